@@ -1,0 +1,26 @@
+"""mcmatlab_py: a Python port of the MCmatlab workflow (Marti et al. 2018).
+
+Describe a voxel cuboid of tissue (``model.G``), run Monte Carlo light transport
+(``model.MC``), then the heat simulation (``model.HS``)::
+
+    from mcmatlab_py import Model, Medium
+    model = Model()
+    ...
+    model = model.run_monte_carlo()
+
+Glossary
+--------
+mua, mus : absorption and scattering coefficients, cm^-1
+g : Henyey-Greenstein anisotropy factor (mean cosine of scattering)
+n : refractive index
+VHC : volumetric heat capacity, J cm^-3 K^-1
+TC : thermal conductivity, W cm^-1 K^-1
+NA : normalized absorption, absorbed power per volume per W incident, W cm^-3 W^-1
+NFR : normalized fluence rate, W cm^-2 W^-1
+E, A : Arrhenius activation energy (J/mol) and frequency factor (1/s)
+"""
+
+from .media import Medium
+from .model import Geometry, LightSource, Model, MonteCarloSimulation
+
+__all__ = ["Geometry", "LightSource", "Medium", "Model", "MonteCarloSimulation"]

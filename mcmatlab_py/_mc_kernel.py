@@ -1,0 +1,454 @@
+"""Numba kernels of the voxel Monte Carlo (arrays and scalars only).
+
+Photon packets as in MCML (Wang, Jacques & Zheng 1995) and MCmatlab
+(Marti et al. 2018): exponential free paths in optical depth, Henyey-Greenstein
+scattering, implicit capture (the packet loses ``w * mua / mut`` at each
+interaction), Russian roulette below a weight threshold.
+
+Two details make the tallies exact and reproducible:
+
+* Weights are fixed-point integers (``W_ONE`` is weight 1). A packet's
+  deposits plus its final escape add up to its launch weight *exactly*, and
+  integer sums do not depend on the order in which threads add them, so the
+  same seed gives bit-identical ``NA`` for any number of threads.
+* The photon's voxel is tracked as integer indices that change by +-1 when it
+  crosses a voxel face (a 3-D DDA), never recomputed by truncating a possibly
+  negative coordinate; this is the bug of the public mcxyz code that piles
+  energy into the first voxel layer of the -x and -y faces.
+
+Coordinates inside the kernel are local: ``0 <= px <= Lx`` etc. (the Python
+layer shifts x and y by ``L/2``).
+"""
+
+import math
+
+import numba
+import numpy as np
+
+from ._rng import next_double, seed_stream
+
+W_ONE = 2**36  # fixed-point weight of a launched packet (about 1.5e-11 resolution)
+
+# tally slots (per thread slot, int64 fixed-point weights)
+T_LAUNCHED = 0
+T_SPECULAR = 1
+T_TOP = 2
+T_BOTTOM = 3
+T_SIDES = 4
+T_OUTSIDE_ABSORBED = 5
+T_KILLED = 6
+T_MISSED = 7
+T_ROULETTE = 8  # weight created by roulette survivors minus weight of packets killed
+N_TALLY = 9
+
+SRC_PENCIL = 0
+SRC_TOPHAT = 1
+SRC_GAUSSIAN = 2
+SRC_PLANE_WAVE = 3
+SRC_ISOTROPIC_POINT = 4
+
+KILLRANGE = 5.0  # as MCmatlab: photons farther than 2.5 cuboid sizes from the centre die
+
+_INF = np.inf
+# fast-math without 'nnan'/'ninf': the kernel relies on inf distances
+_FASTMATH = {"nsz", "arcp", "contract", "afn", "reassoc"}
+
+
+@numba.njit(cache=True, inline="always", fastmath=_FASTMATH)
+def _fresnel(n1, n2, ca1):
+    """Fresnel reflectance for unpolarised light; returns (R, cos of transmitted angle).
+
+    ``ca1`` is the cosine of the angle of incidence (>= 0).
+    """
+    if n1 == n2:
+        return 0.0, ca1
+    if ca1 > 1.0 - 1e-12:
+        r = (n2 - n1) / (n2 + n1)
+        return r * r, ca1
+    sa1 = math.sqrt(max(0.0, 1.0 - ca1 * ca1))
+    sa2 = n1 * sa1 / n2
+    if sa2 >= 1.0:
+        return 1.0, 0.0  # total internal reflection
+    ca2 = math.sqrt(1.0 - sa2 * sa2)
+    cap = ca1 * ca2 - sa1 * sa2  # cos(a1 + a2)
+    cam = ca1 * ca2 + sa1 * sa2  # cos(a1 - a2)
+    sap = sa1 * ca2 + ca1 * sa2
+    sam = sa1 * ca2 - ca1 * sa2
+    r = 0.5 * sam * sam * (cam * cam + cap * cap) / (sap * sap * cam * cam)
+    return r, ca2
+
+
+@numba.njit(cache=True, inline="always", fastmath=_FASTMATH)
+def _hg_cos(g, xi):
+    """Henyey-Greenstein deflection cosine from a uniform ``xi``."""
+    if g == 0.0:
+        return 2.0 * xi - 1.0
+    tmp = (1.0 - g * g) / (1.0 - g + 2.0 * g * xi)
+    c = (1.0 + g * g - tmp * tmp) / (2.0 * g)
+    return min(1.0, max(-1.0, c))
+
+
+@numba.njit(cache=True, inline="always", fastmath=_FASTMATH)
+def _spin(ux, uy, uz, cost, psi):
+    """Rotate direction (ux, uy, uz) by polar cos ``cost`` and azimuth ``psi`` (MCML)."""
+    sint = math.sqrt(max(0.0, 1.0 - cost * cost))
+    cosp = math.cos(psi)
+    # sin from cos (one transcendental fewer): psi in [0, 2 pi)
+    sinp = math.sqrt(max(0.0, 1.0 - cosp * cosp))
+    if psi > math.pi:
+        sinp = -sinp
+    if abs(uz) > 0.99999:
+        return sint * cosp, sint * sinp, cost * (1.0 if uz > 0.0 else -1.0)
+    temp = math.sqrt(1.0 - uz * uz)
+    nux = sint * (ux * uz * cosp - uy * sinp) / temp + ux * cost
+    nuy = sint * (uy * uz * cosp + ux * sinp) / temp + uy * cost
+    nuz = -sint * cosp * temp + uz * cost
+    return nux, nuy, nuz
+
+
+@numba.njit(cache=True, inline="always", fastmath=_FASTMATH)
+def _plane_distance(p, u, i, n, d):
+    """Distance along direction component ``u`` to the next voxel plane of one axis.
+
+    ``i`` may be -1 or ``n`` for a photon outside the cuboid on that axis, where
+    the only plane ahead is the cuboid face it moves towards.
+    """
+    if u > 0.0:
+        if i >= n:
+            return _INF
+        return max(0.0, ((i + 1) * d - p) / u)
+    if u < 0.0:
+        if i < 0:
+            return _INF
+        return max(0.0, (i * d - p) / u)
+    return _INF
+
+
+@numba.njit(cache=True, inline="always")
+def _clamp(i, n):
+    if i < 0:
+        return 0
+    if i >= n:
+        return n - 1
+    return i
+
+
+@numba.njit(cache=True, fastmath=_FASTMATH)
+def transport_batch(
+    b, M, mua, mus, g, nref, uniform_medium, nx, ny, nz, dx, dy, dz,
+    boundary_type, n_out, matched, roulette, weight_threshold, chance,
+    src_type, src, seed, batch_size, n_total, acc, tally,
+):  # fmt: skip
+    """Run the photons of batch ``b`` and add their weights into ``acc`` and ``tally``.
+
+    Parameters
+    ----------
+    M : (nx*ny*nz,) int32, medium index per voxel, C order of (nx, ny, nz).
+    mua, mus, g, nref : (n_media,) float64 optical properties (cm^-1, -, -).
+    uniform_medium : int, the single medium filling the grid, or -1.
+    boundary_type : 0 none escape, 1 all escape, 2 top escapes, 3 top and bottom
+        escape with cyclic sides (MCmatlab).
+    src : (6,) float64: x_focus, y_focus (local cm), radius, point x, y, z.
+    acc : (nx*ny*nz,) int64 absorbed fixed-point weight, updated in place.
+    tally : (N_TALLY,) int64, updated in place.
+    """
+    Lx = nx * dx
+    Ly = ny * dy
+    Lz = nz * dz
+    nyz = ny * nz
+    w_thr = np.int64(weight_threshold * W_ONE)
+    s0, s1, s2, s3 = seed_stream(seed, b)
+    first = b * batch_size
+    last = min(first + batch_size, n_total)
+    for _ in range(first, last):
+        # ---------------------------------------------------------------- launch
+        ux = 0.0
+        uy = 0.0
+        uz = 1.0
+        pz = 0.0
+        if src_type == SRC_ISOTROPIC_POINT:
+            px = src[3]
+            py = src[4]
+            pz = src[5]
+            s0, s1, s2, s3, r1 = next_double(s0, s1, s2, s3)
+            s0, s1, s2, s3, r2 = next_double(s0, s1, s2, s3)
+            uz = 2.0 * r1 - 1.0
+            st = math.sqrt(max(0.0, 1.0 - uz * uz))
+            ux = st * math.cos(2.0 * math.pi * r2)
+            uy = st * math.sin(2.0 * math.pi * r2)
+        elif src_type == SRC_PLANE_WAVE:
+            s0, s1, s2, s3, r1 = next_double(s0, s1, s2, s3)
+            s0, s1, s2, s3, r2 = next_double(s0, s1, s2, s3)
+            px = r1 * Lx
+            py = r2 * Ly
+        else:
+            rad = 0.0
+            s0, s1, s2, s3, r1 = next_double(s0, s1, s2, s3)
+            s0, s1, s2, s3, r2 = next_double(s0, s1, s2, s3)
+            if src_type == SRC_TOPHAT:
+                rad = src[2] * math.sqrt(r1)
+            elif src_type == SRC_GAUSSIAN:
+                rad = src[2] * math.sqrt(-0.5 * math.log(1.0 - r1))
+            phi = 2.0 * math.pi * r2
+            px = src[0] + rad * math.cos(phi)
+            py = src[1] + rad * math.sin(phi)
+        w = np.int64(W_ONE)
+        tally[T_LAUNCHED] += w
+        if boundary_type == 3:  # cyclic sides: fold the entry point into the face
+            px = px - Lx * math.floor(px / Lx)
+            py = py - Ly * math.floor(py / Ly)
+        if not (0.0 <= px <= Lx and 0.0 <= py <= Ly and 0.0 <= pz <= Lz):
+            tally[T_MISSED] += w
+            continue
+        ix = _clamp(int(math.floor(px / dx)), nx)
+        iy = _clamp(int(math.floor(py / dy)), ny)
+        iz = _clamp(int(math.floor(pz / dz)), nz)
+        m = M[(ix * ny + iy) * nz + iz]
+        if src_type != SRC_ISOTROPIC_POINT and not matched:
+            # specular reflection of the collimated beam at normal incidence
+            r = (nref[m] - n_out) / (nref[m] + n_out)
+            spec = np.int64(r * r * w)
+            tally[T_SPECULAR] += spec
+            w -= spec
+        inside = True
+        alive = True
+        # ------------------------------------------------------------- hop loop
+        while alive:
+            s0, s1, s2, s3, r1 = next_double(s0, s1, s2, s3)
+            tau = -math.log(1.0 - r1)  # optical depth to the next interaction
+            while True:  # move until tau is used up or the photon dies
+                ixc = _clamp(ix, nx)
+                iyc = _clamp(iy, ny)
+                izc = _clamp(iz, nz)
+                m = M[(ixc * ny + iyc) * nz + izc]
+                mut = mua[m] + mus[m]
+                if inside and uniform_medium >= 0:
+                    # one medium everywhere: only the cuboid faces stop the path
+                    d0 = (Lx - px) / ux if ux > 0.0 else (-px / ux if ux < 0.0 else _INF)
+                    d1 = (Ly - py) / uy if uy > 0.0 else (-py / uy if uy < 0.0 else _INF)
+                    d2 = (Lz - pz) / uz if uz > 0.0 else (-pz / uz if uz < 0.0 else _INF)
+                    d0 = max(d0, 0.0)
+                    d1 = max(d1, 0.0)
+                    d2 = max(d2, 0.0)
+                else:
+                    d0 = _plane_distance(px, ux, ix, nx, dx)
+                    d1 = _plane_distance(py, uy, iy, ny, dy)
+                    d2 = _plane_distance(pz, uz, iz, nz, dz)
+                if d0 <= d1 and d0 <= d2:
+                    axis = 0
+                    dmin = d0
+                elif d1 <= d2:
+                    axis = 1
+                    dmin = d1
+                else:
+                    axis = 2
+                    dmin = d2
+                if tau < mut * dmin:  # interaction before the plane
+                    s = tau / mut
+                    px += s * ux
+                    py += s * uy
+                    pz += s * uz
+                    if inside and uniform_medium >= 0:
+                        ix = _clamp(int(math.floor(px / dx)), nx)
+                        iy = _clamp(int(math.floor(py / dy)), ny)
+                        iz = _clamp(int(math.floor(pz / dz)), nz)
+                    break
+                if dmin == _INF:  # outside, moving away in vacuum: lost
+                    tally[T_KILLED] += w
+                    alive = False
+                    break
+                tau -= mut * dmin
+                px += dmin * ux
+                py += dmin * uy
+                pz += dmin * uz
+                # land exactly on the plane crossed and find the neighbour voxel
+                if axis == 0:
+                    sgn = 1 if ux > 0.0 else -1
+                    if inside and uniform_medium >= 0:
+                        ix = 0 if sgn < 0 else nx - 1
+                    px = (ix + 1) * dx if sgn > 0 else ix * dx
+                    inew = ix + sgn
+                    nax = nx
+                elif axis == 1:
+                    sgn = 1 if uy > 0.0 else -1
+                    if inside and uniform_medium >= 0:
+                        iy = 0 if sgn < 0 else ny - 1
+                    py = (iy + 1) * dy if sgn > 0 else iy * dy
+                    inew = iy + sgn
+                    nax = ny
+                else:
+                    sgn = 1 if uz > 0.0 else -1
+                    if inside and uniform_medium >= 0:
+                        iz = 0 if sgn < 0 else nz - 1
+                    pz = (iz + 1) * dz if sgn > 0 else iz * dz
+                    inew = iz + sgn
+                    nax = nz
+                if inside and uniform_medium >= 0:
+                    # the fast path does not track indices while moving: fix the others
+                    if axis != 0:
+                        ix = _clamp(int(math.floor(px / dx)), nx)
+                    if axis != 1:
+                        iy = _clamp(int(math.floor(py / dy)), ny)
+                    if axis != 2:
+                        iz = _clamp(int(math.floor(pz / dz)), nz)
+                if not inside:
+                    # outside the cuboid on this axis: re-entry or move along outside
+                    if axis == 0:
+                        ix = inew
+                    elif axis == 1:
+                        iy = inew
+                    else:
+                        iz = inew
+                    inside = 0 <= ix < nx and 0 <= iy < ny and 0 <= iz < nz
+                    continue
+                if 0 <= inew < nax:
+                    # internal voxel face
+                    if axis == 0:
+                        mnew = M[(inew * ny + iy) * nz + iz]
+                    elif axis == 1:
+                        mnew = M[(ix * ny + inew) * nz + iz]
+                    else:
+                        mnew = M[(ix * ny + iy) * nz + inew]
+                    if not matched and nref[mnew] != nref[m]:
+                        ua = ux if axis == 0 else (uy if axis == 1 else uz)
+                        rf, cat = _fresnel(nref[m], nref[mnew], abs(ua))
+                        s0, s1, s2, s3, r1 = next_double(s0, s1, s2, s3)
+                        if r1 < rf:  # reflect
+                            if axis == 0:
+                                ux = -ux
+                            elif axis == 1:
+                                uy = -uy
+                            else:
+                                uz = -uz
+                            continue
+                        ratio = nref[m] / nref[mnew]
+                        ux *= ratio
+                        uy *= ratio
+                        uz *= ratio
+                        if axis == 0:
+                            ux = sgn * cat
+                        elif axis == 1:
+                            uy = sgn * cat
+                        else:
+                            uz = sgn * cat
+                    if axis == 0:
+                        ix = inew
+                    elif axis == 1:
+                        iy = inew
+                    else:
+                        iz = inew
+                    continue
+                # ------------------------------------------- a face of the cuboid
+                top = axis == 2 and sgn < 0
+                bottom = axis == 2 and sgn > 0
+                if boundary_type == 1:
+                    escaping = True
+                elif boundary_type == 2:
+                    escaping = top
+                elif boundary_type == 3:
+                    escaping = top or bottom
+                else:
+                    escaping = False
+                if boundary_type == 3 and axis != 2:
+                    # cyclic side: re-enter through the opposite face
+                    if axis == 0:
+                        ix = 0 if sgn > 0 else nx - 1
+                        px = 0.0 if sgn > 0 else Lx
+                    else:
+                        iy = 0 if sgn > 0 else ny - 1
+                        py = 0.0 if sgn > 0 else Ly
+                    continue
+                if escaping:
+                    if not matched:
+                        ua = ux if axis == 0 else (uy if axis == 1 else uz)
+                        rf, cat = _fresnel(nref[m], n_out, abs(ua))
+                        s0, s1, s2, s3, r1 = next_double(s0, s1, s2, s3)
+                        if r1 < rf:
+                            if axis == 0:
+                                ux = -ux
+                            elif axis == 1:
+                                uy = -uy
+                            else:
+                                uz = -uz
+                            continue
+                    if top:
+                        tally[T_TOP] += w
+                    elif bottom:
+                        tally[T_BOTTOM] += w
+                    else:
+                        tally[T_SIDES] += w
+                    alive = False
+                    break
+                # non-escaping face: continue outside in the nearest voxel's medium
+                if axis == 0:
+                    ix = inew
+                elif axis == 1:
+                    iy = inew
+                else:
+                    iz = inew
+                inside = False
+            if not alive:
+                break
+            # ------------------------------------------------ interaction
+            ixc = _clamp(ix, nx)
+            iyc = _clamp(iy, ny)
+            izc = _clamp(iz, nz)
+            j = (ixc * ny + iyc) * nz + izc
+            m = M[j]
+            mut = mua[m] + mus[m]
+            dep = np.int64(w * (mua[m] / mut))
+            w -= dep
+            if inside:
+                acc[j] += dep
+            else:
+                tally[T_OUTSIDE_ABSORBED] += dep
+                if (
+                    abs(px / Lx - 0.5) > 0.5 * KILLRANGE
+                    or abs(py / Ly - 0.5) > 0.5 * KILLRANGE
+                    or abs(pz / Lz - 0.5) > 0.5 * KILLRANGE
+                ):
+                    tally[T_KILLED] += w
+                    break
+            s0, s1, s2, s3, r1 = next_double(s0, s1, s2, s3)
+            s0, s1, s2, s3, r2 = next_double(s0, s1, s2, s3)
+            ux, uy, uz = _spin(ux, uy, uz, _hg_cos(g[m], r1), 2.0 * math.pi * r2)
+            if w < w_thr:
+                if roulette:
+                    s0, s1, s2, s3, r1 = next_double(s0, s1, s2, s3)
+                    if r1 < chance:
+                        gain = np.int64(w / chance) - w
+                        tally[T_ROULETTE] += gain
+                        w += gain
+                    else:
+                        tally[T_ROULETTE] -= w
+                        break
+                else:
+                    # no roulette: the last bit of weight is absorbed where it is
+                    if inside:
+                        acc[j] += w
+                    else:
+                        tally[T_OUTSIDE_ABSORBED] += w
+                    break
+
+
+@numba.njit(cache=True, parallel=True)
+def run_batches(
+    M, mua, mus, g, nref, uniform_medium, nx, ny, nz, dx, dy, dz,
+    boundary_type, n_out, matched, roulette, weight_threshold, chance,
+    src_type, src, seed, batch_size, n_total, batch_start, batch_stop, acc, tally,
+):  # fmt: skip
+    """Run batches ``[batch_start, batch_stop)`` in parallel.
+
+    ``acc`` is (n_slots, nvox) and ``tally`` (n_slots, N_TALLY), one row per numba
+    thread (``n_slots >= numba.get_num_threads()``); batches are handed out one at a
+    time for load balance. The result of a batch depends only on ``(seed, batch)``
+    and integer sums are exact, so the reduced totals do not depend on which
+    thread ran which batch, nor on the number of threads.
+    """
+    for b in numba.prange(batch_start, batch_stop):
+        k = numba.get_thread_id()
+        transport_batch(
+            b, M, mua, mus, g, nref, uniform_medium, nx, ny, nz, dx, dy, dz,
+            boundary_type, n_out, matched, roulette, weight_threshold, chance,
+            src_type, src, seed, batch_size, n_total, acc[k], tally[k],
+        )  # fmt: skip

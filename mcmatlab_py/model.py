@@ -1,0 +1,291 @@
+"""The MCmatlab-style model: ``model.G`` (geometry), ``model.MC`` (Monte Carlo), ``model.HS`` (heat).
+
+Names follow MCmatlab in snake_case (``nPhotonsRequested`` -> ``n_photons_requested``).
+Users set attributes, then call ``model = model.run_monte_carlo()`` as in MCmatlab;
+everything is validated when a simulation starts, and a bad value raises a
+``ValueError`` that names the field and the value.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from .media import Medium, check_positive
+
+SOURCE_TYPES = ("pencil", "tophat", "gaussian", "plane_wave", "isotropic_point")
+BOUNDARY_TYPES = {
+    0: "no escaping boundaries",
+    1: "all cuboid boundaries escape",
+    2: "top boundary escapes",
+    3: "top and bottom escape, sides cyclic",
+}
+
+
+def _check_int(owner: str, name: str, value, minimum: int = 1) -> int:
+    if isinstance(value, bool) or not isinstance(value, (int, np.integer)):
+        if isinstance(value, float) and value.is_integer():
+            value = int(value)
+        else:
+            raise ValueError(f"{owner}.{name} must be an integer, got {value!r}")
+    if value < minimum:
+        raise ValueError(f"{owner}.{name} must be >= {minimum}, got {value!r}")
+    return int(value)
+
+
+@dataclass
+class Geometry:
+    """The voxel cuboid (MCmatlab's ``model.G``).
+
+    x and y span [-Lx/2, Lx/2] and [-Ly/2, Ly/2]; z spans [0, Lz] and points into
+    the tissue (z = 0 is the irradiated surface). Voxel (i, j, k) has its centre at
+    ``(x[i], y[j], z[k])``.
+    """
+
+    nx: int = 100  #: number of voxels along x
+    ny: int = 100  #: number of voxels along y
+    nz: int = 100  #: number of voxels along z
+    Lx: float = 0.1  #: cm
+    Ly: float = 0.1  #: cm
+    Lz: float = 0.1  #: cm
+    media: list[Medium] = field(default_factory=list)  #: media, indexed by ``geom_func``
+    #: ``geom_func(X, Y, Z) -> (nx, ny, nz)`` int medium index at the voxel centres (cm);
+    #: ``None`` fills the cuboid with ``media[0]``.
+    geom_func: Callable | None = None
+
+    def validate(self) -> None:
+        for name in ("nx", "ny", "nz"):
+            setattr(self, name, _check_int("G", name, getattr(self, name)))
+        for name in ("Lx", "Ly", "Lz"):
+            setattr(self, name, check_positive("G", name, getattr(self, name)))
+        if not self.media:
+            raise ValueError("G.media must hold at least one Medium, got []")
+        for i, m in enumerate(self.media):
+            if not isinstance(m, Medium):
+                raise ValueError(f"G.media[{i}] must be a Medium, got {m!r}")
+            m.__post_init__()  # re-check values changed after construction
+
+    @property
+    def dx(self) -> float:
+        return self.Lx / self.nx
+
+    @property
+    def dy(self) -> float:
+        return self.Ly / self.ny
+
+    @property
+    def dz(self) -> float:
+        return self.Lz / self.nz
+
+    @property
+    def x(self) -> np.ndarray:
+        """(nx,) voxel-centre x coordinates, cm."""
+        return (np.arange(self.nx) + 0.5) * self.dx - self.Lx / 2
+
+    @property
+    def y(self) -> np.ndarray:
+        """(ny,) voxel-centre y coordinates, cm."""
+        return (np.arange(self.ny) + 0.5) * self.dy - self.Ly / 2
+
+    @property
+    def z(self) -> np.ndarray:
+        """(nz,) voxel-centre z coordinates, cm."""
+        return (np.arange(self.nz) + 0.5) * self.dz
+
+    def medium_map(self) -> np.ndarray:
+        """(nx, ny, nz) int32 medium index of every voxel (MCmatlab's ``M``), validated."""
+        self.validate()
+        if self.geom_func is None:
+            return np.zeros((self.nx, self.ny, self.nz), dtype=np.int32)
+        X, Y, Z = np.meshgrid(self.x, self.y, self.z, indexing="ij")
+        M = np.asarray(self.geom_func(X, Y, Z))
+        if M.shape != X.shape:
+            raise ValueError(
+                f"G.geom_func must return an array of shape {X.shape}, got shape {M.shape}"
+            )
+        if M.dtype.kind not in "iub":
+            if M.dtype.kind == "f" and np.all(np.isfinite(M)) and np.all(M == np.round(M)):
+                M = M.astype(np.int64)
+            else:
+                raise ValueError(f"G.geom_func must return integer medium indices, got {M.dtype}")
+        bad = (M < 0) | (M >= len(self.media))
+        if bad.any():
+            value = int(M[bad].flat[0])
+            raise ValueError(
+                f"G.geom_func returned medium index {value}, outside 0..{len(self.media) - 1} "
+                f"(G.media has {len(self.media)} entries)"
+            )
+        return M.astype(np.int32)
+
+
+@dataclass
+class LightSource:
+    """The light source (MCmatlab's ``model.MC.lightSource`` for the cases we support).
+
+    ``pencil``, ``tophat`` and ``gaussian`` beams are collimated along +z and enter
+    the top face centred at (``x_focus``, ``y_focus``); ``plane_wave`` covers the
+    whole top face uniformly; ``isotropic_point`` emits from (``x_focus``,
+    ``y_focus``, ``z_focus``), MCmatlab's convention for point sources.
+    """
+
+    source_type: str = "pencil"
+    radius: float = 0.0  #: cm: top-hat radius, or the Gaussian's 1/e^2 intensity radius
+    x_focus: float = 0.0  #: cm
+    y_focus: float = 0.0  #: cm
+    z_focus: float = 0.0  #: cm, isotropic point sources only
+
+    def validate(self, G: Geometry) -> None:
+        if self.source_type not in SOURCE_TYPES:
+            raise ValueError(
+                f"MC.light_source.source_type must be one of {SOURCE_TYPES}, "
+                f"got {self.source_type!r}"
+            )
+        for name in ("x_focus", "y_focus", "z_focus"):
+            v = getattr(self, name)
+            try:
+                v = float(v)
+            except (TypeError, ValueError):
+                raise ValueError(f"MC.light_source.{name} must be a number, got {v!r}") from None
+            if not math.isfinite(v):
+                raise ValueError(f"MC.light_source.{name} must be finite, got {v!r}")
+            setattr(self, name, v)
+        if self.source_type in ("tophat", "gaussian"):
+            self.radius = check_positive("MC.light_source", "radius", self.radius)
+        else:
+            self.radius = check_positive("MC.light_source", "radius", self.radius,
+                                         allow_zero=True)
+        if self.source_type == "isotropic_point":
+            inside = (abs(self.x_focus) <= G.Lx / 2 and abs(self.y_focus) <= G.Ly / 2
+                      and 0 <= self.z_focus <= G.Lz)
+            if not inside:
+                raise ValueError(
+                    "MC.light_source (x_focus, y_focus, z_focus) must lie inside the cuboid, "
+                    f"got {(self.x_focus, self.y_focus, self.z_focus)}"
+                )
+
+
+@dataclass
+class MonteCarloSimulation:
+    """Monte Carlo settings and results (MCmatlab's ``model.MC``).
+
+    Results (filled by :meth:`Model.run_monte_carlo`):
+
+    * ``NA``: (nx, ny, nz) absorbed power per volume per W incident, W/cm^3/W.
+    * ``NFR``: (nx, ny, nz) normalized fluence rate ``NA / mua``, W/cm^2/W (0 where mua = 0).
+    * ``absorbed_fraction``: absorbed inside the cuboid, fraction of the incident power.
+    * ``specular_reflectance``: reflected at entry (0 with matched interfaces).
+    * ``escaped``: ``{"top", "bottom", "sides"}``, fractions of the incident power.
+    * ``absorbed_outside_fraction``, ``killed_fraction``, ``missed_fraction`` (beam
+      outside the top face), ``roulette_gain_fraction`` (net weight created by Russian
+      roulette; zero in expectation): with these, every launched packet is accounted
+      for exactly (``energy_balance`` is 1 up to rounding).
+    * ``n_photons``, ``photons_per_second``, ``simulation_time`` (s, kernel only).
+    """
+
+    n_photons_requested: int | None = None
+    simulation_time_requested: float | None = None  #: minutes, used if no photon count
+    seed: int | None = None  #: None draws a fresh seed (stored in ``seed_used``)
+    matched_interfaces: bool = True
+    boundary_type: int = 1
+    n_outside: float = 1.0  #: refractive index of the surrounding medium
+    russian_roulette: bool = True
+    weight_threshold: float = 0.01  #: roulette below this weight (MCmatlab's THRESHOLD)
+    roulette_chance: float = 0.1  #: survival probability in roulette (MCmatlab's CHANCE)
+    n_threads: int | None = None  #: None: all numba threads
+    batch_size: int = 1000  #: photons per random stream (part of what a seed means)
+    progress: bool = True  #: progress bar on stderr for runs longer than a few seconds
+    light_source: LightSource = field(default_factory=LightSource)
+
+    # results
+    NA: np.ndarray | None = None
+    NFR: np.ndarray | None = None
+    absorbed_fraction: float | None = None
+    specular_reflectance: float | None = None
+    escaped: dict | None = None
+    absorbed_outside_fraction: float | None = None
+    killed_fraction: float | None = None
+    missed_fraction: float | None = None
+    roulette_gain_fraction: float | None = None
+    n_photons: int | None = None
+    photons_per_second: float | None = None
+    simulation_time: float | None = None
+    seed_used: int | None = None
+
+    @property
+    def energy_balance(self) -> float:
+        """(absorbed + escaped + specular + outside + killed + missed - roulette gain), ~1."""
+        return (self.absorbed_fraction + sum(self.escaped.values()) + self.specular_reflectance
+                + self.absorbed_outside_fraction + self.killed_fraction + self.missed_fraction
+                - self.roulette_gain_fraction)
+
+    def validate(self, G: Geometry) -> None:
+        if self.n_photons_requested is not None:
+            self.n_photons_requested = _check_int("MC", "n_photons_requested",
+                                                  self.n_photons_requested)
+        if self.simulation_time_requested is not None:
+            self.simulation_time_requested = check_positive(
+                "MC", "simulation_time_requested", self.simulation_time_requested)
+        if self.boundary_type not in BOUNDARY_TYPES:
+            raise ValueError(
+                f"MC.boundary_type must be one of {sorted(BOUNDARY_TYPES)}, "
+                f"got {self.boundary_type!r}")
+        n_out = check_positive("MC", "n_outside", self.n_outside)
+        if n_out < 1:
+            raise ValueError(f"MC.n_outside must be >= 1, got {self.n_outside!r}")
+        self.n_outside = n_out
+        self.weight_threshold = check_positive("MC", "weight_threshold", self.weight_threshold)
+        c = check_positive("MC", "roulette_chance", self.roulette_chance)
+        if c >= 1:
+            raise ValueError(f"MC.roulette_chance must be in (0, 1), got {self.roulette_chance!r}")
+        self.batch_size = _check_int("MC", "batch_size", self.batch_size)
+        if self.n_threads is not None:
+            self.n_threads = _check_int("MC", "n_threads", self.n_threads)
+        if self.seed is not None:
+            self.seed = _check_int("MC", "seed", self.seed, minimum=0)
+        if not isinstance(self.light_source, LightSource):
+            raise ValueError(f"MC.light_source must be a LightSource, got {self.light_source!r}")
+        self.light_source.validate(G)
+
+
+class Model:
+    """An MCmatlab model: ``G`` geometry, ``MC`` Monte Carlo, ``HS`` heat simulation.
+
+    Examples
+    --------
+    >>> from mcmatlab_py import Model, Medium
+    >>> model = Model()
+    >>> model.G.nx, model.G.ny, model.G.nz = 20, 20, 10
+    >>> model.G.Lx, model.G.Ly, model.G.Lz = 0.5, 0.5, 0.25
+    >>> model.G.media = [Medium("standard tissue", mua=1.0, mus=100.0, g=0.9, n=1.3)]
+    >>> model.MC.n_photons_requested = 10_000
+    >>> model.MC.seed = 1
+    >>> model.MC.light_source.source_type = "tophat"
+    >>> model.MC.light_source.radius = 0.1
+    >>> model = model.run_monte_carlo()
+    >>> model.MC.NA.shape
+    (20, 20, 10)
+    """
+
+    def __init__(self):
+        from .heat import HeatSimulation
+
+        self.G = Geometry()
+        self.MC = MonteCarloSimulation()
+        self.HS = HeatSimulation()
+
+    def run_monte_carlo(self) -> Model:
+        """Run the Monte Carlo light transport; fills ``self.MC`` and returns ``self``."""
+        from .monte_carlo import run_monte_carlo
+
+        run_monte_carlo(self)
+        return self
+
+    def simulate_heat_distribution(self) -> Model:
+        """Run the heat simulation driven by ``MC.NA``; fills ``self.HS`` and returns ``self``."""
+        from .heat import simulate_heat_distribution
+
+        simulate_heat_distribution(self)
+        return self

@@ -1,0 +1,151 @@
+"""Python layer of the Monte Carlo: validate once, build arrays, run the kernel in rounds."""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass
+
+import numba
+import numpy as np
+
+from . import _mc_kernel as K
+from ._progress import Progress
+
+_SRC_CODES = {
+    "pencil": K.SRC_PENCIL,
+    "tophat": K.SRC_TOPHAT,
+    "gaussian": K.SRC_GAUSSIAN,
+    "plane_wave": K.SRC_PLANE_WAVE,
+    "isotropic_point": K.SRC_ISOTROPIC_POINT,
+}
+
+
+@dataclass
+class MCResult:
+    """Raw totals of a Monte Carlo run, before they are written into ``model.MC``.
+
+    ``absorbed`` is (nx, ny, nz) absorbed weight (in launched-packet units), ``tally``
+    the fixed-point totals indexed by the ``T_*`` constants of the kernel module.
+    """
+
+    absorbed: np.ndarray
+    tally: np.ndarray
+    n_photons: int
+    kernel_seconds: float
+
+
+def optical_arrays(media) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """(mua, mus, g, n) arrays of a list of media, float64."""
+    mua = np.array([m.mua for m in media], dtype=np.float64)
+    mus = np.array([m.mus for m in media], dtype=np.float64)
+    g = np.array([m.g for m in media], dtype=np.float64)
+    n = np.array([m.n for m in media], dtype=np.float64)
+    return mua, mus, g, n
+
+
+def simulate(G, MC, M: np.ndarray, mua, mus, g, nref, *, seed: int, n_photons: int | None,
+             time_limit_s: float | None = None, label: str = "Monte Carlo") -> MCResult:
+    """Run the kernel on a validated geometry; the medium map and properties are given.
+
+    Exactly one of ``n_photons`` and ``time_limit_s`` is used (``n_photons`` wins).
+    """
+    nx, ny, nz = M.shape
+    src = MC.light_source
+    src_arr = np.array([src.x_focus + G.Lx / 2, src.y_focus + G.Ly / 2, src.radius,
+                        src.x_focus + G.Lx / 2, src.y_focus + G.Ly / 2, src.z_focus],
+                       dtype=np.float64)
+    Mf = np.ascontiguousarray(M, dtype=np.int32).ravel()
+    uniform = int(Mf[0]) if np.all(Mf == Mf[0]) else -1
+    n_threads = min(MC.n_threads or numba.get_num_threads(), numba.config.NUMBA_NUM_THREADS)
+    n_slots = n_threads
+    acc = np.zeros((n_slots, Mf.size), dtype=np.int64)
+    # rows padded to 512 bytes so that threads do not share cache lines
+    tally = np.zeros((n_slots, 64), dtype=np.int64)
+    bs = MC.batch_size
+    n_total = n_photons if n_photons is not None else np.iinfo(np.int64).max // 4
+    n_batches = -(-n_total // bs) if n_photons is not None else None
+    args = (Mf, mua, mus, g, nref, uniform, nx, ny, nz, G.dx, G.dy, G.dz,
+            int(MC.boundary_type), float(MC.n_outside), bool(MC.matched_interfaces),
+            bool(MC.russian_roulette), float(MC.weight_threshold), float(MC.roulette_chance),
+            _SRC_CODES[src.source_type], src_arr, np.uint64(seed), bs, n_total)
+
+    old_threads = numba.get_num_threads()
+    numba.set_num_threads(n_threads)
+    old_chunk = numba.set_parallel_chunksize(1)  # one batch at a time: load balance
+    try:
+        K.run_batches(*args, 0, 0, acc, tally)  # compile (or load from cache) outside timing
+        total = n_batches if n_batches is not None else time_limit_s
+        bar = Progress(total, label, enabled=MC.progress)
+        done = 0
+        kernel_s = 0.0
+        per_round = 8 * n_slots
+        while True:
+            stop = done + per_round if n_batches is None else min(done + per_round, n_batches)
+            t0 = time.perf_counter()
+            K.run_batches(*args, done, stop, acc, tally)
+            dt = time.perf_counter() - t0
+            kernel_s += dt
+            n_round = stop - done
+            done = stop
+            bar.update(done if n_batches is not None else kernel_s,
+                       f"{done * bs / max(kernel_s, 1e-9):.3g} photons/s")
+            if n_batches is not None and done >= n_batches:
+                break
+            if n_batches is None and kernel_s >= time_limit_s:
+                break
+            # aim at rounds of about half a second, to keep the bar and the clock responsive
+            rate = n_round / max(dt, 1e-6)  # batches per second
+            per_round = int(min(max(n_slots, 0.5 * rate), 50 * per_round))
+            per_round = max(n_slots, per_round - per_round % n_slots)
+            if n_batches is None:
+                remaining = time_limit_s - kernel_s
+                per_round = max(n_slots, min(per_round, int(rate * remaining) + n_slots))
+        bar.close()
+    finally:
+        numba.set_num_threads(old_threads)
+        numba.set_parallel_chunksize(old_chunk)
+    n_done = n_photons if n_photons is not None else done * bs
+    absorbed = acc.sum(axis=0).reshape(nx, ny, nz) / K.W_ONE
+    return MCResult(absorbed=absorbed, tally=tally.sum(axis=0)[: K.N_TALLY], n_photons=int(n_done),
+                    kernel_seconds=kernel_s)
+
+
+def run_monte_carlo(model) -> None:
+    """Validate ``model.G`` and ``model.MC``, run the Monte Carlo, and fill ``model.MC``."""
+    G, MC = model.G, model.MC
+    M = G.medium_map()  # validates G
+    MC.validate(G)
+    mua, mus, g, nref = optical_arrays(G.media)
+    seed = MC.seed if MC.seed is not None else int(np.random.SeedSequence().entropy % 2**63)
+    n_photons = MC.n_photons_requested
+    time_limit = None
+    if n_photons is None:
+        minutes = MC.simulation_time_requested if MC.simulation_time_requested else 0.1
+        time_limit = 60.0 * minutes
+    res = simulate(G, MC, M, mua, mus, g, nref, seed=seed, n_photons=n_photons,
+                   time_limit_s=time_limit)
+    store_results(MC, res, M, mua, G.dx * G.dy * G.dz)
+    MC.seed_used = seed
+
+
+def store_results(MC, res: MCResult, M: np.ndarray, mua: np.ndarray, dV: float) -> None:
+    """Normalise the raw totals of ``res`` into the MCmatlab outputs of ``MC``."""
+    launched = res.tally[K.T_LAUNCHED] / K.W_ONE  # = n_photons
+
+    def frac(i):
+        return float(res.tally[i] / K.W_ONE / launched)
+
+    MC.NA = res.absorbed / (launched * dV)
+    mua_map = mua[M]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        MC.NFR = np.where(mua_map > 0, MC.NA / mua_map, 0.0)
+    MC.absorbed_fraction = float(res.absorbed.sum() / launched)
+    MC.specular_reflectance = frac(K.T_SPECULAR)
+    MC.escaped = {"top": frac(K.T_TOP), "bottom": frac(K.T_BOTTOM), "sides": frac(K.T_SIDES)}
+    MC.absorbed_outside_fraction = frac(K.T_OUTSIDE_ABSORBED)
+    MC.killed_fraction = frac(K.T_KILLED)
+    MC.missed_fraction = frac(K.T_MISSED)
+    MC.roulette_gain_fraction = frac(K.T_ROULETTE)
+    MC.n_photons = res.n_photons
+    MC.simulation_time = res.kernel_seconds
+    MC.photons_per_second = res.n_photons / max(res.kernel_seconds, 1e-12)
