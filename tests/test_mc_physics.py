@@ -1,0 +1,208 @@
+"""Monte Carlo light transport against analytic and published results.
+
+Tolerances come from the photon count. A packet's contribution X to any tally
+(a reflectance, the power absorbed in a layer) lies in [0, 1], so its variance is
+at most p (1 - p) with p = E[X] (the Bernoulli case is the worst): the standard
+error of a tally over N packets is at most sqrt(p (1 - p) / N). Tests allow a
+few of these bounds.
+"""
+
+import math
+
+import numpy as np
+import pytest
+
+from mcmatlab_py import Medium, Model
+
+
+def se_bound(p: float, n: int) -> float:
+    """Upper bound of the standard error of a [0, 1]-valued tally with mean p over n packets."""
+    return math.sqrt(max(p * (1 - p), 1e-300) / n)
+
+
+def slab_model(mua, mus, g, d, n_photons, *, n=1.0, nz=4, seed=3, matched=True):
+    """Laterally infinite slab of thickness d (cm): cyclic sides, top and bottom escape."""
+    model = Model()
+    model.G.nx, model.G.ny, model.G.nz = 1, 1, nz
+    model.G.Lx, model.G.Ly, model.G.Lz = 1.0, 1.0, d
+    model.G.media = [Medium("slab", mua=mua, mus=mus, g=g, n=n)]
+    model.MC.boundary_type = 3
+    model.MC.matched_interfaces = matched
+    model.MC.n_photons_requested = n_photons
+    model.MC.seed = seed
+    model.MC.progress = False
+    model.MC.light_source.source_type = "pencil"
+    return model
+
+
+def test_mcml_table_6_1_van_de_hulst():
+    """MCML manual Table 6.1 (van de Hulst 1980): n = 1, mua = 10, mus = 90, g = 0.75, d = 0.02 cm."""
+    N = 200_000
+    MC = slab_model(10.0, 90.0, 0.75, 0.02, N).run_monte_carlo().MC
+    Rd, Tt = MC.escaped["top"], MC.escaped["bottom"]
+    assert MC.specular_reflectance == 0.0
+    assert abs(Rd - 0.09739) < 3 * se_bound(0.09739, N)
+    assert abs(Tt - 0.66096) < 3 * se_bound(0.66096, N)
+    assert MC.escaped["sides"] == 0.0  # cyclic sides never escape
+
+
+def test_beer_lambert_depth_profile_is_exact():
+    """mus = 0: a pencil beam deposits exp(-mua z_k) - exp(-mua z_{k+1}) in layer k."""
+    N, mua, nz, Lz = 100_000, 4.0, 25, 0.5
+    model = slab_model(mua, 0.0, 0.0, Lz, N, nz=nz)
+    model.MC.boundary_type = 1
+    MC = model.run_monte_carlo().MC
+    G = model.G
+    layer = MC.NA.sum(axis=(0, 1)) * G.dx * G.dy * G.dz  # absorbed fraction per layer
+    edges = np.arange(nz + 1) * G.dz
+    exact = np.exp(-mua * edges[:-1]) - np.exp(-mua * edges[1:])
+    tol = 4 * np.sqrt(exact * (1 - exact) / N)
+    assert np.all(np.abs(layer - exact) < tol)
+    assert abs(MC.escaped["bottom"] - math.exp(-mua * Lz)) < 4 * se_bound(math.exp(-mua * Lz), N)
+    np.testing.assert_allclose(MC.NFR, MC.NA / mua)
+
+
+def test_fresnel_lossless_slab_total_reflectance():
+    """Non-absorbing, non-scattering slab (n = 1.5) in air: R_total = 2 R / (1 + R) at normal incidence."""
+    N, n = 100_000, 1.5
+    model = slab_model(0.0, 0.0, 0.0, 0.1, N, n=n, matched=False)
+    model.MC.boundary_type = 1
+    MC = model.run_monte_carlo().MC
+    R = ((n - 1) / (n + 1)) ** 2
+    assert MC.specular_reflectance == pytest.approx(R, rel=1e-9)
+    total_R = MC.specular_reflectance + MC.escaped["top"]
+    assert abs(total_R - 2 * R / (1 + R)) < 4 * se_bound(2 * R / (1 + R), N)
+    assert MC.energy_balance == pytest.approx(1.0, abs=1e-9)
+
+
+@pytest.mark.parametrize("matched", [True, False])
+@pytest.mark.parametrize("boundary_type", [0, 1, 2, 3])
+def test_energy_is_conserved_exactly_without_roulette(matched, boundary_type):
+    model = standard_tissue(12, 12, 6, n_photons=3000)
+    model.MC.matched_interfaces = matched
+    model.MC.boundary_type = boundary_type
+    model.MC.russian_roulette = False
+    MC = model.run_monte_carlo().MC
+    assert MC.roulette_gain_fraction == 0.0
+    total = (MC.absorbed_fraction + sum(MC.escaped.values()) + MC.specular_reflectance
+             + MC.absorbed_outside_fraction + MC.killed_fraction + MC.missed_fraction)
+    assert total == pytest.approx(1.0, abs=1e-9)
+    if boundary_type == 1:
+        assert MC.absorbed_outside_fraction == 0.0 and MC.killed_fraction == 0.0
+
+
+def test_roulette_conserves_energy_in_expectation():
+    N = 20_000
+    model = standard_tissue(10, 10, 5, n_photons=N)
+    model.G.Lx = model.G.Ly = model.G.Lz = 3.0  # big block: many packets reach roulette
+    MC = model.run_monte_carlo().MC
+    assert MC.energy_balance == pytest.approx(1.0, abs=1e-9)
+    assert MC.roulette_gain_fraction != 0.0  # roulette did happen
+    # a packet's net roulette gain lies in [-0.01, 0.09]: variance at most 0.1^2 / 4
+    assert abs(MC.roulette_gain_fraction) < 4 * 0.05 / math.sqrt(N)
+    assert MC.absorbed_fraction + sum(MC.escaped.values()) == pytest.approx(1.0, abs=4 * 0.05 / math.sqrt(N))
+
+
+def standard_tissue(nx=20, ny=20, nz=10, n_photons=20_000, seed=1, source="tophat"):
+    model = Model()
+    model.G.nx, model.G.ny, model.G.nz = nx, ny, nz
+    model.G.Lx, model.G.Ly, model.G.Lz = 0.5, 0.5, 0.25
+    model.G.media = [Medium("standard tissue", mua=1.0, mus=100.0, g=0.9, n=1.3)]
+    model.MC.n_photons_requested = n_photons
+    model.MC.seed = seed
+    model.MC.progress = False
+    model.MC.light_source.source_type = source
+    model.MC.light_source.radius = 0.1
+    return model
+
+
+@pytest.mark.parametrize("axis", [0, 1])
+def test_centred_beam_is_symmetric_including_the_face_layers(axis):
+    """x -> -x and y -> -y symmetry; the -x/-y face layers hold no excess (the mcxyz bug)."""
+    N = 40_000
+    # a pencil at x = 0 would sit on a voxel face and enter the +x voxel: use a disc
+    model = standard_tissue(16, 16, 8, n_photons=N, source="tophat")
+    model.G.Lx = model.G.Ly = 0.2  # narrow: many packets reach the side faces
+    model.MC.light_source.radius = 0.05
+    G, MC = model.G, model.run_monte_carlo().MC
+    other = (1, 2) if axis == 0 else (0, 2)
+    frac = MC.NA.sum(axis=other) * G.dx * G.dy * G.dz  # absorbed fraction per slice
+    mirrored = frac[::-1]
+    tol = 4.5 * np.sqrt((frac + mirrored) / N)
+    assert np.all(np.abs(frac - mirrored) <= tol)
+    assert frac[0] > 0 and frac[-1] > 0
+
+
+def test_same_seed_same_result_any_thread_count():
+    import numba
+
+    results = []
+    for threads in (1, min(2, numba.config.NUMBA_NUM_THREADS)):
+        model = standard_tissue(n_photons=5000)
+        model.MC.n_threads = threads
+        results.append(model.run_monte_carlo().MC.NA)
+    np.testing.assert_array_equal(results[0], results[1])
+    other = standard_tissue(n_photons=5000, seed=2).run_monte_carlo().MC.NA
+    assert not np.array_equal(results[0], other)
+
+
+def test_noise_falls_as_one_over_sqrt_photons():
+    """||NA(seed a) - NA(seed b)|| shrinks by 2 when the photon count grows by 4."""
+    def spread(n):
+        a = standard_tissue(n_photons=n, seed=11).run_monte_carlo().MC.NA
+        b = standard_tissue(n_photons=n, seed=12).run_monte_carlo().MC.NA
+        return np.linalg.norm(a - b)
+
+    ratio = spread(10_000) / spread(40_000)
+    assert 1.7 < ratio < 2.3
+
+
+def test_voxel_walk_agrees_with_the_uniform_fast_path():
+    """Two identical media force the voxel-by-voxel walk; results match the one-medium path."""
+    N = 20_000
+    fast = standard_tissue(n_photons=N).run_monte_carlo()
+    walk = standard_tissue(n_photons=N)
+    tissue = walk.G.media[0]
+    walk.G.media = [tissue, Medium("copy", tissue.mua, tissue.mus, tissue.g, tissue.n)]
+    walk.G.geom_func = lambda X, Y, Z: (Z > 0.1).astype(int)
+    walk.run_monte_carlo()
+    # the same random numbers drive the same paths: agreement far beyond MC noise
+    a, b = fast.MC.NA, walk.MC.NA
+    assert np.linalg.norm(a - b) / np.linalg.norm(a) < 1e-3
+    assert walk.MC.absorbed_fraction == pytest.approx(fast.MC.absorbed_fraction, rel=1e-3)
+
+
+def test_refractive_step_inside_the_grid_reflects():
+    """A buried index step (n 1.0 over 1.5, no absorption or scattering) reflects R of a pencil beam."""
+    N = 50_000
+    model = slab_model(0.0, 0.0, 0.0, 0.2, N, nz=4, matched=False)
+    model.MC.boundary_type = 1
+    model.G.media = [Medium("air", 0, 0, 0, 1.0), Medium("glass", 0, 0, 0, 1.5)]
+    model.G.geom_func = lambda X, Y, Z: (Z > 0.1).astype(int)
+    MC = model.run_monte_carlo().MC
+    R = (0.5 / 2.5) ** 2
+    # enters through air (no specular), reflects at the step, then bounces in the glass
+    expected_top = R + (1 - R) ** 2 * R / (1 - R * R)
+    assert MC.specular_reflectance == 0.0
+    assert abs(MC.escaped["top"] - expected_top) < 4 * se_bound(expected_top, N)
+
+
+@pytest.mark.parametrize("source", ["pencil", "tophat", "gaussian", "plane_wave"])
+def test_sources_launch_where_they_should(source):
+    model = standard_tissue(20, 20, 4, n_photons=4000, source=source)
+    model.G.media = [Medium("absorber", mua=1000.0, mus=0.0, g=0.0)]  # absorbed at entry
+    MC = model.run_monte_carlo().MC
+    top = MC.NA[:, :, 0] * model.G.dx * model.G.dy * model.G.dz
+    X, Y = np.meshgrid(model.G.x, model.G.y, indexing="ij")
+    r = np.hypot(X, Y)
+    if source == "pencil":
+        assert top[9:11, 9:11].sum() == pytest.approx(MC.absorbed_fraction)
+    elif source == "tophat":
+        assert top[r > 0.1 + model.G.dx].sum() == 0.0
+    elif source == "gaussian":
+        # 1/e^2 radius 0.1: a fraction 1 - e^-2 lies within r < 0.1
+        inside = top[r < 0.1].sum() / top.sum()
+        assert 0.75 < inside < 0.95
+    else:
+        assert np.all(top > 0)
+    assert MC.missed_fraction == 0.0
