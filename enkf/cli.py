@@ -1,0 +1,117 @@
+"""The ``tissue-enkf`` command line (an edge module).
+
+Every subcommand validates its input first; a problem with the input prints one
+line ``error: ...`` naming it and exits with status 2, writing nothing.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import time
+from pathlib import Path
+
+EXIT_BAD_INPUT = 2
+
+
+def _common(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--out", required=True, help="output directory (created; must be new or empty)")
+    p.add_argument("--force", action="store_true", help="replace a non-empty --out")
+    p.add_argument("--seed", type=int, default=None, help="random seed (overrides the config)")
+    p.add_argument("--threads", type=int, default=None, help="numba threads (default: all cores)")
+    p.add_argument("--quiet", action="store_true", help="no progress bar")
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(
+        prog="tissue-enkf",
+        description="Monte Carlo light transport, FEM heat and ensemble Kalman filtering "
+                    "for laser-irradiated tissue.")
+    sub = parser.add_subparsers(dest="command", required=True)
+    p_mc = sub.add_parser("mc", help="run the Monte Carlo of a TOML model",
+                          description="Run MCmatlab-style Monte Carlo light transport for the "
+                                      "model in CONFIG and write NA/NFR (.npz, .vtu), "
+                                      "summary.json and a PNG of NA slices.")
+    p_mc.add_argument("config", help="TOML model file (see examples/)")
+    p_mc.add_argument("--photons", type=int, default=None,
+                      help="number of photon packets (overrides MC.n_photons_requested)")
+    _common(p_mc)
+    p_mc.set_defaults(func=cmd_mc)
+    return parser
+
+
+def _apply_threads(threads):
+    if threads is not None:
+        import numba
+
+        if threads < 1:
+            raise ValueError(f"--threads must be >= 1, got {threads}")
+        numba.set_num_threads(min(threads, numba.config.NUMBA_NUM_THREADS))
+
+
+def cmd_mc(args) -> int:
+    from mcmatlab_py.config import load_model
+    from mcmatlab_py.export import write_voxel_vtu
+    from mcmatlab_py.plotting import plot_na_slices
+
+    from .rundir import atomic_dir, check_out_dir, write_json
+
+    check_out_dir(args.out, args.force)
+    _apply_threads(args.threads)
+    model = load_model(args.config)
+    if args.seed is not None:
+        model.MC.seed = args.seed
+    if args.photons is not None:
+        model.MC.n_photons_requested = args.photons
+    model.MC.progress = not args.quiet
+    model.MC.n_threads = args.threads
+    model.MC.validate(model.G)
+    t0 = time.perf_counter()
+    model.run_monte_carlo()
+    G, MC = model.G, model.MC
+    import numpy as np
+
+    with atomic_dir(args.out, args.force) as tmp:
+        np.savez_compressed(tmp / "NA.npz", NA=MC.NA, NFR=MC.NFR, x=G.x, y=G.y, z=G.z)
+        write_voxel_vtu(tmp / "NA.vtu", G, {"NA": MC.NA, "NFR": MC.NFR})
+        plot_na_slices(model, tmp / "NA_slices.png")
+        write_json(tmp / "summary.json", {
+            "config": str(Path(args.config)),
+            "absorbed_fraction": MC.absorbed_fraction,
+            "specular_reflectance": MC.specular_reflectance,
+            "escaped": MC.escaped,
+            "absorbed_outside_fraction": MC.absorbed_outside_fraction,
+            "killed_fraction": MC.killed_fraction,
+            "missed_fraction": MC.missed_fraction,
+            "roulette_gain_fraction": MC.roulette_gain_fraction,
+            "energy_balance": MC.energy_balance,
+            "n_photons": MC.n_photons,
+            "photons_per_second": MC.photons_per_second,
+            "kernel_seconds": MC.simulation_time,
+            "wall_seconds": time.perf_counter() - t0,
+            "seed": MC.seed_used,
+            "grid": {"nx": G.nx, "ny": G.ny, "nz": G.nz, "Lx": G.Lx, "Ly": G.Ly, "Lz": G.Lz},
+        })
+    if not args.quiet:
+        print(f"absorbed {MC.absorbed_fraction:.4f}, escaped top {MC.escaped['top']:.4f} "
+              f"bottom {MC.escaped['bottom']:.4f} sides {MC.escaped['sides']:.4f}; "
+              f"{MC.n_photons} photons at {MC.photons_per_second:.3g}/s -> {args.out}")
+    return 0
+
+
+def main(argv=None) -> int:
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    try:
+        return args.func(args)
+    except KeyboardInterrupt:
+        print("interrupted: nothing written", file=sys.stderr)
+        return 130
+    except (ValueError, OSError) as err:
+        msg = str(err).splitlines()[0] if str(err) else type(err).__name__
+        print(f"error: {msg}", file=sys.stderr)
+        return EXIT_BAD_INPUT
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,188 @@
+"""TOML configuration -> :class:`~mcmatlab_py.model.Model` (an edge module: imported only when used).
+
+A config mirrors the Python API::
+
+    [G]
+    nx = 100            # voxels
+    ny = 100
+    nz = 50
+    Lx = 0.5            # cm
+    Ly = 0.5
+    Lz = 0.25
+
+    [[G.media]]         # index 0
+    name = "standard tissue"
+    mua = 1.0           # cm^-1
+    mus = 100.0         # cm^-1
+    g = 0.9
+    n = 1.3
+    VHC = 3.76          # J cm^-3 K^-1
+    TC = 0.0037         # W cm^-1 K^-1
+
+    [[G.regions]]       # optional boxes filled with another medium, applied in order
+    medium = 1
+    z_min = 0.1         # cm; x_min, x_max, y_min, y_max, z_min, z_max all optional
+
+    [MC]
+    n_photons_requested = 1_000_000
+    seed = 1
+    matched_interfaces = true
+    boundary_type = 1
+
+    [MC.light_source]
+    source_type = "tophat"
+    radius = 0.1        # cm
+
+Every key is checked: an unknown key, a wrong type or a bad value raises
+:class:`ConfigError` (a ``ValueError``) naming the key, the value and what is allowed.
+"""
+
+from __future__ import annotations
+
+import math
+import tomllib
+from pathlib import Path
+
+import numpy as np
+
+from .media import Medium
+from .model import Model
+
+
+class ConfigError(ValueError):
+    """A configuration file that cannot be used; the message names the key and the value."""
+
+
+_MEDIUM_KEYS = {"name", "mua", "mus", "g", "n", "VHC", "TC", "E", "A"}
+_REGION_KEYS = {"medium", "x_min", "x_max", "y_min", "y_max", "z_min", "z_max"}
+_G_KEYS = {"nx", "ny", "nz", "Lx", "Ly", "Lz", "media", "regions"}
+_MC_KEYS = {
+    "n_photons_requested", "simulation_time_requested", "seed", "matched_interfaces",
+    "boundary_type", "n_outside", "russian_roulette", "weight_threshold", "roulette_chance",
+    "n_threads", "batch_size", "light_source",
+}
+_SOURCE_KEYS = {"source_type", "radius", "x_focus", "y_focus", "z_focus"}
+_HS_KEYS = {
+    "P", "duration_on", "duration_off", "n_pulses", "dt", "T_initial", "heat_boundary_type",
+    "temp_sensor_positions", "heat_transfer_coefficient", "T_ambient", "theta",
+    "mesh_divisions",
+}
+
+
+def read_toml(path: str | Path) -> dict:
+    """Read a TOML file; a missing, unreadable or malformed file raises ConfigError."""
+    path = Path(path)
+    try:
+        data = path.read_bytes()
+    except FileNotFoundError:
+        raise ConfigError(f"config file {str(path)!r} does not exist") from None
+    except OSError as err:
+        raise ConfigError(f"config file {str(path)!r} cannot be read: {err.strerror}") from None
+    try:
+        return tomllib.loads(data.decode("utf-8"))
+    except (UnicodeDecodeError, tomllib.TOMLDecodeError) as err:
+        raise ConfigError(f"config file {str(path)!r} is not valid TOML: {err}") from None
+
+
+def check_keys(section: str, table, allowed: set[str]) -> dict:
+    """Check that ``table`` is a table whose keys are all in ``allowed``."""
+    if not isinstance(table, dict):
+        raise ConfigError(f"[{section}] must be a table, got {table!r}")
+    unknown = sorted(set(table) - allowed)
+    if unknown:
+        raise ConfigError(
+            f"unknown key {section}.{unknown[0]} (allowed: {', '.join(sorted(allowed))})")
+    return table
+
+
+def _number(key: str, value) -> float:
+    if isinstance(value, bool) or not isinstance(value, (int, float)):
+        raise ConfigError(f"{key} must be a number, got {value!r}")
+    return float(value)
+
+
+def _region_map(G, regions: list) -> callable:
+    boxes = []
+    for i, region in enumerate(regions):
+        key = f"G.regions[{i}]"
+        check_keys(key, region, _REGION_KEYS)
+        if "medium" not in region:
+            raise ConfigError(f"{key}.medium is missing")
+        medium = region["medium"]
+        if isinstance(medium, bool) or not isinstance(medium, int):
+            raise ConfigError(f"{key}.medium must be an integer index into G.media, got {medium!r}")
+        bounds = {}
+        for b in ("x_min", "x_max", "y_min", "y_max", "z_min", "z_max"):
+            v = _number(f"{key}.{b}", region[b]) if b in region else (
+                -math.inf if b.endswith("min") else math.inf)
+            bounds[b] = v
+        boxes.append((medium, bounds))
+
+    def geom_func(X, Y, Z):
+        M = np.zeros(X.shape, dtype=int)
+        for medium, b in boxes:
+            inside = ((X >= b["x_min"]) & (X <= b["x_max"]) & (Y >= b["y_min"])
+                      & (Y <= b["y_max"]) & (Z >= b["z_min"]) & (Z <= b["z_max"]))
+            M[inside] = medium
+        return M
+
+    return geom_func
+
+
+def _set(obj, section: str, table: dict, skip=()) -> None:
+    for k, v in table.items():
+        if k in skip:
+            continue
+        if isinstance(v, dict):
+            raise ConfigError(f"{section}.{k} must be a value, got a table")
+        setattr(obj, k, v)
+
+
+def model_from_config(cfg: dict) -> Model:
+    """Build a :class:`Model` from a parsed config; validates the model's G and MC parts."""
+    check_keys("config", cfg, {"G", "MC", "HS", "paper", "filter", "sensors", "data", "run"})
+    if "G" not in cfg:
+        raise ConfigError("config has no [G] table (geometry)")
+    G_cfg = check_keys("G", cfg["G"], _G_KEYS)
+    model = Model()
+    media_cfg = G_cfg.get("media")
+    if not isinstance(media_cfg, list) or not media_cfg:
+        raise ConfigError(f"G.media must be a non-empty array of tables, got {media_cfg!r}")
+    media = []
+    for i, m in enumerate(media_cfg):
+        check_keys(f"G.media[{i}]", m, _MEDIUM_KEYS)
+        missing = [k for k in ("mua", "mus") if k not in m]
+        if missing:
+            raise ConfigError(f"G.media[{i}].{missing[0]} is missing")
+        try:
+            media.append(Medium(**{"name": f"medium {i}", **m}))
+        except TypeError as err:
+            raise ConfigError(f"G.media[{i}]: {err}") from None
+        except ValueError as err:
+            raise ConfigError(f"G.media[{i}]: {err}") from None
+    model.G.media = media
+    _set(model.G, "G", G_cfg, skip=("media", "regions"))
+    if "regions" in G_cfg:
+        if not isinstance(G_cfg["regions"], list):
+            raise ConfigError(f"G.regions must be an array of tables, got {G_cfg['regions']!r}")
+        model.G.geom_func = _region_map(model.G, G_cfg["regions"])
+    MC_cfg = check_keys("MC", cfg.get("MC", {}), _MC_KEYS)
+    _set(model.MC, "MC", MC_cfg, skip=("light_source",))
+    src_cfg = check_keys("MC.light_source", MC_cfg.get("light_source", {}), _SOURCE_KEYS)
+    _set(model.MC.light_source, "MC.light_source", src_cfg)
+    if "HS" in cfg:
+        HS_cfg = check_keys("HS", cfg["HS"], _HS_KEYS)
+        _set(model.HS, "HS", HS_cfg)
+    try:
+        model.G.medium_map()
+        model.MC.validate(model.G)
+    except ConfigError:
+        raise
+    except ValueError as err:
+        raise ConfigError(str(err)) from None
+    return model
+
+
+def load_model(path: str | Path) -> Model:
+    """Read a TOML config file and build its validated :class:`Model`."""
+    return model_from_config(read_toml(path))
