@@ -1,0 +1,228 @@
+"""numba kernels of the fem package: arrays and scalars in, no validation.
+
+The Python layer (:mod:`fem.assembly`, :mod:`fem.locate`) checks shapes and
+dtypes once and calls these.
+"""
+
+from __future__ import annotations
+
+import numba
+import numpy as np
+
+
+@numba.njit(cache=True)
+def _tet_inverse(p, t, e, G):
+    """Fill G (3, 3) with rows = gradients of barycentrics 1..3; return signed 6V."""
+    i0 = t[0, e]
+    a00 = p[0, t[1, e]] - p[0, i0]
+    a10 = p[1, t[1, e]] - p[1, i0]
+    a20 = p[2, t[1, e]] - p[2, i0]
+    a01 = p[0, t[2, e]] - p[0, i0]
+    a11 = p[1, t[2, e]] - p[1, i0]
+    a21 = p[2, t[2, e]] - p[2, i0]
+    a02 = p[0, t[3, e]] - p[0, i0]
+    a12 = p[1, t[3, e]] - p[1, i0]
+    a22 = p[2, t[3, e]] - p[2, i0]
+    c00 = a11 * a22 - a12 * a21
+    c01 = a12 * a20 - a10 * a22
+    c02 = a10 * a21 - a11 * a20
+    det = a00 * c00 + a01 * c01 + a02 * c02
+    inv = 1.0 / det
+    # rows of the inverse of the edge matrix A = [v1-v0, v2-v0, v3-v0]
+    # (columns): inverse = adjugate / det, adjugate[i, j] = cofactor[j, i]
+    G[0, 0] = c00 * inv
+    G[1, 0] = c01 * inv
+    G[2, 0] = c02 * inv
+    G[0, 1] = (a02 * a21 - a01 * a22) * inv
+    G[1, 1] = (a00 * a22 - a02 * a20) * inv
+    G[2, 1] = (a01 * a20 - a00 * a21) * inv
+    G[0, 2] = (a01 * a12 - a02 * a11) * inv
+    G[1, 2] = (a02 * a10 - a00 * a12) * inv
+    G[2, 2] = (a00 * a11 - a01 * a10) * inv
+    return det
+
+
+@numba.njit(cache=True)
+def _element_matrix(p, t, e, kind, G, g, out):
+    """Local 4x4 matrix of element e: kind 0 stiffness, 1 consistent mass (no coefficient)."""
+    det = _tet_inverse(p, t, e, G)
+    vol = abs(det) / 6.0
+    if kind == 0:
+        for d in range(3):
+            g[1, d] = G[0, d]
+            g[2, d] = G[1, d]
+            g[3, d] = G[2, d]
+            g[0, d] = -(G[0, d] + G[1, d] + G[2, d])
+        for a in range(4):
+            for b in range(4):
+                out[a, b] = vol * (g[a, 0] * g[b, 0] + g[a, 1] * g[b, 1] + g[a, 2] * g[b, 2])
+    else:
+        for a in range(4):
+            for b in range(4):
+                out[a, b] = vol / 20.0 * (2.0 if a == b else 1.0)
+
+
+@numba.njit(cache=True)
+def scatter_rows(p, t, coef, kind, indptr, cols, vals):
+    """Write the 16 entries of every element into per-row buckets (with duplicates).
+
+    ``indptr`` holds the bucket starts (4 entries per element per row).
+    """
+    G = np.empty((3, 3))
+    g = np.empty((4, 3))
+    loc = np.empty((4, 4))
+    fill = indptr[:-1].copy()
+    for e in range(t.shape[1]):
+        _element_matrix(p, t, e, kind, G, g, loc)
+        for a in range(4):
+            r = t[a, e]
+            k = fill[r]
+            fill[r] = k + 4
+            for b in range(4):
+                cols[k + b] = t[b, e]
+                vals[k + b] = coef[e] * loc[a, b]
+
+
+@numba.njit(cache=True, parallel=True)
+def merge_rows(indptr, cols, vals, prune_rtol, counts):
+    """Sort each row bucket by column, sum duplicates, drop |v| <= rtol |diag|."""
+    n = indptr.shape[0] - 1
+    for r in numba.prange(n):
+        s, e = indptr[r], indptr[r + 1]
+        order = np.argsort(cols[s:e], kind="mergesort")
+        c = cols[s:e][order]
+        v = vals[s:e][order]
+        m = 0
+        diag = 0.0
+        for q in range(e - s):
+            if m > 0 and c[q] == cols[s + m - 1]:
+                vals[s + m - 1] += v[q]
+            else:
+                cols[s + m] = c[q]
+                vals[s + m] = v[q]
+                m += 1
+        for q in range(m):
+            if cols[s + q] == r:
+                diag = abs(vals[s + q])
+        w = 0
+        for q in range(m):
+            if cols[s + q] == r or abs(vals[s + q]) > prune_rtol * diag:
+                cols[s + w] = cols[s + q]
+                vals[s + w] = vals[s + q]
+                w += 1
+        counts[r] = w
+
+
+@numba.njit(cache=True)
+def compact_rows(indptr, cols, vals, counts):
+    """Move the merged rows together; return the final indptr."""
+    n = indptr.shape[0] - 1
+    out = np.empty(n + 1, dtype=indptr.dtype)
+    out[0] = 0
+    w = 0
+    for r in range(n):
+        s = indptr[r]
+        for q in range(counts[r]):
+            cols[w] = cols[s + q]
+            vals[w] = vals[s + q]
+            w += 1
+        out[r + 1] = w
+    return out
+
+
+@numba.njit(cache=True)
+def build_buckets(p, t, lo, inv_h, nb):
+    """Bucket grid of element bounding boxes: CSR (start, items)."""
+    ne = t.shape[1]
+    counts = np.zeros(nb[0] * nb[1] * nb[2] + 1, dtype=np.int64)
+    rng = np.empty((ne, 6), dtype=np.int64)
+    for e in range(ne):
+        for d in range(3):
+            mn = np.inf
+            mx = -np.inf
+            for a in range(4):
+                v = p[d, t[a, e]]
+                mn = min(mn, v)
+                mx = max(mx, v)
+            i0 = int(np.floor((mn - lo[d]) * inv_h[d] - 1e-9))
+            i1 = int(np.floor((mx - lo[d]) * inv_h[d] + 1e-9))
+            rng[e, 2 * d] = min(max(i0, 0), nb[d] - 1)
+            rng[e, 2 * d + 1] = min(max(i1, 0), nb[d] - 1)
+        for i in range(rng[e, 0], rng[e, 1] + 1):
+            for j in range(rng[e, 2], rng[e, 3] + 1):
+                for k in range(rng[e, 4], rng[e, 5] + 1):
+                    counts[(i * nb[1] + j) * nb[2] + k + 1] += 1
+    start = np.cumsum(counts)
+    fill = start[:-1].copy()
+    items = np.empty(start[-1], dtype=np.int64)
+    for e in range(ne):
+        for i in range(rng[e, 0], rng[e, 1] + 1):
+            for j in range(rng[e, 2], rng[e, 3] + 1):
+                for k in range(rng[e, 4], rng[e, 5] + 1):
+                    b = (i * nb[1] + j) * nb[2] + k
+                    items[fill[b]] = e
+                    fill[b] += 1
+    return start, items
+
+
+@numba.njit(cache=True)
+def locate_points(x, p, t, lo, inv_h, nb, start, items, tol, elem, bary):
+    """Containing element and barycentrics of each point; elem = -1 if none.
+
+    Among the candidate elements the one with the largest smallest barycentric
+    wins, so points on shared faces get a valid element.  Barycentrics within
+    ``tol`` of the element are clipped to [0, 1] and renormalised to sum 1.
+    """
+    G = np.empty((3, 3))
+    lam = np.empty(4)
+    npt = x.shape[1]
+    for q in range(npt):
+        elem[q] = -1
+        ib = np.empty(3, dtype=np.int64)
+        outside = False
+        for d in range(3):
+            s = (x[d, q] - lo[d]) * inv_h[d]
+            i = int(np.floor(s))
+            if i < 0:
+                if s < -1e-6:
+                    outside = True
+                i = 0
+            if i >= nb[d]:
+                if s > nb[d] + 1e-6:
+                    outside = True
+                i = nb[d] - 1
+            ib[d] = i
+        if outside:
+            continue
+        b = (ib[0] * nb[1] + ib[1]) * nb[2] + ib[2]
+        best = -np.inf
+        for r in range(start[b], start[b + 1]):
+            e = items[r]
+            _tet_inverse(p, t, e, G)
+            i0 = t[0, e]
+            dx = x[0, q] - p[0, i0]
+            dy = x[1, q] - p[1, i0]
+            dz = x[2, q] - p[2, i0]
+            l1 = G[0, 0] * dx + G[0, 1] * dy + G[0, 2] * dz
+            l2 = G[1, 0] * dx + G[1, 1] * dy + G[1, 2] * dz
+            l3 = G[2, 0] * dx + G[2, 1] * dy + G[2, 2] * dz
+            l0 = 1.0 - l1 - l2 - l3
+            m = min(min(l0, l1), min(l2, l3))
+            if m > best:
+                best = m
+                elem[q] = e
+                lam[0] = l0
+                lam[1] = l1
+                lam[2] = l2
+                lam[3] = l3
+                if m >= 0.0:
+                    break
+        if best < -tol:
+            elem[q] = -1
+            continue
+        s = 0.0
+        for a in range(4):
+            lam[a] = min(max(lam[a], 0.0), 1.0)
+            s += lam[a]
+        for a in range(4):
+            bary[a, q] = lam[a] / s
