@@ -1,0 +1,362 @@
+"""The absorption emulator: NA(mua, mus) from a table of Monte Carlo runs, in microseconds.
+
+The filter needs, for each of its N members at every sensor tick, the absorbed
+power map of a homogeneous block for that member's (mua, mus). Running Monte
+Carlo there is what Arnold & Fichera call the barrier to online use. Instead we
+tabulate ``NA`` once on a log-spaced (mua, mus) grid and interpolate
+``log NA`` with 4-point (cubic) Lagrange polynomials in ``log mua`` and ``log mus``
+(error O(h^4) in the table spacing h). All table points use the same random
+seed (common random numbers), so the table is smooth in (mua, mus) and the
+interpolant does not jitter from one point to the next.
+
+Outside the table the emulator raises ``ValueError`` (``out_of_range="error"``,
+the default) or clamps to the table edge with a ``RuntimeWarning``
+(``out_of_range="clamp"``); it never extrapolates silently.
+
+:class:`DirectMonteCarloAbsorption` has the same call signature and runs direct
+Monte Carlo per evaluation: the exact mode, for checking.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import os
+import warnings
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numba
+import numpy as np
+
+from ._progress import Progress
+from .media import Medium
+from .model import Geometry, MonteCarloSimulation
+
+CACHE_VERSION = 2
+#: The table holds log(NA + NA_OFFSET): smooth where NA is zero or noisy in voxels
+#: that (almost) no photon reaches, and exactly inverted on evaluation.
+NA_OFFSET = 1e-3  # W/cm^3/W, far below the NA of the voxels that matter
+
+
+def default_cache_dir() -> Path:
+    """``$TISSUE_ENKF_CACHE``, else ``~/.cache/tissue-enkf``."""
+    env = os.environ.get("TISSUE_ENKF_CACHE")
+    return Path(env) if env else Path.home() / ".cache" / "tissue-enkf"
+
+
+@numba.njit(cache=True, inline="always")
+def _lagrange4(t, i0, grid_log):
+    """Weights of the 4-point Lagrange interpolant at ``t`` on nodes ``grid_log[i0:i0+4]``."""
+    x0 = grid_log[i0]
+    x1 = grid_log[i0 + 1]
+    x2 = grid_log[i0 + 2]
+    x3 = grid_log[i0 + 3]
+    w0 = (t - x1) * (t - x2) * (t - x3) / ((x0 - x1) * (x0 - x2) * (x0 - x3))
+    w1 = (t - x0) * (t - x2) * (t - x3) / ((x1 - x0) * (x1 - x2) * (x1 - x3))
+    w2 = (t - x0) * (t - x1) * (t - x3) / ((x2 - x0) * (x2 - x1) * (x2 - x3))
+    w3 = (t - x0) * (t - x1) * (t - x2) / ((x3 - x0) * (x3 - x1) * (x3 - x2))
+    return w0, w1, w2, w3
+
+
+@numba.njit(cache=True)
+def _stencil(t, grid_log):
+    n = grid_log.size
+    i = np.searchsorted(grid_log, t) - 1
+    i0 = min(max(i - 1, 0), n - 4)
+    return i0
+
+
+@numba.njit(cache=True, parallel=True)
+def interpolate_log_na(table, lmua_grid, lmus_grid, lmua, lmus, offset, out):
+    """``out[n] = exp(sum_ab w_a(lmua[n]) w_b(lmus[n]) table[a, b]) - offset`` (4 x 4 Lagrange).
+
+    table : (n_mua, n_mus, nvox) float64 log NA; lmua, lmus : (N,) logs; out : (N, nvox).
+    """
+    N = lmua.size
+    nvox = table.shape[2]
+    for n in numba.prange(N):
+        ia = _stencil(lmua[n], lmua_grid)
+        ib = _stencil(lmus[n], lmus_grid)
+        wa = _lagrange4(lmua[n], ia, lmua_grid)
+        wb = _lagrange4(lmus[n], ib, lmus_grid)
+        row = out[n]
+        for v in range(nvox):
+            row[v] = 0.0
+        for a in range(4):
+            for b in range(4):
+                w = wa[a] * wb[b]
+                src = table[ia + a, ib + b]
+                for v in range(nvox):
+                    row[v] += w * src[v]
+        for v in range(nvox):
+            row[v] = max(np.exp(row[v]) - offset, 0.0)
+
+
+@dataclass
+class EmulatorSpec:
+    """Everything that changes the tabulated maps (hashed into the cache key).
+
+    The geometry must be a single medium whose ``mua`` and ``mus`` are replaced by the
+    table values; ``g`` and ``n`` are fixed.
+    """
+
+    nx: int
+    ny: int
+    nz: int
+    Lx: float  #: cm
+    Ly: float  #: cm
+    Lz: float  #: cm
+    g: float
+    n: float
+    source_type: str
+    radius: float  #: cm
+    x_focus: float = 0.0
+    y_focus: float = 0.0
+    z_focus: float = 0.0
+    boundary_type: int = 1
+    matched_interfaces: bool = True
+    n_outside: float = 1.0
+    mua_range: tuple[float, float] = (0.1, 20.0)  #: cm^-1
+    mus_range: tuple[float, float] = (10.0, 2000.0)  #: cm^-1
+    n_mua: int = 14
+    n_mus: int = 14
+    n_photons: int = 100_000  #: photons per table point
+    seed: int = 12345
+
+    def __post_init__(self):
+        for name in ("n_mua", "n_mus"):
+            if int(getattr(self, name)) < 4:
+                raise ValueError(f"EmulatorSpec.{name} must be >= 4, got {getattr(self, name)!r}")
+        for name in ("mua_range", "mus_range"):
+            lo, hi = getattr(self, name)
+            if not (0 < lo < hi and np.isfinite(hi)):
+                raise ValueError(f"EmulatorSpec.{name} must be (lo, hi) with 0 < lo < hi, "
+                                 f"got {getattr(self, name)!r}")
+        self.mua_range = tuple(float(v) for v in self.mua_range)
+        self.mus_range = tuple(float(v) for v in self.mus_range)
+
+    @classmethod
+    def from_model(cls, model, **kw) -> EmulatorSpec:
+        """The spec of a single-medium model (its G and MC.light_source)."""
+        G, MC = model.G, model.MC
+        G.validate()
+        if len(G.media) != 1:
+            raise ValueError("the emulator needs a homogeneous block: G.media must have one "
+                             f"medium, got {len(G.media)}")
+        src = MC.light_source
+        return cls(nx=G.nx, ny=G.ny, nz=G.nz, Lx=G.Lx, Ly=G.Ly, Lz=G.Lz, g=G.media[0].g,
+                   n=G.media[0].n, source_type=src.source_type, radius=src.radius,
+                   x_focus=src.x_focus, y_focus=src.y_focus, z_focus=src.z_focus,
+                   boundary_type=MC.boundary_type, matched_interfaces=MC.matched_interfaces,
+                   n_outside=MC.n_outside, **kw)
+
+    def key(self) -> str:
+        d = {k: getattr(self, k) for k in self.__dataclass_fields__}
+        d["version"] = CACHE_VERSION
+        d["batch_size"] = MonteCarloSimulation().batch_size
+        d["weight_threshold"] = MonteCarloSimulation().weight_threshold
+        text = json.dumps(d, sort_keys=True, default=str)
+        return hashlib.sha256(text.encode()).hexdigest()[:24]
+
+    def mua_grid(self) -> np.ndarray:
+        return np.geomspace(*self.mua_range, self.n_mua)
+
+    def mus_grid(self) -> np.ndarray:
+        return np.geomspace(*self.mus_range, self.n_mus)
+
+    def model(self, mua: float, mus: float, n_photons: int | None = None, seed=None):
+        """A :class:`~mcmatlab_py.Model` of this block with the given coefficients."""
+        from .model import Model
+
+        m = Model()
+        m.G = Geometry(nx=self.nx, ny=self.ny, nz=self.nz, Lx=self.Lx, Ly=self.Ly, Lz=self.Lz,
+                       media=[Medium("tissue", mua=mua, mus=mus, g=self.g, n=self.n)])
+        MC = m.MC
+        MC.n_photons_requested = int(n_photons or self.n_photons)
+        MC.seed = self.seed if seed is None else seed
+        MC.boundary_type = self.boundary_type
+        MC.matched_interfaces = self.matched_interfaces
+        MC.n_outside = self.n_outside
+        MC.progress = False
+        src = MC.light_source
+        src.source_type, src.radius = self.source_type, self.radius
+        src.x_focus, src.y_focus, src.z_focus = self.x_focus, self.y_focus, self.z_focus
+        return m
+
+
+@dataclass
+class AbsorptionEmulator:
+    """NA(mua, mus) on a fixed grid by interpolation in a Monte Carlo table.
+
+    Call with arrays ``mua`` (N,) and ``mus`` (N,) in cm^-1; returns NA (N, nx, ny, nz)
+    in W/cm^3/W.
+    """
+
+    spec: EmulatorSpec
+    log_na: np.ndarray  #: (n_mua, n_mus, nx*ny*nz) log NA table
+    absorbed: np.ndarray = None  #: (n_mua, n_mus) absorbed fraction of each table point
+    out_of_range: str = "error"  #: "error" or "clamp"
+    build_seconds: float = 0.0
+    _lmua: np.ndarray = field(init=False, repr=False)
+    _lmus: np.ndarray = field(init=False, repr=False)
+
+    def __post_init__(self):
+        self._lmua = np.log(self.spec.mua_grid())
+        self._lmus = np.log(self.spec.mus_grid())
+        if self.out_of_range not in ("error", "clamp"):
+            raise ValueError(f"out_of_range must be 'error' or 'clamp', got {self.out_of_range!r}")
+        self.log_na = np.ascontiguousarray(self.log_na, dtype=np.float64)
+
+    @property
+    def shape(self) -> tuple[int, int, int]:
+        return (self.spec.nx, self.spec.ny, self.spec.nz)
+
+    def _check(self, name, values, lo, hi):
+        values = np.atleast_1d(np.asarray(values, dtype=np.float64))
+        if not np.all(np.isfinite(values)):
+            raise ValueError(f"{name} must be finite, got {values[~np.isfinite(values)][0]!r}")
+        bad = (values < lo * (1 - 1e-12)) | (values > hi * (1 + 1e-12))
+        if bad.any():
+            if self.out_of_range == "error":
+                raise ValueError(f"{name} = {values[bad][0]!r} cm^-1 is outside the emulator "
+                                 f"table [{lo}, {hi}]")
+            warnings.warn(f"{name} = {values[bad][0]!r} clamped to the emulator table "
+                          f"[{lo}, {hi}]", RuntimeWarning, stacklevel=3)
+            values = np.clip(values, lo, hi)
+        return values
+
+    def __call__(self, mua, mus, out: np.ndarray | None = None) -> np.ndarray:
+        mua = self._check("mua", mua, *self.spec.mua_range)
+        mus = self._check("mus", mus, *self.spec.mus_range)
+        mua, mus = np.broadcast_arrays(mua, mus)
+        N = mua.size
+        nvox = self.log_na.shape[2]
+        if out is None:
+            out = np.empty((N, nvox))
+        interpolate_log_na(self.log_na, self._lmua, self._lmus, np.log(mua).ravel(),
+                           np.log(mus).ravel(), NA_OFFSET, out.reshape(N, nvox))
+        return out.reshape((N, *self.shape))
+
+    # ----------------------------------------------------------------- build & cache
+    @classmethod
+    def build(cls, spec: EmulatorSpec, *, cache_dir: str | Path | None = None,
+              progress: bool = True, out_of_range: str = "error") -> AbsorptionEmulator:
+        """Load the table for ``spec`` from the cache, or run the Monte Carlo and store it.
+
+        Each table point runs ``spec.n_photons`` photons on all cores (photon batches
+        in parallel); a corrupted cache file is detected by its checksum and rebuilt.
+        """
+        import time
+
+        from .monte_carlo import optical_arrays, simulate
+
+        cache = Path(cache_dir) if cache_dir is not None else default_cache_dir()
+        path = cache / f"emulator-{spec.key()}.npz"
+        loaded = _load(path, spec)
+        if loaded is not None:
+            return cls(spec=spec, log_na=loaded["log_na"], absorbed=loaded["absorbed"],
+                       out_of_range=out_of_range, build_seconds=float(loaded["build_seconds"]))
+        mua_grid, mus_grid = spec.mua_grid(), spec.mus_grid()
+        nvox = spec.nx * spec.ny * spec.nz
+        log_na = np.empty((spec.n_mua, spec.n_mus, nvox))
+        absorbed = np.empty((spec.n_mua, spec.n_mus))
+        # cost grows with mus: do the expensive column first so the ETA is honest
+        points = [(a, b) for b in range(spec.n_mus)[::-1] for a in range(spec.n_mua)]
+        bar = Progress(len(points), "emulator table", enabled=progress, delay=1.0)
+        t0 = time.perf_counter()
+        for k, (a, b) in enumerate(points):
+            m = spec.model(mua_grid[a], mus_grid[b])
+            M = m.G.medium_map()
+            m.MC.validate(m.G)
+            res = simulate(m.G, m.MC, M, *optical_arrays(m.G.media), seed=spec.seed,
+                           n_photons=spec.n_photons)
+            dV = m.G.dx * m.G.dy * m.G.dz
+            na = symmetrize(res.absorbed / (res.n_photons * dV), spec)
+            log_na[a, b] = np.log(na.ravel() + NA_OFFSET)
+            absorbed[a, b] = res.absorbed.sum() / res.n_photons
+            bar.update(k + 1)
+        bar.close()
+        seconds = time.perf_counter() - t0
+        _store(path, spec, log_na, absorbed, seconds)
+        return cls(spec=spec, log_na=log_na, absorbed=absorbed, out_of_range=out_of_range,
+                   build_seconds=seconds)
+
+
+def symmetrize(na: np.ndarray, spec: EmulatorSpec) -> np.ndarray:
+    """Average an (nx, ny, nz) map over the mirror symmetries of the block and beam.
+
+    A beam centred on the block is symmetric under x -> -x and y -> -y, and a square
+    block under x <-> y as well: averaging over these images is an exact variance
+    reduction (up to 8 times fewer photons for the same noise).
+    """
+    if spec.x_focus == 0:
+        na = 0.5 * (na + na[::-1])
+    if spec.y_focus == 0:
+        na = 0.5 * (na + na[:, ::-1])
+    if (spec.x_focus == spec.y_focus and spec.nx == spec.ny and spec.Lx == spec.Ly):
+        na = 0.5 * (na + na.transpose(1, 0, 2))
+    return na
+
+
+def _checksum(*arrays) -> str:
+    h = hashlib.sha256()
+    for a in arrays:
+        h.update(np.ascontiguousarray(a).tobytes())
+    return h.hexdigest()
+
+
+def _store(path: Path, spec: EmulatorSpec, log_na, absorbed, seconds) -> None:
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = path.with_suffix(f".tmp{os.getpid()}.npz")
+    np.savez(tmp, log_na=log_na, absorbed=absorbed, build_seconds=seconds, key=spec.key(),
+             checksum=_checksum(log_na, absorbed))
+    os.replace(tmp, path)  # atomic: a reader never sees half a table
+
+
+def _load(path: Path, spec: EmulatorSpec):
+    if not path.exists():
+        return None
+    try:
+        with np.load(path, allow_pickle=False) as f:
+            data = {k: f[k] for k in ("log_na", "absorbed", "build_seconds", "key", "checksum")}
+        ok = (str(data["key"]) == spec.key()
+              and data["log_na"].shape == (spec.n_mua, spec.n_mus, spec.nx * spec.ny * spec.nz)
+              and str(data["checksum"]) == _checksum(data["log_na"], data["absorbed"]))
+    except Exception:  # noqa: BLE001 - any unreadable file is treated as corrupted
+        ok = False
+    if not ok:
+        warnings.warn(f"emulator cache {path} is corrupted or stale: rebuilding", RuntimeWarning,
+                      stacklevel=3)
+        path.unlink(missing_ok=True)
+        return None
+    return data
+
+
+@dataclass
+class DirectMonteCarloAbsorption:
+    """The exact mode: the same call as :class:`AbsorptionEmulator`, by direct Monte Carlo.
+
+    Each call runs one Monte Carlo per member (``spec.n_photons`` photons, seed
+    ``spec.seed + call index`` so that successive calls are independent).
+    """
+
+    spec: EmulatorSpec
+    calls: int = 0
+
+    @property
+    def shape(self) -> tuple[int, int, int]:
+        return (self.spec.nx, self.spec.ny, self.spec.nz)
+
+    def __call__(self, mua, mus, out=None) -> np.ndarray:
+        mua, mus = np.broadcast_arrays(np.atleast_1d(mua), np.atleast_1d(mus))
+        maps = []
+        for a, s in zip(mua.ravel(), mus.ravel(), strict=True):
+            m = self.spec.model(float(a), float(s), seed=self.spec.seed + self.calls)
+            maps.append(m.run_monte_carlo().MC.NA)
+        self.calls += 1
+        result = np.stack(maps)
+        if out is not None:
+            out.reshape(result.shape)[...] = result
+            return out.reshape(result.shape)
+        return result
