@@ -1,0 +1,354 @@
+r"""Fast-diagonalization solver for implicit heat steps on structured box meshes.
+
+On :func:`fem.mesh.box_mesh` with homogeneous VHC ``c`` and TC ``k``, lumped
+mass and boundary conditions that hold on whole faces, the implicit matrix of a
+theta step for ensemble member ``n`` is
+
+.. math::
+
+    A_n = \alpha_n M + \beta_n K + \theta R, \qquad
+    \alpha_n = s^{c}_n c / \Delta t,\quad \beta_n = \theta s^{k}_n k,
+
+(``s`` the per-member scales, ``M``, ``K`` the unit-coefficient P1 matrices,
+``R`` the convective boundary matrix).  Away from the twelve edges of the box
+these are Kronecker products of 1-D lumped P1 matrices (``Mx``: ``h/2, h, ...,
+h/2``; ``Kx``: ``[1, -1; -1, 1]/h`` per interval):
+
+.. math::
+
+    M^\otimes = M_x\otimes M_y\otimes M_z,\qquad
+    K^\otimes = K_x\otimes M_y\otimes M_z + M_x\otimes K_y\otimes M_z + M_x\otimes M_y\otimes K_z,
+
+and a convective face adds ``h e e^T`` to the 1-D stiffness of its axis, a
+fixed face removes its node from the 1-D problem.  With the 1-D generalized
+eigenpairs :math:`(\beta K_a + \theta H_a)\Phi_a = M_a\Phi_a\,\mathrm{diag}(\nu_a)`,
+:math:`\Phi_a^T M_a \Phi_a = I`,
+
+.. math::
+
+    (A^\otimes_n)^{-1} = \Phi\,\mathrm{diag}\big(1/(\alpha_n + \nu_x + \nu_y + \nu_z)\big)\,\Phi^T,
+    \qquad \Phi = \Phi_x\otimes\Phi_y\otimes\Phi_z,
+
+applied axis by axis (Lynch, Rice & Thomas, Numer. Math. 6, 1964), batched over
+members.  Per-member scales change only the diagonal (and, for axes with a
+convective face, the tiny 1-D eigenproblem).
+
+The Kuhn split is not symmetric on the box edges: there the P1 lumped mass,
+stiffness and convective mass differ from the Kronecker forms (by a factor 4/3
+or 2/3, see :func:`fem.mesh.box_mesh`).  The difference
+:math:`\Delta_n = A_n - A^\otimes_n` lives on the ``m`` edge nodes ``E`` only
+(checked at construction), so the exact P1 system is solved with the
+capacitance (Woodbury) formula
+
+.. math::
+
+    x = y - (A^\otimes_n)^{-1} P_E s,\quad y = (A^\otimes_n)^{-1} r,\quad
+    s = (I + \Delta_n G_n)^{-1}\Delta_n y_E,\quad G_n = [(A^\otimes_n)^{-1}]_{EE},
+
+where :math:`y_E` and :math:`(A^\otimes)^{-1}P_E s` need only cheap
+restricted transforms; :math:`(I + \Delta_n G_n)^{-1}\Delta_n` (m x m) is
+computed once per distinct pair of scales and cached.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import scipy.linalg as sla
+import scipy.sparse as sp
+
+from .bc import HeatBoundary
+from .mesh import BoxGrid
+
+__all__ = ["KroneckerSolver", "NotApplicable", "one_d_operators"]
+
+
+class NotApplicable(Exception):
+    """The fast-diagonalization path does not apply to this problem."""
+
+
+def one_d_operators(n: int, h: float) -> tuple[np.ndarray, np.ndarray]:
+    """1-D lumped P1 mass (diagonal, (n+1,)) and stiffness ((n+1, n+1)), unit coefficient."""
+    m = np.full(n + 1, h)
+    m[[0, -1]] = h / 2
+    K = (np.diag(np.full(n + 1, 2.0)) - np.eye(n + 1, k=1) - np.eye(n + 1, k=-1)) / h
+    K[0, 0] = K[-1, -1] = 1.0 / h
+    return m, K
+
+
+def _contract(X: np.ndarray, Phi: np.ndarray, axis: int) -> np.ndarray:
+    """Contract spatial ``axis`` (0..2) of X (B, a0, a1, a2) with the first matrix index.
+
+    ``Phi`` is (L, P) shared by the batch or (B, L, P) per batch entry; the
+    result has the contracted axis (now of size P) in the same position.
+    """
+    Xm = np.moveaxis(X, axis + 1, -1)
+    shape = Xm.shape
+    L = shape[-1]
+    if Phi.ndim == 2:
+        Y = Xm.reshape(-1, L) @ Phi
+    else:
+        Y = np.matmul(Xm.reshape(shape[0], -1, L), Phi)
+    return np.moveaxis(Y.reshape(*shape[:-1], Phi.shape[-1]), -1, axis + 1)
+
+
+def _transpose(Phi: np.ndarray) -> np.ndarray:
+    return np.swapaxes(Phi, -1, -2)
+
+
+def _rows(Phi: np.ndarray, idx: np.ndarray) -> np.ndarray:
+    return Phi[..., idx, :]
+
+
+class KroneckerSolver:
+    """Exact P1 implicit solves on a structured box mesh by fast diagonalization.
+
+    Parameters
+    ----------
+    grid : BoxGrid
+        The grid whose :func:`fem.mesh.box_mesh` is the mesh.
+    boundary : HeatBoundary
+    vhc, tc : float
+        Homogeneous VHC (J cm^-3 K^-1) and TC (W cm^-1 K^-1).
+    dt : float
+        s, time step.
+    theta : float
+        Implicitness (1 backward Euler, 0.5 Crank-Nicolson).
+    M_true : array (npoints,)
+        The lumped P1 mass with coefficient ``vhc``.
+    K_true : csr (npoints, npoints)
+        The P1 stiffness with coefficient ``tc``.
+    R_true : array (npoints,)
+        The lumped convective boundary matrix (diagonal).
+    free : bool array (npoints,)
+        Nodes not held by a fixed face.
+
+    Raises
+    ------
+    NotApplicable
+        If ``A - A^\\otimes`` is not confined to the box edges (it always is
+        for box_mesh; the check guards against misuse).
+    """
+
+    def __init__(self, grid: BoxGrid, boundary: HeatBoundary, vhc: float, tc: float,
+                 dt: float, theta: float, M_true, K_true, R_true, free):
+        self.grid, self.theta, self.dt, self.vhc, self.tc = grid, theta, dt, vhc, tc
+        sizes = grid.shape
+        self.m1, self.K1, self.H1, self.free1 = [], [], [], []
+        for a, (n, h) in enumerate(zip(sizes, grid.spacing, strict=True)):
+            m, K = one_d_operators(n, h)
+            H = np.zeros(n + 1)
+            keep = np.ones(n + 1, dtype=bool)
+            for side, node in (("-", 0), ("+", n)):
+                bc = boundary["xyz"[a] + side]
+                if bc.kind == "convective":
+                    H[node] += bc.h
+                elif bc.kind == "fixed":
+                    keep[node] = False
+            idx = np.flatnonzero(keep)
+            if idx.size == 0:
+                raise NotApplicable(f"no free nodes along axis {'xyz'[a]}")
+            self.free1.append(idx)
+            self.m1.append(m[idx])
+            self.K1.append(K[np.ix_(idx, idx)])
+            self.H1.append(H[idx])
+        self.shape_f = tuple(len(i) for i in self.free1)
+        # free nodes of the mesh in the C order of the free grid
+        I, J, Kk = np.meshgrid(*self.free1, indexing="ij")
+        self.free_nodes = grid.node_index(I.ravel(), J.ravel(), Kk.ravel())
+        if not np.array_equal(np.sort(self.free_nodes), np.flatnonzero(free)):
+            raise NotApplicable("fixed nodes are not whole faces of the box")
+        self._shared = {}
+        for a in range(3):
+            if not np.any(self.H1[a]):
+                mu, Phi = sla.eigh(self.K1[a], np.diag(self.m1[a]))
+                self._shared[a] = (mu, Phi)
+        self._eig_cache: dict = {}
+        self._W_cache: dict = {}
+        self._last = None
+        self._setup_edges(M_true, K_true, R_true)
+
+    # ------------------------------------------------------------------ 1-D
+    def _axis_eig(self, a: int, beta: float):
+        """(nu, Phi) of the 1-D pencil (beta K_a + theta H_a, M_a)."""
+        if a in self._shared:
+            mu, Phi = self._shared[a]
+            return beta * mu, Phi
+        key = (a, beta)
+        if key not in self._eig_cache:
+            S = beta * self.K1[a] + self.theta * np.diag(self.H1[a])
+            self._eig_cache[key] = sla.eigh(S, np.diag(self.m1[a]))
+        return self._eig_cache[key]
+
+    def _member_data(self, alpha: np.ndarray, beta: np.ndarray):
+        """Per-member mode diagonals (N, Px, Py, Pz) and 1-D bases."""
+        N = alpha.size
+        ub, inv = np.unique(beta, return_inverse=True)
+        nus, Phis = [], []
+        for a in range(3):
+            eig = [self._axis_eig(a, b) for b in ub]
+            if a in self._shared or ub.size == 1:
+                Phis.append(eig[0][1])
+            else:
+                Phis.append(np.stack([eig[i][1] for i in inv]))
+            nus.append(np.stack([eig[i][0] for i in inv]))  # (N, P_a)
+        d = (alpha[:, None, None, None] + nus[0][:, :, None, None]
+             + nus[1][:, None, :, None] + nus[2][:, None, None, :])
+        return 1.0 / d, Phis, N
+
+    # --------------------------------------------------------------- edges
+    def _setup_edges(self, M_true, K_true, R_true):
+        g = self.grid
+        free = self.free_nodes
+        # Kronecker forms on the full grid (unit coefficients), then restrict
+        mk, Kk = [], []
+        for n, h in zip(g.shape, g.spacing, strict=True):
+            m, K = one_d_operators(n, h)
+            mk.append(sp.diags_array(m))
+            Kk.append(sp.csr_matrix(K))
+        Mx, My, Mz = mk
+        Kx, Ky, Kz = Kk
+        Mkron = np.kron(np.kron(Mx.diagonal(), My.diagonal()), Mz.diagonal())
+        Kkron = (sp.kron(sp.kron(Kx, My), Mz) + sp.kron(sp.kron(Mx, Ky), Mz)
+                 + sp.kron(sp.kron(Mx, My), Kz)).tocsr()
+        Rkron = np.zeros(g.npoints)
+        for a in range(3):
+            n = g.shape[a]
+            H = np.zeros(n + 1)
+            # H1 holds only free nodes; rebuild the full 1-D vector
+            H[self.free1[a]] = self.H1[a]
+            diag = [Mx.diagonal(), My.diagonal(), Mz.diagonal()]
+            diag[a] = H
+            Rkron += np.kron(np.kron(diag[0], diag[1]), diag[2])
+        dM = (M_true / self.vhc - Mkron)[free]
+        dK = (K_true / self.tc - Kkron)[free][:, free].tocoo()
+        dR = (R_true - Rkron)[free]
+        scale = np.abs(Kkron.diagonal()).max()
+        dK.data[np.abs(dK.data) <= 1e-12 * scale] = 0
+        dK.eliminate_zeros()
+        mscale, rscale = Mkron.max(), max(np.abs(R_true).max(), 1e-300)
+        dM[np.abs(dM) <= 1e-12 * mscale] = 0
+        dR[np.abs(dR) <= 1e-12 * rscale] = 0
+
+        # edge nodes, grouped by the line they lie on, as free-grid positions
+        bnd, inn = [], []
+        for a in range(3):
+            idx = self.free1[a]
+            on = (idx == 0) | (idx == g.shape[a])
+            bnd.append(np.flatnonzero(on))
+            inn.append(np.flatnonzero(~on))
+        allx = np.arange(self.shape_f[0])
+        self.groups = [
+            ((allx, bnd[1], bnd[2]), (2, 1, 0)),
+            ((bnd[0], inn[1], bnd[2]), (2, 0, 1)),
+            ((bnd[0], bnd[1], inn[2]), (0, 1, 2)),
+        ]
+        pos = []
+        for (ix, iy, iz), _ in self.groups:
+            P = np.ix_(ix, iy, iz)
+            pos.append(np.ravel_multi_index(P, self.shape_f).ravel())
+        self.E = np.concatenate(pos)  # positions among the free nodes
+        m = self.E.size
+        inE = np.zeros(free.size, dtype=bool)
+        inE[self.E] = True
+        support = np.unique(np.concatenate([dK.row, dK.col, np.flatnonzero(dM),
+                                            np.flatnonzero(dR)]))
+        if support.size and not inE[support].all():
+            raise NotApplicable("P1 and Kronecker operators differ away from the box edges")
+        if support.size == 0:
+            self.m = 0
+            return
+        loc = np.full(free.size, -1)
+        loc[self.E] = np.arange(m)
+        self.dM = np.diag(dM[self.E])
+        self.dR = np.diag(dR[self.E])
+        self.dK = np.zeros((m, m))
+        np.add.at(self.dK, (loc[dK.row], loc[dK.col]), dK.data)
+        self.m = m
+
+    def _gather(self, Xhat: np.ndarray, Phis) -> np.ndarray:
+        """Node values on E of mode coefficients Xhat (B, Px, Py, Pz) -> (B, m)."""
+        out = []
+        for rows, order in self.groups:
+            if any(r.size == 0 for r in rows):
+                out.append(np.zeros((Xhat.shape[0], 0)))
+                continue
+            Y = Xhat
+            for a in order:
+                Y = _contract(Y, _transpose(_rows(Phis[a], rows[a])), a)
+            out.append(Y.reshape(Y.shape[0], -1))
+        return np.concatenate(out, axis=1)
+
+    def _scatter(self, s: np.ndarray, Phis) -> np.ndarray:
+        """Phi^T P_E s: mode coefficients (B, Px, Py, Pz) of values s (B, m) on E."""
+        B = s.shape[0]
+        out = np.zeros((B,) + self.shape_f)
+        start = 0
+        for rows, order in self.groups:
+            size = int(np.prod([r.size for r in rows]))
+            if size == 0:
+                continue
+            Y = s[:, start:start + size].reshape(B, *(r.size for r in rows))
+            start += size
+            for a in order[::-1]:
+                Y = _contract(Y, _rows(Phis[a], rows[a]), a)
+            out += Y
+        return out
+
+    def _W(self, alpha: float, beta: float) -> np.ndarray:
+        """(I + Delta G)^-1 Delta for one pair of coefficients, cached."""
+        key = (alpha, beta)
+        if key in self._W_cache:
+            return self._W_cache[key]
+        dinv, Phis, _ = self._member_data(np.array([alpha]), np.array([beta]))
+        Phis = [P if P.ndim == 2 else P[0] for P in Phis]
+        m = self.m
+        G = np.empty((m, m))
+        chunk = max(1, int(2e7 // max(dinv.size, 1)))
+        for c0 in range(0, m, chunk):
+            c1 = min(c0 + chunk, m)
+            I = np.zeros((c1 - c0, m))
+            I[np.arange(c1 - c0), np.arange(c0, c1)] = 1.0
+            G[:, c0:c1] = self._gather(self._scatter(I, Phis) * dinv, Phis).T
+        D = alpha * self.dM + beta * self.dK + self.theta * self.dR
+        W = np.linalg.solve(np.eye(m) + D @ G, D)
+        self._W_cache[key] = W
+        return W
+
+    # --------------------------------------------------------------- solve
+    def solve(self, r: np.ndarray, vhc_scale: np.ndarray, tc_scale: np.ndarray) -> np.ndarray:
+        """Solve ``A_n x_n = r_n`` on the free nodes.
+
+        Parameters
+        ----------
+        r : array (N, nfree)
+            W, right-hand sides in the order of ``self.free_nodes``.
+        vhc_scale, tc_scale : arrays (N,)
+            Per-member factors on VHC and TC.
+
+        Returns
+        -------
+        array (N, nfree)
+        """
+        alpha = vhc_scale * (self.vhc / self.dt)
+        beta = tc_scale * (self.theta * self.tc)
+        last = self._last
+        if last is not None and np.array_equal(last[0], alpha) and np.array_equal(last[1], beta):
+            dinv, Phis, W = last[2]
+        else:
+            dinv, Phis, N = self._member_data(alpha, beta)
+            W = None
+            if self.m:
+                W = np.stack([self._W(a, b) for a, b in zip(alpha, beta, strict=True)])
+            self._last = (alpha.copy(), beta.copy(), (dinv, Phis, W))
+        N = r.shape[0]
+        X = r.reshape((N,) + self.shape_f)
+        for a in range(3):
+            X = _contract(X, Phis[a], a)
+        Yhat = X * dinv
+        if W is not None:
+            yE = self._gather(Yhat, Phis)
+            s = np.einsum("nij,nj->ni", W, yE)
+            Yhat = Yhat - self._scatter(s, Phis) * dinv
+        for a in range(3):
+            Yhat = _contract(Yhat, _transpose(Phis[a]), a)
+        return Yhat.reshape(N, -1)
