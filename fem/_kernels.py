@@ -83,11 +83,11 @@ def scatter_rows(p, t, coef, kind, indptr, cols, vals):
                 vals[k + b] = coef[e] * loc[a, b]
 
 
-@numba.njit(cache=True, parallel=True)
+@numba.njit(cache=True)
 def merge_rows(indptr, cols, vals, prune_rtol, counts):
     """Sort each row bucket by column, sum duplicates, drop |v| <= rtol |diag|."""
     n = indptr.shape[0] - 1
-    for r in numba.prange(n):
+    for r in range(n):
         s, e = indptr[r], indptr[r + 1]
         order = np.argsort(cols[s:e], kind="mergesort")
         c = cols[s:e][order]

@@ -56,6 +56,7 @@ import numpy as np
 import scipy.linalg as sla
 import scipy.sparse as sp
 
+from ._threads import blas_threads
 from .bc import HeatBoundary
 from .mesh import BoxGrid
 
@@ -76,19 +77,28 @@ def one_d_operators(n: int, h: float) -> tuple[np.ndarray, np.ndarray]:
 
 
 def _contract(X: np.ndarray, Phi: np.ndarray, axis: int) -> np.ndarray:
-    """Contract spatial ``axis`` (0..2) of X (B, a0, a1, a2) with the first matrix index.
+    """Contract spatial ``axis`` (0..2) of X (B, a0, a1, a2) with Phi's first index.
 
     ``Phi`` is (L, P) shared by the batch or (B, L, P) per batch entry; the
     result has the contracted axis (now of size P) in the same position.
+    Only reshapes of the contiguous X are used (moving the contracted axis to
+    the end would need strided copies, ten times slower than the products).
     """
-    Xm = np.moveaxis(X, axis + 1, -1)
-    shape = Xm.shape
-    L = shape[-1]
+    X = np.ascontiguousarray(X)
+    B, a0, a1, a2 = X.shape
+    P = Phi.shape[-1]
+    if axis == 0:
+        Y = np.matmul(_transpose(Phi), X.reshape(B, a0, a1 * a2))
+        return Y.reshape(B, P, a1, a2)
+    if axis == 1:
+        if Phi.ndim == 2:
+            Y = np.matmul(Phi.T, X.reshape(B * a0, a1, a2))
+        else:
+            Y = np.matmul(_transpose(Phi)[:, None], X)
+        return Y.reshape(B, a0, P, a2)
     if Phi.ndim == 2:
-        Y = Xm.reshape(-1, L) @ Phi
-    else:
-        Y = np.matmul(Xm.reshape(shape[0], -1, L), Phi)
-    return np.moveaxis(Y.reshape(*shape[:-1], Phi.shape[-1]), -1, axis + 1)
+        return (X.reshape(-1, a2) @ Phi).reshape(B, a0, a1, P)
+    return np.matmul(X.reshape(B, a0 * a1, a2), Phi).reshape(B, a0, a1, P)
 
 
 def _transpose(Phi: np.ndarray) -> np.ndarray:
@@ -164,6 +174,7 @@ class KroneckerSolver:
                 self._shared[a] = (mu, Phi)
         self._eig_cache: dict = {}
         self._W_cache: dict = {}
+        self._SI: dict = {}
         self._last = None
         self._setup_edges(M_true, K_true, R_true)
 
@@ -237,13 +248,11 @@ class KroneckerSolver:
             bnd.append(np.flatnonzero(on))
             inn.append(np.flatnonzero(~on))
         allx = np.arange(self.shape_f[0])
-        self.groups = [
-            ((allx, bnd[1], bnd[2]), (2, 1, 0)),
-            ((bnd[0], inn[1], bnd[2]), (2, 0, 1)),
-            ((bnd[0], bnd[1], inn[2]), (0, 1, 2)),
-        ]
+        self._bnd, self._inn = bnd, inn
+        # x-lines, y-lines (without corners), z-lines (without corners)
+        groups = [(allx, bnd[1], bnd[2]), (bnd[0], inn[1], bnd[2]), (bnd[0], bnd[1], inn[2])]
         pos = []
-        for (ix, iy, iz), _ in self.groups:
+        for ix, iy, iz in groups:
             P = np.ix_(ix, iy, iz)
             pos.append(np.ravel_multi_index(P, self.shape_f).ravel())
         self.E = np.concatenate(pos)  # positions among the free nodes
@@ -266,32 +275,54 @@ class KroneckerSolver:
         self.m = m
 
     def _gather(self, Xhat: np.ndarray, Phis) -> np.ndarray:
-        """Node values on E of mode coefficients Xhat (B, Px, Py, Pz) -> (B, m)."""
-        out = []
-        for rows, order in self.groups:
-            if any(r.size == 0 for r in rows):
-                out.append(np.zeros((Xhat.shape[0], 0)))
-                continue
-            Y = Xhat
-            for a in order:
-                Y = _contract(Y, _transpose(_rows(Phis[a], rows[a])), a)
-            out.append(Y.reshape(Y.shape[0], -1))
-        return np.concatenate(out, axis=1)
+        """Node values on E of mode coefficients Xhat (B, Px, Py, Pz) -> (B, m).
+
+        The thin contractions onto the boundary rows go first, and the one
+        onto the z-boundary rows is shared by the x- and y-line groups.
+        """
+        (bx, by, bz), (_, iy, iz) = self._bnd, self._inn
+        B = Xhat.shape[0]
+
+        def T(a, rows):
+            return _transpose(_rows(Phis[a], rows))
+
+        out = [np.zeros((B, 0))] * 3
+        if bz.size and by.size:
+            Z1 = _contract(Xhat, T(2, bz), 2)
+            out[0] = _contract(_contract(Z1, T(1, by), 1), _transpose(Phis[0]), 0)
+            if bx.size and iy.size:
+                out[1] = _contract(_contract(Z1, T(0, bx), 0), T(1, iy), 1)
+        elif bz.size and bx.size and iy.size:
+            Z1 = _contract(Xhat, T(2, bz), 2)
+            out[1] = _contract(_contract(Z1, T(0, bx), 0), T(1, iy), 1)
+        if bx.size and by.size and iz.size:
+            X1 = _contract(Xhat, T(0, bx), 0)
+            out[2] = _contract(_contract(X1, T(1, by), 1), T(2, iz), 2)
+        return np.concatenate([o.reshape(B, -1) for o in out], axis=1)
 
     def _scatter(self, s: np.ndarray, Phis) -> np.ndarray:
         """Phi^T P_E s: mode coefficients (B, Px, Py, Pz) of values s (B, m) on E."""
+        (bx, by, bz), (_, iy, iz) = self._bnd, self._inn
         B = s.shape[0]
-        out = np.zeros((B,) + self.shape_f)
-        start = 0
-        for rows, order in self.groups:
-            size = int(np.prod([r.size for r in rows]))
-            if size == 0:
-                continue
-            Y = s[:, start:start + size].reshape(B, *(r.size for r in rows))
-            start += size
-            for a in order[::-1]:
-                Y = _contract(Y, _rows(Phis[a], rows[a]), a)
-            out += Y
+        Lx = self.shape_f[0]
+        n0, n1 = Lx * by.size * bz.size, bx.size * iy.size * bz.size
+        sx, sy, sz = s[:, :n0], s[:, n0:n0 + n1], s[:, n0 + n1:]
+        out = None
+        if bz.size and (n0 or n1):
+            acc = 0.0
+            if n0:
+                Y = _contract(sx.reshape(B, Lx, by.size, bz.size), Phis[0], 0)
+                acc = acc + _contract(Y, _rows(Phis[1], by), 1)
+            if n1:
+                Y = _contract(sy.reshape(B, bx.size, iy.size, bz.size), _rows(Phis[1], iy), 1)
+                acc = acc + _contract(Y, _rows(Phis[0], bx), 0)
+            out = _contract(acc, _rows(Phis[2], bz), 2)
+        if sz.shape[1]:
+            Y = _contract(sz.reshape(B, bx.size, by.size, iz.size), _rows(Phis[2], iz), 2)
+            Y = _contract(_contract(Y, _rows(Phis[1], by), 1), _rows(Phis[0], bx), 0)
+            out = Y if out is None else out + Y
+        if out is None:
+            out = np.zeros((B,) + self.shape_f)
         return out
 
     def _W(self, alpha: float, beta: float) -> np.ndarray:
@@ -303,12 +334,18 @@ class KroneckerSolver:
         Phis = [P if P.ndim == 2 else P[0] for P in Phis]
         m = self.m
         G = np.empty((m, m))
-        chunk = max(1, int(2e7 // max(dinv.size, 1)))
+        chunk = max(1, int(4e6 // max(dinv.size, 1)))
+        shared = len(self._shared) == 3
         for c0 in range(0, m, chunk):
             c1 = min(c0 + chunk, m)
-            I = np.zeros((c1 - c0, m))
-            I[np.arange(c1 - c0), np.arange(c0, c1)] = 1.0
-            G[:, c0:c1] = self._gather(self._scatter(I, Phis) * dinv, Phis).T
+            SI = self._SI.get(c0) if shared else None
+            if SI is None:
+                I = np.zeros((c1 - c0, m))
+                I[np.arange(c1 - c0), np.arange(c0, c1)] = 1.0
+                SI = self._scatter(I, Phis)
+                if shared and SI.nbytes * (m / (c1 - c0)) < 2e8:
+                    self._SI[c0] = SI
+            G[:, c0:c1] = self._gather(SI * dinv, Phis).T
         D = alpha * self.dM + beta * self.dK + self.theta * self.dR
         W = np.linalg.solve(np.eye(m) + D @ G, D)
         self._W_cache[key] = W
@@ -329,6 +366,10 @@ class KroneckerSolver:
         -------
         array (N, nfree)
         """
+        with blas_threads(1):
+            return self._solve(r, vhc_scale, tc_scale)
+
+    def _solve(self, r, vhc_scale, tc_scale):
         alpha = vhc_scale * (self.vhc / self.dt)
         beta = tc_scale * (self.theta * self.tc)
         last = self._last
@@ -347,8 +388,10 @@ class KroneckerSolver:
         Yhat = X * dinv
         if W is not None:
             yE = self._gather(Yhat, Phis)
-            s = np.einsum("nij,nj->ni", W, yE)
-            Yhat = Yhat - self._scatter(s, Phis) * dinv
+            s = np.matmul(W, yE[:, :, None])[:, :, 0]
+            S = self._scatter(s, Phis)
+            np.subtract(X, S, out=S)  # x_hat = (r_hat - Phi^T P_E s) / d
+            Yhat = np.multiply(S, dinv, out=S)
         for a in range(3):
             Yhat = _contract(Yhat, _transpose(Phis[a]), a)
         return Yhat.reshape(N, -1)

@@ -158,12 +158,14 @@ class HeatStepper:
                         self.dt, self.theta, self._m_lumped, self.K, self.R.diagonal(),
                         self._free_mask())
                     self._order = self._solver.free_nodes
+                    self._identity_order = np.array_equal(self._order, np.arange(self.npoints))
                     return "fast"
                 except NotApplicable as exc:
                     why = str(exc)
             if method == "fast":
                 raise ValueError(f"method='fast' is not applicable: {why}")
         self._order = f
+        self._identity_order = f.size == self.npoints
         Mf, Kf, Rf = self.M[f][:, f], self.K[f][:, f], self.theta * self.R[f][:, f]
         if method == "direct" or (method == "auto" and self.npoints <= direct_max_nodes):
             self._solver = DirectSolver(Mf, Kf, Rf)
@@ -230,7 +232,12 @@ class HeatStepper:
         b = self._scales(tc_scale, N, "tc_scale")
         th = self.theta
 
-        rhs = self._apply(self.M, T2) * a[:, None] + self.g
+        if self._m_lumped is not None:
+            rhs = T2 * (a[:, None] * self._m_lumped)
+        else:
+            rhs = self._apply(self.M, T2) * a[:, None]
+        if self.g.any():
+            rhs += self.g
         if th != 1.0:
             rhs -= (1.0 - th) * (self._apply(self.K, T2) * b[:, None] + self._apply(self.R, T2))
         if load is not None:
@@ -238,8 +245,11 @@ class HeatStepper:
             if f.shape not in ((self.npoints,), (N, self.npoints)):
                 raise ValueError(f"load must have shape ({self.npoints},) or "
                                  f"({N}, {self.npoints}), got {f.shape}")
-            rhs = rhs + f
+            rhs += f
 
+        if self.fixed.size == 0 and self._identity_order:
+            x = self._solve(rhs, a, b, T2)
+            return x[0] if single else x
         out = np.array(T2, dtype=float, copy=True)
         if self.fixed.size:
             TD = np.where(np.isnan(self.fixed_values), T2[:, self.fixed], self.fixed_values)
@@ -247,16 +257,15 @@ class HeatStepper:
             lift = ((Mfd @ TD.T).T * a[:, None] + (Kfd @ TD.T).T * (th * b[:, None])
                     + th * (Rfd @ TD.T).T)
             out[:, self.fixed] = TD
+            rhs[:, self.free] -= lift
         order = self._order
-        r = rhs[:, order]
-        if self.fixed.size:
-            pos = np.empty(self.npoints, dtype=np.int64)
-            pos[self.free] = np.arange(self.free.size)
-            r -= lift[:, pos[order]]
-        x0 = T2[:, order] if self.method == "pcg" else None
-        out[:, order] = self._solver.solve(r, a, th * b, x0=x0) if self.method != "fast" \
-            else self._solver.solve(r, a * self.dt, b)
+        out[:, order] = self._solve(rhs[:, order], a, b, T2[:, order])
         return out[0] if single else out
+
+    def _solve(self, r, a, b, x0):
+        if self.method == "fast":
+            return self._solver.solve(r, a * self.dt, b)
+        return self._solver.solve(r, a, self.theta * b, x0=x0 if self.method == "pcg" else None)
 
     def _apply(self, A, T2: np.ndarray) -> np.ndarray:
         """A @ T for each member row of T2 (N, npoints)."""
