@@ -37,6 +37,30 @@ def build_parser() -> argparse.ArgumentParser:
                       help="number of photon packets (overrides MC.n_photons_requested)")
     _common(p_mc)
     p_mc.set_defaults(func=cmd_mc)
+
+    p_paper = sub.add_parser(
+        "paper", help="run one of the paper's experiments end to end",
+        description="Fine-grid truth (Monte Carlo + FEM heat), noisy sensor data, and the "
+                    "EnKF on the coarse model with the absorption emulator; writes "
+                    "estimates.csv, truth.csv, summary.json and figures/.")
+    p_paper.add_argument("scenario", choices=("constant", "time-varying", "all-params"))
+    p_paper.add_argument("--members", type=int, default=50, help="ensemble size N (default 50)")
+    p_paper.add_argument("--method", choices=("enkf", "etkf"), default="enkf")
+    p_paper.add_argument("--fine", type=int, nargs=3, default=(100, 100, 50),
+                         metavar=("NX", "NY", "NZ"), help="truth grid (default 100 100 50)")
+    p_paper.add_argument("--truth-photons", type=int, default=None,
+                         help="photons of the truth's Monte Carlo (per step when the optics "
+                              "change; default 1e7 constant, 1e6 per step)")
+    p_paper.add_argument("--emulator-photons", type=int, default=200_000,
+                         help="photons per emulator table point (default 2e5)")
+    p_paper.add_argument("--exact", action="store_true",
+                         help="direct Monte Carlo per member and step instead of the emulator "
+                              "(slow: for checking)")
+    p_paper.add_argument("--cache-dir", default=None,
+                         help="where emulator tables and truths are cached "
+                              "(default $TISSUE_ENKF_CACHE or ~/.cache/tissue-enkf)")
+    _common(p_paper)
+    p_paper.set_defaults(func=cmd_paper, out_default=None)
     return parser
 
 
@@ -96,6 +120,73 @@ def cmd_mc(args) -> int:
         print(f"absorbed {MC.absorbed_fraction:.4f}, escaped top {MC.escaped['top']:.4f} "
               f"bottom {MC.escaped['bottom']:.4f} sides {MC.escaped['sides']:.4f}; "
               f"{MC.n_photons} photons at {MC.photons_per_second:.3g}/s -> {args.out}")
+    return 0
+
+
+def cmd_paper(args) -> int:
+    import numpy as np
+
+    from . import paper
+    from .rundir import atomic_dir, check_out_dir, write_json
+    from .tissue import identify
+
+    check_out_dir(args.out, args.force)
+    _apply_threads(args.threads)
+    if args.members < 2:
+        raise ValueError(f"--members must be >= 2, got {args.members}")
+    seed = 0 if args.seed is None else args.seed
+    verbose = not args.quiet
+    tcfg = paper.TruthConfig(scenario=args.scenario, grid=tuple(args.fine))
+    if args.truth_photons is not None:
+        tcfg.n_photons_constant = tcfg.n_photons_per_step = args.truth_photons
+    t0 = time.perf_counter()
+    if verbose:
+        print(f"truth on {tcfg.grid} voxels (cached after the first run) ...", file=sys.stderr)
+    truth = paper.generate_truth(tcfg, cache_dir=args.cache_dir, progress=verbose)
+    data = paper.noisy_sensor(truth, seed)
+    emu = paper.emulator_for(n_photons=args.emulator_photons, progress=verbose,
+                             cache_dir=args.cache_dir)
+    absorption = emu
+    if args.exact:
+        from mcmatlab_py.emulator import DirectMonteCarloAbsorption
+
+        absorption = DirectMonteCarloAbsorption(emu.spec)
+    setup = paper.filter_setup(args.scenario, absorption, seed=seed, n_members=args.members,
+                               method=args.method)
+    times = truth.times[1:]
+    from mcmatlab_py._progress import Progress
+
+    bar = Progress(len(times), "filter", enabled=verbose)
+    est = identify(setup, times, data[:, None], callback=lambda r: bar.update(r.step))
+    bar.close()
+    summary = paper.summarize(args.scenario, est, truth)
+    summary["truth"] = {"grid": list(tcfg.grid), "wall_seconds_when_computed":
+                        truth.wall_seconds, "mc_seed": tcfg.mc_seed}
+    summary["emulator"] = {"n_photons_per_point": emu.spec.n_photons,
+                           "build_seconds": emu.build_seconds,
+                           "table": [emu.spec.n_mua, emu.spec.n_mus],
+                           "exact_mode": bool(args.exact)}
+    summary["seed"] = seed
+    summary["wall_seconds"] = time.perf_counter() - t0
+    with atomic_dir(args.out, args.force) as tmp:
+        (tmp / "figures").mkdir()
+        paper.write_estimates_csv(tmp / "estimates.csv", est, truth, data)
+        np.savetxt(tmp / "truth.csv", np.column_stack(
+            [truth.times, truth.temps, np.r_[np.nan, data],
+             *[paper.true_parameters(args.scenario, truth.times)[k] for k in paper.TABLE]]),
+            delimiter=",", comments="", fmt="%.8g",
+            header="time_s,T_z0.0,T_z0.1,T_z0.2,sensor_data,mua,mus,VHC,TC")
+        write_json(tmp / "summary.json", summary)
+        paper.plot_results(tmp / "figures" / "estimates.png", args.scenario, est, truth, data)
+        paper.plot_data(tmp / "figures" / "data.png", args.scenario, truth, data)
+    if verbose:
+        for name, p in summary["parameters"].items():
+            print(f"{name}: final {p['estimate_final']:.4g} +- {p['std_final']:.2g} "
+                  f"(truth {p['truth_final']:.4g}, rel. error {p['relative_error_final']:.3f})")
+        tm = summary["timing"]
+        print(f"filter {tm['filter_wall_s']:.2f} s for {tm['steps']} steps, median step "
+              f"{1e3 * tm['step_latency_median_s']:.1f} ms, max "
+              f"{1e3 * tm['step_latency_max_s']:.1f} ms -> {args.out}")
     return 0
 
 
