@@ -70,7 +70,9 @@ class FaceBC:
             if not np.isfinite(h) or h <= 0:
                 raise ValueError(f"h must be > 0 for a convective face, got {self.h!r}")
             if self.temperature is None:
-                raise ValueError("temperature (ambient) is required for a convective face, got None")
+                raise ValueError(
+                    "temperature (ambient) is required for a convective face, got None"
+                )
         elif h != 0.0:
             raise ValueError(f"h must be 0 for a {self.kind} face, got {self.h!r}")
         object.__setattr__(self, "h", h)
