@@ -30,6 +30,7 @@ from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
+import scipy.sparse as sp
 
 import fem
 
@@ -147,6 +148,12 @@ class TissueForwardModel:
         g = setup.grid
         self.mesh = g.mesh()
         self.L = fem.voxel_load_matrix(self.mesh, g).tocsr()  # (npoints, nvox)
+        # an emulator that stores symmetry orbits: fold the expansion into the operator
+        self._unique = hasattr(setup.absorption, "unique")
+        if self._unique:
+            inv = setup.absorption.inverse
+            expand = sp.csr_matrix((np.ones(inv.size), (np.arange(inv.size), inv)))
+            self.L = (self.L @ expand).tocsr()  # (npoints, n_unique)
         self.steppers: dict[float, fem.HeatStepper] = {}
         self.n_par = len(setup.estimate)
         self._warned = False
@@ -166,7 +173,10 @@ class TissueForwardModel:
         if power != 0.0:
             with warnings.catch_warnings(record=True) as caught:
                 warnings.simplefilter("always")
-                NA = s.absorption(theta[:, 0], theta[:, 1])
+                if self._unique:
+                    NA = s.absorption.unique(theta[:, 0], theta[:, 1])
+                else:
+                    NA = s.absorption(theta[:, 0], theta[:, 1])
             if caught and not self._warned:
                 warnings.warn(str(caught[0].message), RuntimeWarning, stacklevel=2)
                 self._warned = True

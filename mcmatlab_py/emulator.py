@@ -33,7 +33,7 @@ from ._progress import Progress
 from .media import Medium
 from .model import Geometry, MonteCarloSimulation
 
-CACHE_VERSION = 2
+CACHE_VERSION = 3
 #: The table holds log(NA + NA_OFFSET): smooth where NA is zero or noisy in voxels
 #: that (almost) no photon reaches, and exactly inverted on evaluation.
 NA_OFFSET = 1e-3  # W/cm^3/W, far below the NA of the voxels that matter
@@ -159,6 +159,33 @@ class EmulatorSpec:
         text = json.dumps(d, sort_keys=True, default=str)
         return hashlib.sha256(text.encode()).hexdigest()[:24]
 
+    def symmetric_axes(self) -> tuple[bool, bool, bool]:
+        """(x -> -x, y -> -y, x <-> y): the mirror symmetries of the block and beam."""
+        sx = self.x_focus == 0
+        sy = self.y_focus == 0
+        swap = (self.x_focus == self.y_focus and self.nx == self.ny and self.Lx == self.Ly)
+        return sx, sy, swap
+
+    def orbits(self) -> tuple[np.ndarray, np.ndarray]:
+        """Voxels equal by symmetry: ``(representatives (n_unique,), inverse (nvox,))``.
+
+        ``field.ravel()[representatives][inverse]`` rebuilds a symmetric field; the table
+        stores only the ``n_unique`` representatives (about nvox / 8 for a centred beam
+        on a square block).
+        """
+        sx, sy, swap = self.symmetric_axes()
+        i, j, k = np.meshgrid(np.arange(self.nx), np.arange(self.ny), np.arange(self.nz),
+                              indexing="ij")
+        if sx:
+            i = np.minimum(i, self.nx - 1 - i)
+        if sy:
+            j = np.minimum(j, self.ny - 1 - j)
+        if swap:
+            i, j = np.minimum(i, j), np.maximum(i, j)
+        canon = ((i * self.ny + j) * self.nz + k).ravel()
+        reps, inverse = np.unique(canon, return_inverse=True)
+        return reps, inverse
+
     def mua_grid(self) -> np.ndarray:
         return np.geomspace(*self.mua_range, self.n_mua)
 
@@ -194,16 +221,18 @@ class AbsorptionEmulator:
     """
 
     spec: EmulatorSpec
-    log_na: np.ndarray  #: (n_mua, n_mus, nx*ny*nz) log NA table
+    log_na: np.ndarray  #: (n_mua, n_mus, n_unique) log(NA + NA_OFFSET) at the orbit representatives
     absorbed: np.ndarray = None  #: (n_mua, n_mus) absorbed fraction of each table point
     out_of_range: str = "error"  #: "error" or "clamp"
     build_seconds: float = 0.0
     _lmua: np.ndarray = field(init=False, repr=False)
     _lmus: np.ndarray = field(init=False, repr=False)
+    inverse: np.ndarray = field(init=False, repr=False)  #: (nvox,) orbit of each voxel
 
     def __post_init__(self):
         self._lmua = np.log(self.spec.mua_grid())
         self._lmus = np.log(self.spec.mus_grid())
+        self.inverse = self.spec.orbits()[1]
         if self.out_of_range not in ("error", "clamp"):
             raise ValueError(f"out_of_range must be 'error' or 'clamp', got {self.out_of_range!r}")
         self.log_na = np.ascontiguousarray(self.log_na, dtype=np.float64)
@@ -215,28 +244,35 @@ class AbsorptionEmulator:
     def _check(self, name, values, lo, hi):
         values = np.atleast_1d(np.asarray(values, dtype=np.float64))
         if not np.all(np.isfinite(values)):
-            raise ValueError(f"{name} must be finite, got {values[~np.isfinite(values)][0]!r}")
+            raise ValueError(f"{name} must be finite, got {float(values[~np.isfinite(values)][0])!r}")
         bad = (values < lo * (1 - 1e-12)) | (values > hi * (1 + 1e-12))
         if bad.any():
             if self.out_of_range == "error":
-                raise ValueError(f"{name} = {values[bad][0]!r} cm^-1 is outside the emulator "
+                raise ValueError(f"{name} = {float(values[bad][0])!r} cm^-1 is outside the emulator "
                                  f"table [{lo}, {hi}]")
-            warnings.warn(f"{name} = {values[bad][0]!r} clamped to the emulator table "
+            warnings.warn(f"{name} = {float(values[bad][0])!r} clamped to the emulator table "
                           f"[{lo}, {hi}]", RuntimeWarning, stacklevel=3)
             values = np.clip(values, lo, hi)
         return values
 
-    def __call__(self, mua, mus, out: np.ndarray | None = None) -> np.ndarray:
+    def unique(self, mua, mus) -> np.ndarray:
+        """NA at the orbit representatives, (N, n_unique): expand with ``[:, self.inverse]``.
+
+        The filter's forward model folds the expansion into its load operator, so that
+        the interpolation and the exponentials run on about nvox / 8 values.
+        """
         mua = self._check("mua", mua, *self.spec.mua_range)
         mus = self._check("mus", mus, *self.spec.mus_range)
         mua, mus = np.broadcast_arrays(mua, mus)
-        N = mua.size
-        nvox = self.log_na.shape[2]
-        if out is None:
-            out = np.empty((N, nvox))
+        out = np.empty((mua.size, self.log_na.shape[2]))
         interpolate_log_na(self.log_na, self._lmua, self._lmus, np.log(mua).ravel(),
-                           np.log(mus).ravel(), NA_OFFSET, out.reshape(N, nvox))
-        return out.reshape((N, *self.shape))
+                           np.log(mus).ravel(), NA_OFFSET, out)
+        return out
+
+    def __call__(self, mua, mus) -> np.ndarray:
+        """NA (N, nx, ny, nz) in W/cm^3/W for ``mua``, ``mus`` (N,) in cm^-1."""
+        vals = self.unique(mua, mus)
+        return vals[:, self.inverse].reshape((vals.shape[0], *self.shape))
 
     # ----------------------------------------------------------------- build & cache
     @classmethod
@@ -258,8 +294,8 @@ class AbsorptionEmulator:
             return cls(spec=spec, log_na=loaded["log_na"], absorbed=loaded["absorbed"],
                        out_of_range=out_of_range, build_seconds=float(loaded["build_seconds"]))
         mua_grid, mus_grid = spec.mua_grid(), spec.mus_grid()
-        nvox = spec.nx * spec.ny * spec.nz
-        log_na = np.empty((spec.n_mua, spec.n_mus, nvox))
+        reps, _ = spec.orbits()
+        log_na = np.empty((spec.n_mua, spec.n_mus, reps.size))
         absorbed = np.empty((spec.n_mua, spec.n_mus))
         # cost grows with mus: do the expensive column first so the ETA is honest
         points = [(a, b) for b in range(spec.n_mus)[::-1] for a in range(spec.n_mua)]
@@ -273,7 +309,7 @@ class AbsorptionEmulator:
                            n_photons=spec.n_photons)
             dV = m.G.dx * m.G.dy * m.G.dz
             na = symmetrize(res.absorbed / (res.n_photons * dV), spec)
-            log_na[a, b] = np.log(na.ravel() + NA_OFFSET)
+            log_na[a, b] = np.log(na.ravel()[reps] + NA_OFFSET)
             absorbed[a, b] = res.absorbed.sum() / res.n_photons
             bar.update(k + 1)
         bar.close()
@@ -290,11 +326,12 @@ def symmetrize(na: np.ndarray, spec: EmulatorSpec) -> np.ndarray:
     block under x <-> y as well: averaging over these images is an exact variance
     reduction (up to 8 times fewer photons for the same noise).
     """
-    if spec.x_focus == 0:
+    sx, sy, swap = spec.symmetric_axes()
+    if sx:
         na = 0.5 * (na + na[::-1])
-    if spec.y_focus == 0:
+    if sy:
         na = 0.5 * (na + na[:, ::-1])
-    if (spec.x_focus == spec.y_focus and spec.nx == spec.ny and spec.Lx == spec.Ly):
+    if swap:
         na = 0.5 * (na + na.transpose(1, 0, 2))
     return na
 
@@ -321,7 +358,7 @@ def _load(path: Path, spec: EmulatorSpec):
         with np.load(path, allow_pickle=False) as f:
             data = {k: f[k] for k in ("log_na", "absorbed", "build_seconds", "key", "checksum")}
         ok = (str(data["key"]) == spec.key()
-              and data["log_na"].shape == (spec.n_mua, spec.n_mus, spec.nx * spec.ny * spec.nz)
+              and data["log_na"].shape == (spec.n_mua, spec.n_mus, spec.orbits()[0].size)
               and str(data["checksum"]) == _checksum(data["log_na"], data["absorbed"]))
     except Exception:  # noqa: BLE001 - any unreadable file is treated as corrupted
         ok = False
@@ -348,15 +385,11 @@ class DirectMonteCarloAbsorption:
     def shape(self) -> tuple[int, int, int]:
         return (self.spec.nx, self.spec.ny, self.spec.nz)
 
-    def __call__(self, mua, mus, out=None) -> np.ndarray:
+    def __call__(self, mua, mus) -> np.ndarray:
         mua, mus = np.broadcast_arrays(np.atleast_1d(mua), np.atleast_1d(mus))
         maps = []
         for a, s in zip(mua.ravel(), mus.ravel(), strict=True):
             m = self.spec.model(float(a), float(s), seed=self.spec.seed + self.calls)
             maps.append(m.run_monte_carlo().MC.NA)
         self.calls += 1
-        result = np.stack(maps)
-        if out is not None:
-            out.reshape(result.shape)[...] = result
-            return out.reshape(result.shape)
-        return result
+        return np.stack(maps)

@@ -1,0 +1,106 @@
+"""The absorption emulator: cache keys, corruption, range handling, accuracy on and off the table."""
+
+import warnings
+
+import numpy as np
+import pytest
+
+from mcmatlab_py.emulator import (
+    AbsorptionEmulator,
+    DirectMonteCarloAbsorption,
+    EmulatorSpec,
+    symmetrize,
+)
+
+
+def small_spec(**kw):
+    args = dict(nx=8, ny=8, nz=4, Lx=0.5, Ly=0.5, Lz=0.25, g=0.9, n=1.3, source_type="tophat",
+                radius=0.1, mua_range=(0.5, 4.0), mus_range=(50.0, 400.0), n_mua=4, n_mus=4,
+                n_photons=3000, seed=7)
+    args.update(kw)
+    return EmulatorSpec(**args)
+
+
+@pytest.fixture(scope="module")
+def built(tmp_path_factory):
+    cache = tmp_path_factory.mktemp("cache")
+    spec = small_spec()
+    return AbsorptionEmulator.build(spec, cache_dir=cache, progress=False), cache
+
+
+def test_table_nodes_reproduce_direct_monte_carlo(built):
+    """At a table node the interpolant returns the (symmetrised) Monte Carlo map itself."""
+    emu, _ = built
+    spec = emu.spec
+    mua, mus = spec.mua_grid()[1], spec.mus_grid()[2]
+    direct = spec.model(mua, mus).run_monte_carlo().MC.NA
+    np.testing.assert_allclose(emu(mua, mus)[0], symmetrize(direct, spec), rtol=1e-9, atol=1e-9)
+
+
+def test_every_input_is_in_the_cache_key():
+    base = small_spec()
+    for change in [dict(nx=9), dict(Lz=0.3), dict(g=0.8), dict(n=1.4), dict(radius=0.05),
+                   dict(source_type="gaussian"), dict(n_photons=3001), dict(seed=8),
+                   dict(boundary_type=3), dict(matched_interfaces=False), dict(n_mua=5)]:
+        assert small_spec(**change).key() != base.key(), change
+    assert small_spec().key() == base.key()
+
+
+def test_cache_is_reused_and_corruption_is_detected(built):
+    emu, cache = built
+    again = AbsorptionEmulator.build(emu.spec, cache_dir=cache, progress=False)
+    np.testing.assert_array_equal(again.log_na, emu.log_na)
+    path = next(cache.glob("emulator-*.npz"))
+    raw = bytearray(path.read_bytes())
+    raw[len(raw) // 2] ^= 0xFF  # flip a byte in the middle of the table
+    path.write_bytes(bytes(raw))
+    with pytest.warns(RuntimeWarning, match="corrupted"):
+        rebuilt = AbsorptionEmulator.build(emu.spec, cache_dir=cache, progress=False)
+    np.testing.assert_array_equal(rebuilt.log_na, emu.log_na)
+
+
+def test_outside_the_table_errors_or_clamps_with_a_warning(built):
+    emu, _ = built
+    with pytest.raises(ValueError, match=r"mua = 5\.0 cm\^-1 is outside"):
+        emu(5.0, 100.0)
+    with pytest.raises(ValueError, match="mus must be finite"):
+        emu(1.0, float("nan"))
+    clamp = AbsorptionEmulator(spec=emu.spec, log_na=emu.log_na, out_of_range="clamp")
+    with pytest.warns(RuntimeWarning, match="clamped"):
+        out = clamp(5.0, 100.0)
+    np.testing.assert_allclose(out, clamp(4.0, 100.0))
+
+
+def test_interpolation_is_smooth_and_monotone_in_mua(built):
+    emu, _ = built
+    mua = np.linspace(0.5, 4.0, 40)
+    absorbed = emu(mua, np.full(40, 120.0)).sum(axis=(1, 2, 3))
+    assert np.all(np.diff(absorbed) > 0)  # more absorption absorbs more
+
+
+def test_exact_mode_has_the_same_call(built):
+    emu, _ = built
+    exact = DirectMonteCarloAbsorption(emu.spec)
+    out = exact(np.array([1.0, 2.0]), np.array([100.0, 200.0]))
+    assert out.shape == (2, 8, 8, 4)
+    assert exact.calls == 1
+
+
+def test_bad_spec():
+    with pytest.raises(ValueError, match="n_mua must be >= 4"):
+        small_spec(n_mua=3)
+    with pytest.raises(ValueError, match="mua_range"):
+        small_spec(mua_range=(2.0, 1.0))
+
+
+def test_orbits_rebuild_symmetric_fields():
+    spec = small_spec()
+    reps, inverse = spec.orbits()
+    assert reps.size < 8 * 8 * 4 / 4
+    f = symmetrize(np.random.default_rng(0).random((8, 8, 4)), spec)
+    np.testing.assert_array_equal(f.ravel()[reps][inverse], f.ravel())
+    off = small_spec(x_focus=0.05)
+    assert off.orbits()[0].size > reps.size
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        assert off.symmetric_axes() == (False, True, False)
