@@ -55,7 +55,7 @@ def element_coefficient(mesh, value, name: str) -> np.ndarray:
         raise ValueError(f"{name} must be a scalar or have shape ({ne},), got shape {c.shape}")
     bad = np.flatnonzero(~np.isfinite(c) | (c <= 0))
     if bad.size:
-        raise ValueError(f"{name} must be > 0 and finite, got {name}[{bad[0]}]={c[bad[0]]!r}")
+        raise ValueError(f"{name} must be > 0 and finite, got {name}[{bad[0]}]={float(c[bad[0]])!r}")
     return c
 
 

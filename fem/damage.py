@@ -26,9 +26,9 @@ def _rates(E, A) -> tuple[np.ndarray, np.ndarray]:
     E = np.asarray(E, dtype=float)
     A = np.asarray(A, dtype=float)
     if np.any(~np.isfinite(E)) or np.any(E < 0):
-        raise ValueError(f"E must be finite and >= 0 (J/mol), got min {np.min(E)!r}")
+        raise ValueError(f"E must be finite and >= 0 (J/mol), got min {float(np.min(E))!r}")
     if np.any(~np.isfinite(A)) or np.any(A < 0):
-        raise ValueError(f"A must be finite and >= 0 (1/s), got min {np.min(A)!r}")
+        raise ValueError(f"A must be finite and >= 0 (1/s), got min {float(np.min(A))!r}")
     return E, A
 
 
@@ -47,7 +47,7 @@ def arrhenius_increment(T_old, T_new, dt: float, E, A) -> np.ndarray:
         1/s, frequency factor (0: no damage).
     """
     if not np.isfinite(dt) or dt <= 0:
-        raise ValueError(f"dt must be > 0, got {dt!r}")
+        raise ValueError(f"dt must be > 0, got {float(dt)!r}")
     E, A = _rates(E, A)
     Tmean = 0.5 * (np.asarray(T_old, dtype=float) + np.asarray(T_new, dtype=float))
     with np.errstate(over="ignore", under="ignore"):

@@ -366,7 +366,7 @@ def check_mesh(mesh, rtol: float = 1e-8) -> None:
     if bad.size:
         e = int(bad[0])
         raise ValueError(
-            f"mesh element {e} (vertices {t[:, e].tolist()}) is degenerate: volume={vol[e]!r}"
+            f"mesh element {e} (vertices {t[:, e].tolist()}) is degenerate: volume={float(vol[e])!r}"
         )
     f2t, facets = mesh.f2t, mesh.facets
     inner = np.flatnonzero(f2t[1] >= 0)
@@ -384,5 +384,5 @@ def check_mesh(mesh, rtol: float = 1e-8) -> None:
         e = int(e1[f]) if abs(vol[e1[f]]) <= abs(vol[e0[f]]) else int(e0[f])
         raise ValueError(
             f"mesh element {e} (vertices {t[:, e].tolist()}) is inverted: it overlaps its "
-            f"neighbour across facet {facets[:, inner[f]].tolist()}; signed volume={vol[e]!r}"
+            f"neighbour across facet {facets[:, inner[f]].tolist()}; signed volume={float(vol[e])!r}"
         )

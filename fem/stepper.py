@@ -109,10 +109,10 @@ class HeatStepper:
         self.tc = element_coefficient(mesh, tc, "tc")
         dt_f = float(dt)
         if not np.isfinite(dt_f) or dt_f <= 0:
-            raise ValueError(f"dt must be > 0, got {dt!r}")
+            raise ValueError(f"dt must be > 0, got {dt_f!r}")
         th = float(theta)
         if not 0.0 <= th <= 1.0:
-            raise ValueError(f"theta must be in [0, 1], got {theta!r}")
+            raise ValueError(f"theta must be in [0, 1], got {th!r}")
         if method not in _METHODS:
             raise ValueError(f"method must be one of {_METHODS}, got {method!r}")
         if boundary is None:
@@ -199,7 +199,7 @@ class HeatStepper:
             raise ValueError(f"{name} must be a scalar or have shape ({N},), got shape {s.shape}")
         bad = np.flatnonzero(~np.isfinite(s) | (s <= 0))
         if bad.size:
-            raise ValueError(f"{name} must be > 0, got {name}[{bad[0]}]={s[bad[0]]!r}")
+            raise ValueError(f"{name} must be > 0, got {name}[{bad[0]}]={float(s[bad[0]])!r}")
         return s
 
     def step(self, T, load=None, vhc_scale=None, tc_scale=None) -> np.ndarray:
