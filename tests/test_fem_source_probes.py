@@ -1,0 +1,112 @@
+"""Voxel power density -> P1 loads, and point probes."""
+
+import numpy as np
+import pytest
+from skfem import MeshTet
+
+from fem import BoxGrid, box_mesh, load_vector, probe_matrix, voxel_load_matrix
+
+
+def _power(grid: BoxGrid, S: np.ndarray) -> float:
+    return float(S.sum() * grid.dx * grid.dy * grid.dz)
+
+
+@pytest.mark.parametrize(
+    "mesh_grid",
+    [BoxGrid(4, 5, 3, 0.4, 0.5, 0.3),  # the voxel grid itself (aligned)
+     BoxGrid(8, 10, 6, 0.4, 0.5, 0.3),  # a refinement (aligned)
+     BoxGrid(3, 3, 2, 0.4, 0.5, 0.3),  # coarser (not aligned)
+     BoxGrid(7, 6, 5, 0.4, 0.5, 0.3)],  # unrelated (not aligned)
+)
+def test_total_power_conserved(mesh_grid):
+    grid = BoxGrid(4, 5, 3, 0.4, 0.5, 0.3)
+    S = np.random.default_rng(0).uniform(0, 10, grid.shape)
+    mesh = mesh_grid.mesh()
+    L = voxel_load_matrix(mesh, grid)
+    assert L.shape == (mesh.p.shape[1], grid.nvoxels)
+    f = L @ S.ravel()
+    assert abs(f.sum() - _power(grid, S)) <= 1e-10 * _power(grid, S)
+    # batched members
+    SN = np.stack([S, 2 * S, 0 * S])
+    F = SN.reshape(3, -1) @ L.T
+    np.testing.assert_allclose(F, np.stack([f, 2 * f, 0 * f]), rtol=1e-13, atol=1e-15)
+    np.testing.assert_allclose(load_vector(mesh, grid, SN), F, rtol=1e-13, atol=1e-15)
+
+
+def test_total_power_conserved_on_scikit_fem_mesh():
+    grid = BoxGrid(4, 4, 2, 1.0, 1.0, 0.5)
+    mesh = MeshTet.init_tensor(np.linspace(-0.5, 0.5, 4), np.linspace(-0.5, 0.5, 5),
+                               np.linspace(0, 0.5, 3))
+    S = np.random.default_rng(1).uniform(0, 1, grid.shape)
+    f = voxel_load_matrix(mesh, grid) @ S.ravel()
+    assert abs(f.sum() - _power(grid, S)) <= 1e-10 * _power(grid, S)
+
+
+def test_aligned_load_is_exact():
+    """f_i = int S phi_i exactly; for S = 1 in one voxel and 0 elsewhere,
+    corners on the voxel diagonal get 6 V/24 = V/4, the other six corners V/12."""
+    grid = BoxGrid(3, 3, 3, 0.3, 0.3, 0.3)
+    mesh = grid.mesh()
+    S = np.zeros(grid.shape)
+    S[1, 1, 1] = 5.0
+    f = voxel_load_matrix(mesh, grid) @ S.ravel()
+    V = grid.dx * grid.dy * grid.dz
+    expected = np.zeros(mesh.p.shape[1])
+    for di in (0, 1):
+        for dj in (0, 1):
+            for dk in (0, 1):
+                n = grid.node_index(1 + di, 1 + dj, 1 + dk)
+                expected[n] = 5.0 * V * (0.25 if di == dj == dk else 1 / 12)
+    np.testing.assert_allclose(f, expected, rtol=1e-12, atol=1e-18)
+    # a linear power density: int S phi_i computed with the exact P1 quadrature
+    # of a piecewise-constant S equals the voxel-centre value times V_e / 4 summed
+    S = 1.0 + grid.x[:, None, None] + 2 * grid.y[None, :, None] + grid.z[None, None, :]
+    f = voxel_load_matrix(mesh, grid) @ S.ravel()
+    assert f.sum() == pytest.approx(_power(grid, S), rel=1e-13)
+
+
+def test_non_aligned_load_converges_to_exact():
+    """On a coarse mesh, refining the sub-sampling converges to int S phi_i."""
+    grid = BoxGrid(6, 6, 4, 0.6, 0.6, 0.4)
+    mesh = BoxGrid(2, 2, 2, 0.6, 0.6, 0.4).mesh()
+    S = np.random.default_rng(2).uniform(0, 1, grid.shape)
+    fs = [voxel_load_matrix(mesh, grid, n_sub=k) @ S.ravel() for k in (2, 4, 8, 32)]
+    errs = [np.abs(f - fs[-1]).max() for f in fs[:-1]]
+    assert errs[0] > errs[1] > errs[2]
+    assert errs[2] < 0.02 * np.abs(fs[-1]).max()
+
+
+def test_load_outside_mesh_raises():
+    grid = BoxGrid(2, 2, 2, 1.0, 1.0, 1.0)
+    mesh = BoxGrid(3, 3, 3, 0.5, 0.5, 0.5).mesh()
+    with pytest.raises(ValueError, match="outside the mesh"):
+        voxel_load_matrix(mesh, grid)
+
+
+def test_probes_exact_for_linear_functions_incl_boundary_points():
+    mesh = box_mesh(4, 3, 5, 0.4, 0.3, 0.5)
+    rng = np.random.default_rng(3)
+    pts = np.hstack([
+        rng.uniform([-0.2, -0.15, 0], [0.2, 0.15, 0.5], size=(20, 3)).T,
+        np.array([[0, 0, 0], [0.2, 0.15, 0.5], [-0.2, 0, 0.25], [0.05, -0.15, 0.1]]).T,
+    ])  # last four: top surface, a corner, a face, an edge-ish point
+    P = probe_matrix(mesh, pts)
+    assert P.shape == (pts.shape[1], mesh.p.shape[1])
+    u = 1.0 + 2 * mesh.p[0] - 3 * mesh.p[1] + 0.5 * mesh.p[2]
+    np.testing.assert_allclose(P @ u, 1.0 + 2 * pts[0] - 3 * pts[1] + 0.5 * pts[2],
+                               rtol=0, atol=1e-13)
+    np.testing.assert_allclose(P.sum(axis=1), 1.0, rtol=1e-14)
+    U = np.stack([u, 2 * u])
+    np.testing.assert_allclose(U @ P.T, np.stack([P @ u, 2 * (P @ u)]))
+    # a node: weight 1 on that node
+    n = 7
+    np.testing.assert_allclose(probe_matrix(mesh, mesh.p[:, n]).toarray().ravel(),
+                               np.eye(mesh.p.shape[1])[n], atol=1e-12)
+
+
+def test_probe_outside_raises_naming_point():
+    mesh = box_mesh(2, 2, 2, 1.0, 1.0, 1.0)
+    with pytest.raises(ValueError, match=r"points\[:, 1\] = \(0.0, 0.0, -0.1\) is outside"):
+        probe_matrix(mesh, np.array([[0, 0, 0.5], [0, 0, -0.1]]).T)
+    with pytest.raises(ValueError, match="shape"):
+        probe_matrix(mesh, np.zeros((4, 2)))
