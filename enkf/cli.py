@@ -51,8 +51,8 @@ def build_parser() -> argparse.ArgumentParser:
     p_paper.add_argument("--truth-photons", type=int, default=None,
                          help="photons of the truth's Monte Carlo (per step when the optics "
                               "change; default 1e7 constant, 1e6 per step)")
-    p_paper.add_argument("--emulator-photons", type=int, default=200_000,
-                         help="photons per emulator table point (default 2e5)")
+    p_paper.add_argument("--emulator-photons", type=int, default=250_000,
+                         help="photons per emulator table point at mus = 100 (default 2.5e5)")
     p_paper.add_argument("--exact", action="store_true",
                          help="direct Monte Carlo per member and step instead of the emulator "
                               "(slow: for checking)")

@@ -172,7 +172,7 @@ def filter_setup(scenario: str, absorption, *, seed: int = 0, n_members: int = 5
         T_initial=0.0, random_walk_std=rw, n_members=n_members, seed=seed, method=method)
 
 
-def emulator_for(coarse=(20, 20, 10), n_photons: int = 200_000, *, progress=True,
+def emulator_for(coarse=(20, 20, 10), n_photons: int = 250_000, *, progress=True,
                  cache_dir=None, **kw):
     """The absorption emulator of the paper's block on the filter's grid (cached)."""
     from mcmatlab_py.emulator import AbsorptionEmulator, EmulatorSpec

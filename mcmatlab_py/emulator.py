@@ -33,7 +33,7 @@ from ._progress import Progress
 from .media import Medium
 from .model import Geometry, MonteCarloSimulation
 
-CACHE_VERSION = 3
+CACHE_VERSION = 4
 #: The table holds log(NA + NA_OFFSET): smooth where NA is zero or noisy in voxels
 #: that (almost) no photon reaches, and exactly inverted on evaluation.
 NA_OFFSET = 1e-3  # W/cm^3/W, far below the NA of the voxels that matter
@@ -119,9 +119,11 @@ class EmulatorSpec:
     n_outside: float = 1.0
     mua_range: tuple[float, float] = (0.1, 20.0)  #: cm^-1
     mus_range: tuple[float, float] = (10.0, 2000.0)  #: cm^-1
-    n_mua: int = 14
-    n_mus: int = 14
-    n_photons: int = 100_000  #: photons per table point
+    n_mua: int = 12  #: log-spaced table points in mua_range
+    n_mus: int = 12  #: log-spaced table points in mus_range
+    #: photons per table point at mus = 100 cm^-1; other columns get
+    #: ``n_photons * clip((100 / mus)^0.7, 0.5, 5)`` (see :meth:`photons_at`)
+    n_photons: int = 250_000
     seed: int = 12345
 
     def __post_init__(self):
@@ -185,6 +187,15 @@ class EmulatorSpec:
         canon = ((i * self.ny + j) * self.nz + k).ravel()
         reps, inverse = np.unique(canon, return_inverse=True)
         return reps, inverse
+
+    def photons_at(self, mus: float) -> int:
+        """Photons for a table point with scattering ``mus``.
+
+        Weakly scattering points are cheap per photon but noisy (few interactions per
+        photon), strongly scattering ones expensive but smooth: the schedule spends
+        photons where they buy accuracy (measured in validation/emulator_accuracy.py).
+        """
+        return int(self.n_photons * float(np.clip((100.0 / mus) ** 0.7, 0.5, 5.0)))
 
     def mua_grid(self) -> np.ndarray:
         return np.geomspace(*self.mua_range, self.n_mua)
@@ -302,11 +313,11 @@ class AbsorptionEmulator:
         bar = Progress(len(points), "emulator table", enabled=progress, delay=1.0)
         t0 = time.perf_counter()
         for k, (a, b) in enumerate(points):
-            m = spec.model(mua_grid[a], mus_grid[b])
+            m = spec.model(mua_grid[a], mus_grid[b], n_photons=spec.photons_at(mus_grid[b]))
             M = m.G.medium_map()
             m.MC.validate(m.G)
             res = simulate(m.G, m.MC, M, *optical_arrays(m.G.media), seed=spec.seed,
-                           n_photons=spec.n_photons)
+                           n_photons=m.MC.n_photons_requested)
             dV = m.G.dx * m.G.dy * m.G.dz
             na = symmetrize(res.absorbed / (res.n_photons * dV), spec)
             log_na[a, b] = np.log(na.ravel()[reps] + NA_OFFSET)
