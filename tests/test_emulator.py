@@ -33,7 +33,7 @@ def test_table_nodes_reproduce_direct_monte_carlo(built):
     emu, _ = built
     spec = emu.spec
     mua, mus = spec.mua_grid()[1], spec.mus_grid()[2]
-    direct = spec.model(mua, mus).run_monte_carlo().MC.NA
+    direct = spec.model(mua, mus, n_photons=spec.photons_at(mus)).run_monte_carlo().MC.NA
     np.testing.assert_allclose(emu(mua, mus)[0], symmetrize(direct, spec), rtol=1e-9, atol=1e-9)
 
 
