@@ -124,69 +124,41 @@ def cmd_mc(args) -> int:
 
 
 def cmd_paper(args) -> int:
-    import numpy as np
-
     from . import paper
-    from .rundir import atomic_dir, check_out_dir, write_json
-    from .tissue import identify
+    from .rundir import atomic_dir, check_out_dir
 
     check_out_dir(args.out, args.force)
     _apply_threads(args.threads)
     if args.members < 2:
         raise ValueError(f"--members must be >= 2, got {args.members}")
-    seed = 0 if args.seed is None else args.seed
-    verbose = not args.quiet
     tcfg = paper.TruthConfig(scenario=args.scenario, grid=tuple(args.fine))
     if args.truth_photons is not None:
+        if args.truth_photons < 1:
+            raise ValueError(f"--truth-photons must be >= 1, got {args.truth_photons}")
         tcfg.n_photons_constant = tcfg.n_photons_per_step = args.truth_photons
-    t0 = time.perf_counter()
+    verbose = not args.quiet
     if verbose:
-        print(f"truth on {tcfg.grid} voxels (cached after the first run) ...", file=sys.stderr)
-    truth = paper.generate_truth(tcfg, cache_dir=args.cache_dir, progress=verbose)
-    data = paper.noisy_sensor(truth, seed)
-    emu = paper.emulator_for(n_photons=args.emulator_photons, progress=verbose,
-                             cache_dir=args.cache_dir)
-    absorption = emu
-    if args.exact:
-        from mcmatlab_py.emulator import DirectMonteCarloAbsorption
-
-        absorption = DirectMonteCarloAbsorption(emu.spec)
-    setup = paper.filter_setup(args.scenario, absorption, seed=seed, n_members=args.members,
-                               method=args.method)
-    times = truth.times[1:]
-    from mcmatlab_py._progress import Progress
-
-    bar = Progress(len(times), "filter", enabled=verbose)
-    est = identify(setup, times, data[:, None], callback=lambda r: bar.update(r.step))
-    bar.close()
-    summary = paper.summarize(args.scenario, est, truth)
-    summary["truth"] = {"grid": list(tcfg.grid), "wall_seconds_when_computed":
-                        truth.wall_seconds, "mc_seed": tcfg.mc_seed}
-    summary["emulator"] = {"n_photons_per_point": emu.spec.n_photons,
-                           "build_seconds": emu.build_seconds,
-                           "table": [emu.spec.n_mua, emu.spec.n_mus],
-                           "exact_mode": bool(args.exact)}
-    summary["seed"] = seed
-    summary["wall_seconds"] = time.perf_counter() - t0
+        print(f"truth on {tcfg.grid} voxels, emulator on the 20 x 20 x 10 filter grid "
+              "(both cached after the first run) ...", file=sys.stderr)
+    run = paper.run_experiment(args.scenario, 0 if args.seed is None else args.seed,
+                               n_members=args.members, method=args.method, truth_config=tcfg,
+                               emulator_photons=args.emulator_photons, exact=args.exact,
+                               cache_dir=args.cache_dir, progress=verbose)
     with atomic_dir(args.out, args.force) as tmp:
-        (tmp / "figures").mkdir()
-        paper.write_estimates_csv(tmp / "estimates.csv", est, truth, data)
-        np.savetxt(tmp / "truth.csv", np.column_stack(
-            [truth.times, truth.temps, np.r_[np.nan, data],
-             *[paper.true_parameters(args.scenario, truth.times)[k] for k in paper.TABLE]]),
-            delimiter=",", comments="", fmt="%.8g",
-            header="time_s,T_z0.0,T_z0.1,T_z0.2,sensor_data,mua,mus,VHC,TC")
-        write_json(tmp / "summary.json", summary)
-        paper.plot_results(tmp / "figures" / "estimates.png", args.scenario, est, truth, data)
-        paper.plot_data(tmp / "figures" / "data.png", args.scenario, truth, data)
+        paper.write_run(run, tmp)
     if verbose:
+        summary = run.summary
         for name, p in summary["parameters"].items():
             print(f"{name}: final {p['estimate_final']:.4g} +- {p['std_final']:.2g} "
                   f"(truth {p['truth_final']:.4g}, rel. error {p['relative_error_final']:.3f})")
+        for name, p in summary["temperatures"].items():
+            print(f"T at {name}: rmse {p['rmse']:.3f} deg C, coverage {p['coverage_2sd']:.2f}")
         tm = summary["timing"]
         print(f"filter {tm['filter_wall_s']:.2f} s for {tm['steps']} steps, median step "
               f"{1e3 * tm['step_latency_median_s']:.1f} ms, max "
               f"{1e3 * tm['step_latency_max_s']:.1f} ms -> {args.out}")
+        if summary["diverged"]:
+            print(f"warning: {summary['diverged']}", file=sys.stderr)
     return 0
 
 

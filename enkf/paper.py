@@ -183,6 +183,73 @@ def emulator_for(coarse=(20, 20, 10), n_photons: int = 250_000, *, progress=True
                                     out_of_range="clamp")
 
 
+@dataclass
+class PaperRun:
+    """One experiment: the truth, the data, the filter's estimates and the summary."""
+
+    scenario: str
+    truth: Truth
+    data: np.ndarray
+    estimates: object
+    summary: dict
+
+
+def run_experiment(scenario: str, seed: int = 0, *, n_members: int = 50, method: str = "enkf",
+                   truth_config: TruthConfig | None = None, emulator_photons: int = 250_000,
+                   exact: bool = False, cache_dir=None, progress: bool = True) -> PaperRun:
+    """Truth (cached), noisy data (``seed``), and the filter (``seed``) for one scenario."""
+    import time
+
+    from mcmatlab_py._progress import Progress
+
+    from .tissue import identify
+
+    if scenario not in SCENARIOS:
+        raise ValueError(f"scenario must be one of {SCENARIOS}, got {scenario!r}")
+    t0 = time.perf_counter()
+    tcfg = truth_config or TruthConfig(scenario=scenario)
+    tcfg.scenario = scenario
+    truth = generate_truth(tcfg, cache_dir=cache_dir, progress=progress)
+    data = noisy_sensor(truth, seed)
+    emu = emulator_for(n_photons=emulator_photons, progress=progress, cache_dir=cache_dir)
+    absorption = emu
+    if exact:
+        from mcmatlab_py.emulator import DirectMonteCarloAbsorption
+
+        absorption = DirectMonteCarloAbsorption(emu.spec)
+    setup = filter_setup(scenario, absorption, seed=seed, n_members=n_members, method=method)
+    bar = Progress(len(truth.times) - 1, "filter", enabled=progress)
+    est = identify(setup, truth.times[1:], data[:, None], callback=lambda r: bar.update(r.step))
+    bar.close()
+    summary = summarize(scenario, est, truth)
+    summary["truth"] = {"grid": list(tcfg.grid), "mc_seed": tcfg.mc_seed,
+                        "wall_seconds_when_computed": truth.wall_seconds}
+    summary["emulator"] = {"n_photons_per_point_at_mus_100": emu.spec.n_photons,
+                           "table": [emu.spec.n_mua, emu.spec.n_mus],
+                           "build_seconds": emu.build_seconds, "exact_mode": bool(exact)}
+    summary["seed"] = seed
+    summary["wall_seconds"] = time.perf_counter() - t0
+    return PaperRun(scenario, truth, data, est, summary)
+
+
+def write_run(run: PaperRun, out_dir: Path) -> None:
+    """estimates.csv, truth.csv, summary.json and figures/ of a run into ``out_dir``."""
+    from .rundir import write_json
+
+    out_dir = Path(out_dir)
+    (out_dir / "figures").mkdir(exist_ok=True)
+    truth, data = run.truth, run.data
+    write_estimates_csv(out_dir / "estimates.csv", run.estimates, truth, data)
+    tp = true_parameters(run.scenario, truth.times)
+    np.savetxt(out_dir / "truth.csv", np.column_stack(
+        [truth.times, truth.temps, np.r_[np.nan, data], *[tp[k] for k in TABLE]]),
+        delimiter=",", comments="", fmt="%.8g",
+        header="time_s,T_z0.0,T_z0.1,T_z0.2,sensor_data,mua,mus,VHC,TC")
+    write_json(out_dir / "summary.json", run.summary)
+    plot_results(out_dir / "figures" / "estimates.png", run.scenario, run.estimates, truth, data)
+    plot_data(out_dir / "figures" / "data.png", run.scenario, truth, data)
+
+
 def summarize(scenario: str, est, truth: Truth) -> dict:
     """The ``summary.json`` of a run: final errors, RMSE and coverage of the +-2 sd band."""
     k = len(est.times)

@@ -155,7 +155,6 @@ def transport_batch(
     Lx = nx * dx
     Ly = ny * dy
     Lz = nz * dz
-    nyz = ny * nz
     w_thr = np.int64(weight_threshold * W_ONE)
     s0, s1, s2, s3 = seed_stream(seed, b)
     first = b * batch_size
