@@ -1,0 +1,78 @@
+"""The paper's three experiments over several seeds, checked against the targets of issue 5.
+
+Targets: constant: mua within 5% and mus within 25 cm^-1 at t = 15 s; time-varying:
+mua RMSE <= 0.3 cm^-1, mus within 10% at t = 15 s; all-params: each of the four within
+10% at t = 15 s; temperature coverage of the +-2 sd band >= 0.9 at all three depths;
+filter <= 15 s wall and no step above 100 ms. Writes validation/reports/paper_runs.md.
+
+    python validation/paper_runs.py [--seeds 0 1 2 3 4] [--scenarios constant ...]
+"""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+import numpy as np
+
+from enkf.paper import SCENARIOS, run_experiment
+
+
+def checks(s: dict) -> dict[str, bool]:
+    p, sc = s["parameters"], s["scenario"]
+    out = {}
+    if sc == "constant":
+        out["mua within 5%"] = p["mua"]["relative_error_final"] <= 0.05
+        out["mus within 25/cm"] = abs(p["mus"]["estimate_final"] - p["mus"]["truth_final"]) <= 25
+    elif sc == "time-varying":
+        out["mua rmse <= 0.3"] = p["mua"]["rmse"] <= 0.3
+        out["mus within 10%"] = p["mus"]["relative_error_final"] <= 0.10
+    else:
+        for k in ("mua", "mus", "VHC", "TC"):
+            out[f"{k} within 10%"] = p[k]["relative_error_final"] <= 0.10
+    for z, t in s["temperatures"].items():
+        out[f"coverage {z} >= 0.9"] = t["coverage_2sd"] >= 0.9
+    out["filter <= 15 s"] = s["timing"]["filter_wall_s"] <= 15
+    out["max step <= 100 ms"] = s["timing"]["step_latency_max_s"] <= 0.1
+    return out
+
+
+def main(argv=None):
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--seeds", type=int, nargs="+", default=[0, 1, 2, 3, 4])
+    ap.add_argument("--scenarios", nargs="+", default=list(SCENARIOS), choices=SCENARIOS)
+    ap.add_argument("--out", default=str(Path(__file__).parent / "reports" / "paper_runs.md"))
+    args = ap.parse_args(argv)
+    lines = ["# The paper's experiments over several seeds", "",
+             f"Command: `python validation/paper_runs.py --seeds {' '.join(map(str, args.seeds))}`",
+             "", "Fine-grid truth 100 x 100 x 50 (cached), filter N = 50 on 20 x 20 x 10 with the "
+             "emulator. The seed sets the sensor noise and the filter's random numbers.", ""]
+    for sc in args.scenarios:
+        lines += [f"## {sc}", ""]
+        rows, passed = [], {}
+        for seed in args.seeds:
+            s = run_experiment(sc, seed, progress=False).summary
+            c = checks(s)
+            for k, v in c.items():
+                passed.setdefault(k, []).append(v)
+            par = ", ".join(f"{k} {v['estimate_final']:.4g}+-{v['std_final']:.2g} "
+                            f"({100 * v['relative_error_final']:.1f}%)"
+                            for k, v in s["parameters"].items())
+            temps = ", ".join(f"{z}: rmse {t['rmse']:.2f}, cov {t['coverage_2sd']:.2f}"
+                              for z, t in s["temperatures"].items())
+            tm = s["timing"]
+            rows.append(f"| {seed} | {par} | {temps} | {tm['filter_wall_s']:.1f} s, max step "
+                        f"{1e3 * tm['step_latency_max_s']:.0f} ms |")
+            print(sc, seed, par, temps, flush=True)
+        lines += ["| seed | parameters at t = 15 s (rel. error) | temperatures | filter |",
+                  "|---|---|---|---|", *rows, "", "| target | seeds passing |", "|---|---|"]
+        lines += [f"| {k} | {sum(v)}/{len(v)} |" for k, v in passed.items()]
+        lines.append("")
+    Path(args.out).parent.mkdir(parents=True, exist_ok=True)
+    Path(args.out).write_text("\n".join(lines) + "\n")
+    print(f"report written to {args.out}")
+    return 0 if all(np.all(v) for v in passed.values()) else 1
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
