@@ -43,6 +43,24 @@ def _tet_inverse(p, t, e, G):
 
 
 @numba.njit(cache=True)
+def tet_volumes(p, t, out):
+    """Signed volumes of all elements."""
+    for e in range(t.shape[1]):
+        i0 = t[0, e]
+        a0 = p[0, t[1, e]] - p[0, i0]
+        a1 = p[1, t[1, e]] - p[1, i0]
+        a2 = p[2, t[1, e]] - p[2, i0]
+        b0 = p[0, t[2, e]] - p[0, i0]
+        b1 = p[1, t[2, e]] - p[1, i0]
+        b2 = p[2, t[2, e]] - p[2, i0]
+        c0 = p[0, t[3, e]] - p[0, i0]
+        c1 = p[1, t[3, e]] - p[1, i0]
+        c2 = p[2, t[3, e]] - p[2, i0]
+        out[e] = (a0 * (b1 * c2 - b2 * c1) - a1 * (b0 * c2 - b2 * c0)
+                  + a2 * (b0 * c1 - b1 * c0)) / 6.0
+
+
+@numba.njit(cache=True)
 def _element_matrix(p, t, e, kind, G, g, out):
     """Local 4x4 matrix of element e: kind 0 stiffness, 1 consistent mass (no coefficient)."""
     det = _tet_inverse(p, t, e, G)

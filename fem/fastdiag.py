@@ -174,7 +174,6 @@ class KroneckerSolver:
                 self._shared[a] = (mu, Phi)
         self._eig_cache: dict = {}
         self._W_cache: dict = {}
-        self._SI: dict = {}
         self._last = None
         self._setup_edges(M_true, K_true, R_true)
 
@@ -325,6 +324,28 @@ class KroneckerSolver:
             out = np.zeros((B,) + self.shape_f)
         return out
 
+    def _edge_green(self, dinv: np.ndarray, Phis) -> np.ndarray:
+        """G = [(A^kron)^-1]_EE (m x m) for one member, block by block.
+
+        Entry (e, e') is sum over modes of prod_a Phi_a[i_a(e), p_a] Phi_a[i_a(e'), p_a]
+        times 1/d; each block between two line groups is one einsum whose cost is
+        about (number of modes) x 16 plus (line length)^3.
+        """
+        (bx, by, bz), (_, iy, iz) = self._bnd, self._inn
+        allx = np.arange(self.shape_f[0])
+        groups = [(allx, by, bz), (bx, iy, bz), (bx, by, iz)]
+        sizes = [int(np.prod([r.size for r in g])) for g in groups]
+        offs = np.concatenate([[0], np.cumsum(sizes)])
+        G = np.empty((self.m, self.m))
+        for A, ga in enumerate(groups):
+            for B, gb in enumerate(groups):
+                if sizes[A] == 0 or sizes[B] == 0:
+                    continue
+                F = [Phis[a][ga[a]][:, None, :] * Phis[a][gb[a]][None, :, :] for a in range(3)]
+                blk = np.einsum("uvp,wxq,yzr,pqr->uwyvxz", *F, dinv, optimize="optimal")
+                G[offs[A]:offs[A + 1], offs[B]:offs[B + 1]] = blk.reshape(sizes[A], sizes[B])
+        return G
+
     def _W(self, alpha: float, beta: float) -> np.ndarray:
         """(I + Delta G)^-1 Delta for one pair of coefficients, cached."""
         key = (alpha, beta)
@@ -332,22 +353,9 @@ class KroneckerSolver:
             return self._W_cache[key]
         dinv, Phis, _ = self._member_data(np.array([alpha]), np.array([beta]))
         Phis = [P if P.ndim == 2 else P[0] for P in Phis]
-        m = self.m
-        G = np.empty((m, m))
-        chunk = max(1, int(4e6 // max(dinv.size, 1)))
-        shared = len(self._shared) == 3
-        for c0 in range(0, m, chunk):
-            c1 = min(c0 + chunk, m)
-            SI = self._SI.get(c0) if shared else None
-            if SI is None:
-                I = np.zeros((c1 - c0, m))
-                I[np.arange(c1 - c0), np.arange(c0, c1)] = 1.0
-                SI = self._scatter(I, Phis)
-                if shared and SI.nbytes * (m / (c1 - c0)) < 2e8:
-                    self._SI[c0] = SI
-            G[:, c0:c1] = self._gather(SI * dinv, Phis).T
+        G = self._edge_green(dinv[0], Phis)
         D = alpha * self.dM + beta * self.dK + self.theta * self.dR
-        W = np.linalg.solve(np.eye(m) + D @ G, D)
+        W = np.linalg.solve(np.eye(self.m) + D @ G, D)
         self._W_cache[key] = W
         return W
 

@@ -30,6 +30,7 @@ Three solvers, chosen automatically (``method="auto"``):
 from __future__ import annotations
 
 import numpy as np
+import scipy.sparse as sp
 
 from .assembly import (
     element_coefficient,
@@ -123,7 +124,8 @@ class HeatStepper:
         self.npoints = n
 
         self._m_lumped = lumped_mass(mesh, self.vhc) if lumped else None
-        self.M = mass_matrix(mesh, self.vhc, lumped=lumped)
+        self.M = (sp.diags_array(self._m_lumped, format="csr") if lumped
+                  else mass_matrix(mesh, self.vhc, lumped=False))
         self.K = stiffness_matrix(mesh, self.tc)
         self.R = robin_matrix(mesh, boundary, lumped=lumped)
         self.g = robin_load(mesh, boundary)
