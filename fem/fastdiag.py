@@ -131,6 +131,10 @@ class KroneckerSolver:
         The lumped convective boundary matrix (diagonal).
     free : bool array (npoints,)
         Nodes not held by a fixed face.
+    exact : bool
+        Apply the box-edge correction (default).  Without it the solver
+        inverts the Kronecker operator only, a preconditioner for the P1 system
+        (``M_true``, ``K_true``, ``R_true`` may then be None).
 
     Raises
     ------
@@ -140,7 +144,7 @@ class KroneckerSolver:
     """
 
     def __init__(self, grid: BoxGrid, boundary: HeatBoundary, vhc: float, tc: float,
-                 dt: float, theta: float, M_true, K_true, R_true, free):
+                 dt: float, theta: float, M_true, K_true, R_true, free, exact: bool = True):
         self.grid, self.theta, self.dt, self.vhc, self.tc = grid, theta, dt, vhc, tc
         sizes = grid.shape
         self.m1, self.K1, self.H1, self.free1 = [], [], [], []
@@ -175,7 +179,10 @@ class KroneckerSolver:
         self._eig_cache: dict = {}
         self._W_cache: dict = {}
         self._last = None
-        self._setup_edges(M_true, K_true, R_true)
+        if exact:
+            self._setup_edges(M_true, K_true, R_true)
+        else:
+            self.m = 0
 
     # ------------------------------------------------------------------ 1-D
     def _axis_eig(self, a: int, beta: float):

@@ -7,8 +7,10 @@ TC scale).  Both solvers take the matrices once and never refactorize per step:
 - :class:`DirectSolver` keeps one sparse LU (SuperLU) per distinct ``(a, b)``
   pair, built the first time the pair is seen;
 - :class:`BatchedPCG` runs preconditioned conjugate gradients for all members
-  at once (one sparse matrix times an (nfree, N) block per iteration) with a
-  Jacobi preconditioner, warm-started from the previous temperatures.
+  at once (one sparse matrix times an (nfree, N) block per iteration),
+  warm-started from the previous temperatures, with a Jacobi preconditioner or
+  a given one (the stepper passes fast diagonalization of the homogenized
+  operator on structured meshes).
 """
 
 from __future__ import annotations
@@ -70,9 +72,12 @@ class BatchedPCG:
         Stop when each member's residual 2-norm is below ``rtol`` times its
         right-hand side's.
     maxiter : int
+    precond : callable, optional
+        ``precond(R, a, b) -> Z`` approximately solving ``A_n z_n = r_n`` for
+        residual columns R (nfree, N); default Jacobi.
     """
 
-    def __init__(self, M, K, R, rtol: float = 1e-10, maxiter: int = 2000):
+    def __init__(self, M, K, R, rtol: float = 1e-10, maxiter: int = 2000, precond=None):
         self.M, self.K, self.R = sp.csr_matrix(M), sp.csr_matrix(K), sp.csr_matrix(R)
         self.m_diag = self.M.diagonal()
         self.k_diag = self.K.diagonal()
@@ -80,6 +85,7 @@ class BatchedPCG:
         self.M_is_diag = self.M.nnz == np.count_nonzero(self.m_diag)
         self.R_is_diag = self.R.nnz == np.count_nonzero(self.r_diag)
         self.rtol, self.maxiter = rtol, maxiter
+        self.precond = precond
         self.last_iterations = 0
 
     def _matvec(self, X, a, b):
@@ -93,11 +99,19 @@ class BatchedPCG:
         """Solve for all members; r (N, nfree) -> (N, nfree); x0 the initial guess."""
         B = np.ascontiguousarray(r.T)
         X = np.zeros_like(B) if x0 is None else np.ascontiguousarray(x0.T, dtype=float)
-        dinv = 1.0 / (self.m_diag[:, None] * a + self.k_diag[:, None] * b + self.r_diag[:, None])
+        if self.precond is None:
+            dinv = 1.0 / (self.m_diag[:, None] * a + self.k_diag[:, None] * b
+                          + self.r_diag[:, None])
+
+            def prec(Rr):
+                return dinv * Rr
+        else:
+            def prec(Rr):
+                return self.precond(Rr, a, b)
         Rr = B - self._matvec(X, a, b)
         bnorm = np.linalg.norm(B, axis=0)
         bnorm[bnorm == 0] = 1.0
-        Z = dinv * Rr
+        Z = prec(Rr)
         P = Z.copy()
         rz = np.einsum("ij,ij->j", Rr, Z)
         it = 0
@@ -110,7 +124,7 @@ class BatchedPCG:
             alpha = np.where(pap > 0, rz / np.where(pap > 0, pap, 1.0), 0.0)
             X += alpha * P
             Rr -= alpha * AP
-            Z = dinv * Rr
+            Z = prec(Rr)
             rz_new = np.einsum("ij,ij->j", Rr, Z)
             beta = np.where(rz > 0, rz_new / np.where(rz > 0, rz, 1.0), 0.0)
             P = Z + beta * P

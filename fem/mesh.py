@@ -193,6 +193,31 @@ def _kuhn_offsets() -> np.ndarray:
 
 
 _KUHN = _kuhn_offsets()
+#: (6, 3): the axis order of each Kuhn simplex's path, in element order.
+KUHN_PATHS = np.array(list(itertools.permutations(range(3))))
+
+
+def kuhn_path_edges(grid: BoxGrid) -> tuple[np.ndarray, np.ndarray]:
+    """Path edges of every element of ``box_mesh(grid)``.
+
+    Returns
+    -------
+    lower : int64 array (3, nelements)
+        Lower node of the element's path edge along x, y and z (row = axis).
+    axis_order : int array (6, 3)
+        :data:`KUHN_PATHS`.
+    """
+    i, j, k = np.meshgrid(np.arange(grid.nx), np.arange(grid.ny), np.arange(grid.nz),
+                          indexing="ij")
+    base = grid.node_index(i.ravel(), j.ravel(), k.ravel())
+    strides = np.array([(grid.ny + 1) * (grid.nz + 1), grid.nz + 1, 1])
+    lower = np.empty((3, 6, base.size), dtype=np.int64)
+    for s, perm in enumerate(KUHN_PATHS):
+        off = 0
+        for axis in perm:  # the path reaches the edge along `axis` at offset `off`
+            lower[axis, s] = base + off
+            off += strides[axis]
+    return lower.transpose(0, 2, 1).reshape(3, -1), KUHN_PATHS
 
 
 def box_mesh(nx: int, ny: int, nz: int, Lx: float, Ly: float, Lz: float) -> MeshTet:
@@ -271,6 +296,8 @@ def element_voxel_index(mesh, grid: BoxGrid) -> np.ndarray:
     ValueError
         If an element centroid lies outside the grid.
     """
+    if structured_grid(mesh) == grid:
+        return np.repeat(np.arange(grid.nvoxels), 6)
     c = mesh.p[:, mesh.t].mean(axis=1)
     ijk = grid.voxel_of_points(c)
     bad = np.flatnonzero((ijk < 0).any(axis=0))

@@ -22,13 +22,15 @@ import numpy as np
 import scipy.sparse as sp
 
 from .locate import locate
-from .mesh import BoxGrid, element_volumes
+from .mesh import BoxGrid, element_volumes, structured_grid
 
 __all__ = ["load_vector", "voxel_load_matrix"]
 
 
 def _aligned_voxels(mesh, grid: BoxGrid) -> np.ndarray | None:
     """Voxel of each element if every element lies inside one voxel, else None."""
+    if structured_grid(mesh) == grid:
+        return np.repeat(np.arange(grid.nvoxels), 6)
     p, t = mesh.p, mesh.t
     c = p[:, t].mean(axis=1)
     ijk = grid.voxel_of_points(c)

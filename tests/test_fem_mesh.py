@@ -146,3 +146,14 @@ def test_box_grid_validation_names_field(field, value):
     kw[field] = value
     with pytest.raises(ValueError, match=rf"{field} must be .*{value}"):
         BoxGrid(**kw)
+
+
+def test_structured_stiffness_equals_generic_assembly():
+    from fem.assembly import _assemble
+
+    g = BoxGrid(4, 3, 5, 0.4, 0.3, 0.5)
+    m = g.mesh()
+    k = np.random.default_rng(0).uniform(1, 2, m.t.shape[1])
+    fast, generic = stiffness_matrix(m, k), _assemble(m, k, kind=0, prune_rtol=1e-13)
+    assert fast.nnz == generic.nnz
+    np.testing.assert_allclose((fast - generic).toarray(), 0, atol=1e-14 * abs(generic).max())
