@@ -62,8 +62,9 @@ def element_coefficient(mesh, value, name: str) -> np.ndarray:
 def lumped_mass(mesh, vhc) -> np.ndarray:
     """Row-sum lumped mass, J/K per node, shape (npoints,): sum of vhc_e V_e / 4."""
     c = element_coefficient(mesh, vhc, "vhc")
-    w = np.repeat((c * element_volumes(mesh) / 4.0)[None, :], 4, axis=0)
-    return np.bincount(mesh.t.ravel(), weights=w.ravel(), minlength=mesh.p.shape[1])
+    w = c * element_volumes(mesh) / 4.0
+    n = mesh.p.shape[1]
+    return sum(np.bincount(mesh.t[a], weights=w, minlength=n) for a in range(4))
 
 
 def mass_matrix(mesh, vhc, lumped: bool = True) -> sp.csr_matrix:

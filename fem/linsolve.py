@@ -88,12 +88,20 @@ class BatchedPCG:
         self.precond = precond
         self.last_iterations = 0
 
-    def _matvec(self, X, a, b):
-        # X (nfree, N): columns are members
-        KX = self.K @ X
-        MX = self.m_diag[:, None] * X if self.M_is_diag else self.M @ X
-        RX = self.r_diag[:, None] * X if self.R_is_diag else self.R @ X
-        return MX * a + KX * b + RX
+    def _operator(self, a, b):
+        """X -> A X for columns X (nfree, N), A_n = a_n M + b_n K + R."""
+        if self.M_is_diag and self.R_is_diag:
+            D = self.m_diag[:, None] * a + self.r_diag[:, None]
+
+            def matvec(X):
+                Y = self.K @ X
+                Y *= b
+                Y += D * X
+                return Y
+        else:
+            def matvec(X):
+                return (self.M @ X) * a + (self.K @ X) * b + self.R @ X
+        return matvec
 
     def solve(self, r: np.ndarray, a: np.ndarray, b: np.ndarray, x0=None) -> np.ndarray:
         """Solve for all members; r (N, nfree) -> (N, nfree); x0 the initial guess."""
@@ -108,7 +116,8 @@ class BatchedPCG:
         else:
             def prec(Rr):
                 return self.precond(Rr, a, b)
-        Rr = B - self._matvec(X, a, b)
+        matvec = self._operator(a, b)
+        Rr = B - matvec(X)
         bnorm = np.linalg.norm(B, axis=0)
         bnorm[bnorm == 0] = 1.0
         Z = prec(Rr)
@@ -119,7 +128,7 @@ class BatchedPCG:
             if np.all(np.linalg.norm(Rr, axis=0) <= self.rtol * bnorm):
                 it -= 1
                 break
-            AP = self._matvec(P, a, b)
+            AP = matvec(P)
             pap = np.einsum("ij,ij->j", P, AP)
             alpha = np.where(pap > 0, rz / np.where(pap > 0, pap, 1.0), 0.0)
             X += alpha * P

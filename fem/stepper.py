@@ -72,7 +72,8 @@ class HeatStepper:
     direct_max_nodes : int
         Largest mesh for the sparse LU path under ``"auto"``.
     rtol : float
-        Relative residual tolerance of the PCG path.
+        Relative residual tolerance of the PCG path (the right-hand side
+        includes ``M T / dt``, so 1e-9 is about 1e-9 of the temperatures).
 
     Attributes
     ----------
@@ -103,7 +104,7 @@ class HeatStepper:
 
     def __init__(self, mesh, vhc, tc, dt: float, theta: float = 1.0,
                  boundary: HeatBoundary | None = None, lumped: bool = True,
-                 method: str = "auto", direct_max_nodes: int = 150_000, rtol: float = 1e-10):
+                 method: str = "auto", direct_max_nodes: int = 150_000, rtol: float = 1e-9):
         self.mesh = mesh
         n = mesh.p.shape[1]
         self.vhc = element_coefficient(mesh, vhc, "vhc")
