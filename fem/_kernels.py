@@ -244,3 +244,51 @@ def locate_points(x, p, t, lo, inv_h, nb, start, items, tol, elem, bary):
             s += lam[a]
         for a in range(4):
             bary[a, q] = lam[a] / s
+
+
+@numba.njit(cache=True, nogil=True)
+def edge_partials(X, dinv, Fz, Fx, Z1, X1):
+    """Thin contractions of Y = X * dinv (B, Px, Py, Pz) onto boundary rows.
+
+    Z1[b, p, q, k] = sum_r Y[b, p, q, r] Fz[b', k, r] and
+    X1[b, i, q, r] = sum_p Fx[b'', i, p] Y[b, p, q, r], where b' = b if the
+    basis is per member (leading size B) else 0; one pass over Y.
+    """
+    B, Px, Py, Pz = X.shape
+    nbz, nbx = Fz.shape[1], Fx.shape[1]
+    Z1[:] = 0.0
+    X1[:] = 0.0
+    for b in range(B):
+        bz = b if Fz.shape[0] > 1 else 0
+        bx = b if Fx.shape[0] > 1 else 0
+        for p in range(Px):
+            for q in range(Py):
+                for r in range(Pz):
+                    y = X[b, p, q, r] * dinv[b, p, q, r]
+                    for k in range(nbz):
+                        Z1[b, p, q, k] += y * Fz[bz, k, r]
+                    for i in range(nbx):
+                        X1[b, i, q, r] += Fx[bx, i, p] * y
+
+
+@numba.njit(cache=True, nogil=True)
+def correct_modes(X, dinv, Axy, Fz, Bz, Fx, out):
+    """out = (X - Axy . Fz - Fx^T . Bz) * dinv: the corrected mode coefficients.
+
+    Axy (B, Px, Py, nbz) expands along z with Fz (., nbz, Pz); Bz (B, nbx, Py, Pz)
+    expands along x with Fx (., nbx, Px); one pass over the full arrays.
+    """
+    B, Px, Py, Pz = X.shape
+    nbz, nbx = Axy.shape[3], Bz.shape[1]
+    for b in range(B):
+        bz = b if Fz.shape[0] > 1 else 0
+        bx = b if Fx.shape[0] > 1 else 0
+        for p in range(Px):
+            for q in range(Py):
+                for r in range(Pz):
+                    v = X[b, p, q, r]
+                    for k in range(nbz):
+                        v -= Axy[b, p, q, k] * Fz[bz, k, r]
+                    for i in range(nbx):
+                        v -= Fx[bx, i, p] * Bz[b, i, q, r]
+                    out[b, p, q, r] = v * dinv[b, p, q, r]

@@ -52,10 +52,14 @@ computed once per distinct pair of scales and cached.
 
 from __future__ import annotations
 
+import os
+from concurrent.futures import ThreadPoolExecutor
+
 import numpy as np
 import scipy.linalg as sla
 import scipy.sparse as sp
 
+from . import _kernels
 from ._threads import blas_threads
 from .bc import HeatBoundary
 from .mesh import BoxGrid
@@ -280,55 +284,58 @@ class KroneckerSolver:
         np.add.at(self.dK, (loc[dK.row], loc[dK.col]), dK.data)
         self.m = m
 
-    def _gather(self, Xhat: np.ndarray, Phis) -> np.ndarray:
-        """Node values on E of mode coefficients Xhat (B, Px, Py, Pz) -> (B, m).
+    def _rows3(self, Phi: np.ndarray, rows: np.ndarray) -> np.ndarray:
+        """Rows of a shared (L, P) or per-member (B, L, P) basis as a 3-D array."""
+        R = _rows(Phi, rows)
+        return np.ascontiguousarray(R[None] if R.ndim == 2 else R)
 
-        The thin contractions onto the boundary rows go first, and the one
-        onto the z-boundary rows is shared by the x- and y-line groups.
+    def _gather(self, X: np.ndarray, dinv: np.ndarray, Phis) -> np.ndarray:
+        """Node values on E of the modes Y = X * dinv (B, Px, Py, Pz) -> (B, m).
+
+        One numba pass makes the thin contractions of Y onto the z- and
+        x-boundary rows; the rest are contractions of small arrays.
         """
         (bx, by, bz), (_, iy, iz) = self._bnd, self._inn
-        B = Xhat.shape[0]
+        B = X.shape[0]
+        Px, Py, Pz = self.shape_f
+        Z1 = np.empty((B, Px, Py, bz.size))
+        X1 = np.empty((B, bx.size, Py, Pz))
+        _kernels.edge_partials(X, dinv, self._rows3(Phis[2], bz), self._rows3(Phis[0], bx),
+                               Z1, X1)
 
         def T(a, rows):
             return _transpose(_rows(Phis[a], rows))
 
         out = [np.zeros((B, 0))] * 3
         if bz.size and by.size:
-            Z1 = _contract(Xhat, T(2, bz), 2)
             out[0] = _contract(_contract(Z1, T(1, by), 1), _transpose(Phis[0]), 0)
-            if bx.size and iy.size:
-                out[1] = _contract(_contract(Z1, T(0, bx), 0), T(1, iy), 1)
-        elif bz.size and bx.size and iy.size:
-            Z1 = _contract(Xhat, T(2, bz), 2)
+        if bz.size and bx.size and iy.size:
             out[1] = _contract(_contract(Z1, T(0, bx), 0), T(1, iy), 1)
         if bx.size and by.size and iz.size:
-            X1 = _contract(Xhat, T(0, bx), 0)
             out[2] = _contract(_contract(X1, T(1, by), 1), T(2, iz), 2)
         return np.concatenate([o.reshape(B, -1) for o in out], axis=1)
 
-    def _scatter(self, s: np.ndarray, Phis) -> np.ndarray:
-        """Phi^T P_E s: mode coefficients (B, Px, Py, Pz) of values s (B, m) on E."""
+    def _correct(self, X: np.ndarray, dinv: np.ndarray, s: np.ndarray, Phis) -> np.ndarray:
+        """Corrected modes (X - Phi^T P_E s) * dinv for values s (B, m) on E."""
         (bx, by, bz), (_, iy, iz) = self._bnd, self._inn
         B = s.shape[0]
-        Lx = self.shape_f[0]
-        n0, n1 = Lx * by.size * bz.size, bx.size * iy.size * bz.size
+        Px, Py, Pz = self.shape_f
+        n0, n1 = Px * by.size * bz.size, bx.size * iy.size * bz.size
         sx, sy, sz = s[:, :n0], s[:, n0:n0 + n1], s[:, n0 + n1:]
-        out = None
-        if bz.size and (n0 or n1):
-            acc = 0.0
-            if n0:
-                Y = _contract(sx.reshape(B, Lx, by.size, bz.size), Phis[0], 0)
-                acc = acc + _contract(Y, _rows(Phis[1], by), 1)
-            if n1:
-                Y = _contract(sy.reshape(B, bx.size, iy.size, bz.size), _rows(Phis[1], iy), 1)
-                acc = acc + _contract(Y, _rows(Phis[0], bx), 0)
-            out = _contract(acc, _rows(Phis[2], bz), 2)
+        Axy = np.zeros((B, Px, Py, bz.size))
+        if n0:
+            Y = _contract(sx.reshape(B, Px, by.size, bz.size), Phis[0], 0)
+            Axy += _contract(Y, _rows(Phis[1], by), 1)
+        if n1:
+            Y = _contract(sy.reshape(B, bx.size, iy.size, bz.size), _rows(Phis[1], iy), 1)
+            Axy += _contract(Y, _rows(Phis[0], bx), 0)
+        Bz = np.zeros((B, bx.size, Py, Pz))
         if sz.shape[1]:
             Y = _contract(sz.reshape(B, bx.size, by.size, iz.size), _rows(Phis[2], iz), 2)
-            Y = _contract(_contract(Y, _rows(Phis[1], by), 1), _rows(Phis[0], bx), 0)
-            out = Y if out is None else out + Y
-        if out is None:
-            out = np.zeros((B,) + self.shape_f)
+            Bz += _contract(Y, _rows(Phis[1], by), 1)
+        out = np.empty_like(X)
+        _kernels.correct_modes(X, dinv, Axy, self._rows3(Phis[2], bz), Bz,
+                               self._rows3(Phis[0], bx), out)
         return out
 
     def _edge_green(self, dinv: np.ndarray, Phis) -> np.ndarray:
@@ -367,7 +374,8 @@ class KroneckerSolver:
         return W
 
     # --------------------------------------------------------------- solve
-    def solve(self, r: np.ndarray, vhc_scale: np.ndarray, tc_scale: np.ndarray) -> np.ndarray:
+    def solve(self, r: np.ndarray, vhc_scale: np.ndarray, tc_scale: np.ndarray,
+              threads: int | None = None) -> np.ndarray:
         """Solve ``A_n x_n = r_n`` on the free nodes.
 
         Parameters
@@ -376,37 +384,71 @@ class KroneckerSolver:
             W, right-hand sides in the order of ``self.free_nodes``.
         vhc_scale, tc_scale : arrays (N,)
             Per-member factors on VHC and TC.
+        threads : int, optional
+            Member blocks solved concurrently (numpy and the numba kernels
+            release the GIL; BLAS runs single-threaded inside each).  Default:
+            up to 2 for ensembles, 1 for a single member.
 
         Returns
         -------
         array (N, nfree)
         """
-        with blas_threads(1):
-            return self._solve(r, vhc_scale, tc_scale)
-
-    def _solve(self, r, vhc_scale, tc_scale):
         alpha = vhc_scale * (self.vhc / self.dt)
         beta = tc_scale * (self.theta * self.tc)
+        N = r.shape[0]
+        with blas_threads(1):
+            dinv, Phis, W = self._cached(alpha, beta)
+            nt = min(_DEFAULT_THREADS if threads is None else int(threads), N)
+            if nt <= 1:
+                return self._solve_block(r, dinv, Phis, W)
+            bounds = np.linspace(0, N, nt + 1).astype(int)
+            out = np.empty_like(r, dtype=float)
+
+            def run(i0, i1):
+                sl = slice(i0, i1)
+                P = [Ph[sl] if Ph.ndim == 3 else Ph for Ph in Phis]
+                out[sl] = self._solve_block(r[sl], dinv[sl], P, None if W is None else W[sl])
+
+            futures = [_pool().submit(run, i0, i1) for i0, i1 in zip(bounds[:-1], bounds[1:],
+                                                                     strict=True)]
+            for f in futures:
+                f.result()
+            return out
+
+    def _cached(self, alpha, beta):
         last = self._last
         if last is not None and np.array_equal(last[0], alpha) and np.array_equal(last[1], beta):
-            dinv, Phis, W = last[2]
-        else:
-            dinv, Phis, N = self._member_data(alpha, beta)
-            W = None
-            if self.m:
-                W = np.stack([self._W(a, b) for a, b in zip(alpha, beta, strict=True)])
-            self._last = (alpha.copy(), beta.copy(), (dinv, Phis, W))
+            return last[2]
+        dinv, Phis, _ = self._member_data(alpha, beta)
+        W = None
+        if self.m:
+            W = np.stack([self._W(a, b) for a, b in zip(alpha, beta, strict=True)])
+        self._last = (alpha.copy(), beta.copy(), (dinv, Phis, W))
+        return dinv, Phis, W
+
+    def _solve_block(self, r, dinv, Phis, W):
         N = r.shape[0]
         X = r.reshape((N,) + self.shape_f)
         for a in range(3):
             X = _contract(X, Phis[a], a)
-        Yhat = X * dinv
-        if W is not None:
-            yE = self._gather(Yhat, Phis)
+        if W is None:
+            Yhat = X * dinv
+        else:
+            X = np.ascontiguousarray(X)
+            yE = self._gather(X, dinv, Phis)
             s = np.matmul(W, yE[:, :, None])[:, :, 0]
-            S = self._scatter(s, Phis)
-            np.subtract(X, S, out=S)  # x_hat = (r_hat - Phi^T P_E s) / d
-            Yhat = np.multiply(S, dinv, out=S)
+            Yhat = self._correct(X, dinv, s, Phis)  # (r_hat - Phi^T P_E s) / d
         for a in range(3):
             Yhat = _contract(Yhat, _transpose(Phis[a]), a)
         return Yhat.reshape(N, -1)
+
+
+_DEFAULT_THREADS = min(2, os.cpu_count() or 1)
+_POOL = None
+
+
+def _pool() -> ThreadPoolExecutor:
+    global _POOL
+    if _POOL is None:
+        _POOL = ThreadPoolExecutor(max_workers=_DEFAULT_THREADS, thread_name_prefix="fem-fd")
+    return _POOL
