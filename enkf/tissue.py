@@ -148,8 +148,15 @@ class TissueForwardModel:
         g = setup.grid
         self.mesh = g.mesh()
         self.L = fem.voxel_load_matrix(self.mesh, g).tocsr()  # (npoints, nvox)
+        # an emulator of nodal loads on this mesh: gather, no operator at all
+        self._nodal = getattr(setup.absorption, "kind", "NA") == "load"
+        if self._nodal:
+            shape = setup.absorption.shape
+            if shape != tuple(n + 1 for n in g.shape):
+                raise ValueError(f"the load emulator's mesh has {shape} nodes, the filter's "
+                                 f"grid {tuple(n + 1 for n in g.shape)}")
         # an emulator that stores symmetry orbits: fold the expansion into the operator
-        self._unique = hasattr(setup.absorption, "unique")
+        self._unique = hasattr(setup.absorption, "unique") and not self._nodal
         if self._unique:
             inv = setup.absorption.inverse
             expand = sp.csr_matrix((np.ones(inv.size), (np.arange(inv.size), inv)))
@@ -173,14 +180,20 @@ class TissueForwardModel:
         if power != 0.0:
             with warnings.catch_warnings(record=True) as caught:
                 warnings.simplefilter("always")
-                if self._unique:
+                if self._nodal:
+                    vals = s.absorption.unique(theta[:, 0], theta[:, 1])
+                    NA = None
+                elif self._unique:
                     NA = s.absorption.unique(theta[:, 0], theta[:, 1])
                 else:
                     NA = s.absorption(theta[:, 0], theta[:, 1])
             if caught and not self._warned:
                 warnings.warn(str(caught[0].message), RuntimeWarning, stacklevel=2)
                 self._warned = True
-            load = (self.L @ (power * NA.reshape(N, -1)).T).T
+            if self._nodal:
+                load = power * vals[:, s.absorption.inverse]
+            else:
+                load = (self.L @ (power * NA.reshape(N, -1)).T).T
         else:
             load = None
         kw = {}

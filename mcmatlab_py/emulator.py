@@ -33,7 +33,7 @@ from ._progress import Progress
 from .media import Medium
 from .model import Geometry, MonteCarloSimulation
 
-CACHE_VERSION = 4
+CACHE_VERSION = 5
 #: The table holds log(NA + NA_OFFSET): smooth where NA is zero or noisy in voxels
 #: that (almost) no photon reaches, and exactly inverted on evaluation.
 NA_OFFSET = 1e-3  # W/cm^3/W, far below the NA of the voxels that matter
@@ -121,6 +121,10 @@ class EmulatorSpec:
     mus_range: tuple[float, float] = (10.0, 2000.0)  #: cm^-1
     n_mua: int = 12  #: log-spaced table points in mua_range
     n_mus: int = 12  #: log-spaced table points in mus_range
+    #: None: tabulate NA on the voxels. (mx, my, mz): tabulate the P1 nodal load per W
+    #: incident, ``L @ NA`` (W/W), on ``fem.box_mesh`` of mx x my x mz boxes over the same
+    #: cuboid, so that a fine Monte Carlo grid feeds a coarse heat mesh exactly
+    mesh_divisions: tuple | None = None
     #: photons per table point at mus = 100 cm^-1; other columns get
     #: ``n_photons * clip((100 / mus)^0.7, 0.5, 5)`` (see :meth:`photons_at`)
     n_photons: int = 250_000
@@ -137,6 +141,27 @@ class EmulatorSpec:
                                  f"got {getattr(self, name)!r}")
         self.mua_range = tuple(float(v) for v in self.mua_range)
         self.mus_range = tuple(float(v) for v in self.mus_range)
+        if self.mesh_divisions is not None:
+            md = tuple(int(v) for v in self.mesh_divisions)
+            if len(md) != 3 or min(md) < 1:
+                raise ValueError("EmulatorSpec.mesh_divisions must be three integers >= 1, "
+                                 f"got {self.mesh_divisions!r}")
+            self.mesh_divisions = md
+
+    @property
+    def field_shape(self) -> tuple[int, int, int]:
+        """Shape of the tabulated field: the voxels, or the mesh nodes (mx+1, my+1, mz+1)."""
+        if self.mesh_divisions is None:
+            return (self.nx, self.ny, self.nz)
+        return tuple(m + 1 for m in self.mesh_divisions)
+
+    @property
+    def offset(self) -> float:
+        """Offset of the log table: NA_OFFSET, times the mesh cell volume for nodal loads."""
+        if self.mesh_divisions is None:
+            return NA_OFFSET
+        mx, my, mz = self.mesh_divisions
+        return NA_OFFSET * self.Lx * self.Ly * self.Lz / (mx * my * mz)
 
     @classmethod
     def from_model(cls, model, **kw) -> EmulatorSpec:
@@ -165,7 +190,9 @@ class EmulatorSpec:
         """(x -> -x, y -> -y, x <-> y): the mirror symmetries of the block and beam."""
         sx = self.x_focus == 0
         sy = self.y_focus == 0
-        swap = (self.x_focus == self.y_focus and self.nx == self.ny and self.Lx == self.Ly)
+        a, b, _ = self.field_shape
+        swap = (self.x_focus == self.y_focus and self.nx == self.ny and self.Lx == self.Ly
+                and a == b)
         return sx, sy, swap
 
     def orbits(self) -> tuple[np.ndarray, np.ndarray]:
@@ -176,15 +203,15 @@ class EmulatorSpec:
         on a square block).
         """
         sx, sy, swap = self.symmetric_axes()
-        i, j, k = np.meshgrid(np.arange(self.nx), np.arange(self.ny), np.arange(self.nz),
-                              indexing="ij")
+        a, b, c = self.field_shape
+        i, j, k = np.meshgrid(np.arange(a), np.arange(b), np.arange(c), indexing="ij")
         if sx:
-            i = np.minimum(i, self.nx - 1 - i)
+            i = np.minimum(i, a - 1 - i)
         if sy:
-            j = np.minimum(j, self.ny - 1 - j)
+            j = np.minimum(j, b - 1 - j)
         if swap:
             i, j = np.minimum(i, j), np.maximum(i, j)
-        canon = ((i * self.ny + j) * self.nz + k).ravel()
+        canon = ((i * b + j) * c + k).ravel()
         reps, inverse = np.unique(canon, return_inverse=True)
         return reps, inverse
 
@@ -228,7 +255,8 @@ class AbsorptionEmulator:
     """NA(mua, mus) on a fixed grid by interpolation in a Monte Carlo table.
 
     Call with arrays ``mua`` (N,) and ``mus`` (N,) in cm^-1; returns NA (N, nx, ny, nz)
-    in W/cm^3/W.
+    in W/cm^3/W, or, when ``spec.mesh_divisions`` is set, the P1 nodal load per W
+    incident (N, mx+1, my+1, mz+1) in W/W (C order of the nodes of ``fem.box_mesh``).
     """
 
     spec: EmulatorSpec
@@ -250,7 +278,12 @@ class AbsorptionEmulator:
 
     @property
     def shape(self) -> tuple[int, int, int]:
-        return (self.spec.nx, self.spec.ny, self.spec.nz)
+        return self.spec.field_shape
+
+    @property
+    def kind(self) -> str:
+        """``"NA"`` (voxels) or ``"load"`` (P1 nodal loads)."""
+        return "NA" if self.spec.mesh_divisions is None else "load"
 
     def _check(self, name, values, lo, hi):
         values = np.atleast_1d(np.asarray(values, dtype=np.float64))
@@ -277,7 +310,7 @@ class AbsorptionEmulator:
         mua, mus = np.broadcast_arrays(mua, mus)
         out = np.empty((mua.size, self.log_na.shape[2]))
         interpolate_log_na(self.log_na, self._lmua, self._lmus, np.log(mua).ravel(),
-                           np.log(mus).ravel(), NA_OFFSET, out)
+                           np.log(mus).ravel(), self.spec.offset, out)
         return out
 
     def __call__(self, mua, mus) -> np.ndarray:
@@ -307,6 +340,13 @@ class AbsorptionEmulator:
         mua_grid, mus_grid = spec.mua_grid(), spec.mus_grid()
         reps, _ = spec.orbits()
         log_na = np.empty((spec.n_mua, spec.n_mus, reps.size))
+        L = None
+        if spec.mesh_divisions is not None:
+            import fem
+
+            grid = fem.BoxGrid(spec.nx, spec.ny, spec.nz, spec.Lx, spec.Ly, spec.Lz)
+            mesh = fem.BoxGrid(*spec.mesh_divisions, spec.Lx, spec.Ly, spec.Lz).mesh()
+            L = fem.voxel_load_matrix(mesh, grid)
         absorbed = np.empty((spec.n_mua, spec.n_mus))
         # cost grows with mus: do the expensive column first so the ETA is honest
         points = [(a, b) for b in range(spec.n_mus)[::-1] for a in range(spec.n_mua)]
@@ -319,8 +359,12 @@ class AbsorptionEmulator:
             res = simulate(m.G, m.MC, M, *optical_arrays(m.G.media), seed=spec.seed,
                            n_photons=m.MC.n_photons_requested)
             dV = m.G.dx * m.G.dy * m.G.dz
-            na = symmetrize(res.absorbed / (res.n_photons * dV), spec)
-            log_na[a, b] = np.log(na.ravel()[reps] + NA_OFFSET)
+            na = res.absorbed / (res.n_photons * dV)
+            if L is not None:
+                na = symmetrize(na, spec, voxels=True)
+                na = (L @ na.ravel()).reshape(spec.field_shape)  # W per node per W
+            na = symmetrize(na, spec)
+            log_na[a, b] = np.log(na.ravel()[reps] + spec.offset)
             absorbed[a, b] = res.absorbed.sum() / res.n_photons
             bar.update(k + 1)
         bar.close()
@@ -330,14 +374,18 @@ class AbsorptionEmulator:
                    build_seconds=seconds)
 
 
-def symmetrize(na: np.ndarray, spec: EmulatorSpec) -> np.ndarray:
-    """Average an (nx, ny, nz) map over the mirror symmetries of the block and beam.
+def symmetrize(na: np.ndarray, spec: EmulatorSpec, voxels: bool = False) -> np.ndarray:
+    """Average a field over the mirror symmetries of the block and beam.
 
     A beam centred on the block is symmetric under x -> -x and y -> -y, and a square
     block under x <-> y as well: averaging over these images is an exact variance
-    reduction (up to 8 times fewer photons for the same noise).
+    reduction (up to 8 times fewer photons for the same noise). The field is on the
+    spec's voxels, or (``voxels=False`` with ``mesh_divisions``) on its mesh nodes, where
+    the average also evens out the O(h^2) asymmetry of the Kuhn triangulation's quadrature.
     """
     sx, sy, swap = spec.symmetric_axes()
+    if voxels:
+        swap = swap and spec.nx == spec.ny
     if sx:
         na = 0.5 * (na + na[::-1])
     if sy:
@@ -386,7 +434,8 @@ class DirectMonteCarloAbsorption:
     """The exact mode: the same call as :class:`AbsorptionEmulator`, by direct Monte Carlo.
 
     Each call runs one Monte Carlo per member (``spec.n_photons`` photons, seed
-    ``spec.seed + call index`` so that successive calls are independent).
+    ``spec.seed + call index`` so that successive calls are independent), and projects
+    onto the mesh nodes when ``spec.mesh_divisions`` is set.
     """
 
     spec: EmulatorSpec
@@ -394,13 +443,34 @@ class DirectMonteCarloAbsorption:
 
     @property
     def shape(self) -> tuple[int, int, int]:
-        return (self.spec.nx, self.spec.ny, self.spec.nz)
+        return self.spec.field_shape
+
+    @property
+    def kind(self) -> str:
+        return "NA" if self.spec.mesh_divisions is None else "load"
+
+    @property
+    def inverse(self) -> np.ndarray:
+        """Identity orbits: ``unique`` returns every entry."""
+        return np.arange(int(np.prod(self.shape)))
+
+    def unique(self, mua, mus) -> np.ndarray:
+        return self(mua, mus).reshape(np.size(mua), -1)
 
     def __call__(self, mua, mus) -> np.ndarray:
         mua, mus = np.broadcast_arrays(np.atleast_1d(mua), np.atleast_1d(mus))
+        L = None
+        if self.spec.mesh_divisions is not None:
+            import fem
+
+            sp = self.spec
+            L = fem.voxel_load_matrix(
+                fem.BoxGrid(*sp.mesh_divisions, sp.Lx, sp.Ly, sp.Lz).mesh(),
+                fem.BoxGrid(sp.nx, sp.ny, sp.nz, sp.Lx, sp.Ly, sp.Lz))
         maps = []
         for a, s in zip(mua.ravel(), mus.ravel(), strict=True):
             m = self.spec.model(float(a), float(s), seed=self.spec.seed + self.calls)
-            maps.append(m.run_monte_carlo().MC.NA)
+            na = m.run_monte_carlo().MC.NA
+            maps.append(na if L is None else (L @ na.ravel()).reshape(self.shape))
         self.calls += 1
         return np.stack(maps)

@@ -104,3 +104,16 @@ def test_orbits_rebuild_symmetric_fields():
     with warnings.catch_warnings():
         warnings.simplefilter("error")
         assert off.symmetric_axes() == (False, True, False)
+
+
+def test_nodal_load_emulator_conserves_power(tmp_path):
+    """With mesh_divisions the table holds P1 nodal loads: they sum to the absorbed fraction."""
+    spec = small_spec(nx=8, ny=8, nz=4, mesh_divisions=(4, 4, 2))
+    emu = AbsorptionEmulator.build(spec, cache_dir=tmp_path, progress=False)
+    assert emu.kind == "load" and emu.shape == (5, 5, 3)
+    a, b = 1, 2
+    mua, mus = spec.mua_grid()[a], spec.mus_grid()[b]
+    load = emu(mua, mus)[0]
+    assert load.sum() == pytest.approx(emu.absorbed[a, b], rel=1e-9)
+    exact = DirectMonteCarloAbsorption(spec)
+    assert exact.kind == "load" and exact(mua, mus).shape == (1, 5, 5, 3)
