@@ -43,7 +43,9 @@ def build_parser() -> argparse.ArgumentParser:
         description="Fine-grid truth (Monte Carlo + FEM heat), noisy sensor data, and the "
                     "EnKF on the coarse model with the absorption emulator; writes "
                     "estimates.csv, truth.csv, summary.json and figures/.")
-    p_paper.add_argument("scenario", choices=("constant", "time-varying", "all-params"))
+    p_paper.add_argument("scenario", choices=("constant", "time-varying", "all-params",
+                                              "sensitivity"),
+                         help="an experiment, or 'sensitivity' for the paper's sensitivity study")
     p_paper.add_argument("--members", type=int, default=50, help="ensemble size N (default 50)")
     p_paper.add_argument("--method", choices=("enkf", "etkf"), default="enkf")
     p_paper.add_argument("--fine", type=int, nargs=3, default=(100, 100, 50),
@@ -131,12 +133,25 @@ def cmd_paper(args) -> int:
     _apply_threads(args.threads)
     if args.members < 2:
         raise ValueError(f"--members must be >= 2, got {args.members}")
+    verbose = not args.quiet
+    if args.scenario == "sensitivity":
+        res = paper.sensitivity_study(tuple(args.fine), args.truth_photons or 10**6,
+                                      progress=verbose)
+        with atomic_dir(args.out, args.force) as tmp:
+            (tmp / "figures").mkdir()
+            paper.plot_sensitivity(tmp / "figures" / "sensitivity.png", res)
+            cols = [f"T_mua_{v:g}" for v in res["mua"]] + [f"T_mus_{v:g}" for v in res["mus"]]
+            import numpy as np
+
+            np.savetxt(tmp / "sensitivity.csv", np.column_stack(
+                [res["times"], *res["mua"].values(), *res["mus"].values()]), delimiter=",",
+                header="time_s," + ",".join(cols), comments="", fmt="%.8g")
+        return 0
     tcfg = paper.TruthConfig(scenario=args.scenario, grid=tuple(args.fine))
     if args.truth_photons is not None:
         if args.truth_photons < 1:
             raise ValueError(f"--truth-photons must be >= 1, got {args.truth_photons}")
         tcfg.n_photons_constant = tcfg.n_photons_per_step = args.truth_photons
-    verbose = not args.quiet
     if verbose:
         print(f"truth on {tcfg.grid} voxels, emulator on the 20 x 20 x 10 filter grid "
               "(both cached after the first run) ...", file=sys.stderr)

@@ -374,3 +374,68 @@ def plot_data(path, scenario: str, truth: Truth, data: np.ndarray) -> None:
     b2.set_ylabel("$\\mu_s$ [cm$^{-1}$]")
     fig.savefig(path, dpi=110)
     plt.close(fig)
+
+
+def sensitivity_study(grid=(100, 100, 50), n_photons: int = 10**6, *, progress=True,
+                      mua_values=(1.0, 2.0, 3.0, 4.0, 5.0),
+                      mus_values=(100.0, 200.0, 300.0, 400.0, 500.0)) -> dict:
+    """The paper's sensitivity study (its Fig. "sens"): sensor temperature against mua and mus.
+
+    One Monte Carlo per case on ``grid`` (mus fixed at 100 while mua varies, mua at 1
+    while mus varies), then all cases stepped together as one batch of heat fields.
+
+    Returns ``{"times": (n,), "mua": {value: (n,)}, "mus": {value: (n,)}}`` (deg C).
+    """
+    import fem
+
+    base = paper_model(grid, n_photons=n_photons, progress=False)
+    HS = base.HS
+    cases = [("mua", v, v, TABLE["mus"]) for v in mua_values]
+    cases += [("mus", v, TABLE["mua"], v) for v in mus_values]
+    g = fem.BoxGrid(*grid, 0.5, 0.5, 0.25)
+    mesh = g.mesh()
+    L = fem.voxel_load_matrix(mesh, g)
+    loads = []
+    from mcmatlab_py._progress import Progress
+
+    bar = Progress(len(cases), "sensitivity: Monte Carlo", enabled=progress, delay=0.5)
+    for i, (_, _, mua, mus) in enumerate(cases):
+        m = paper_model(grid, n_photons=n_photons, progress=False)
+        m.G.media[0].mua, m.G.media[0].mus = mua, mus
+        loads.append(L @ m.run_monte_carlo().MC.NA.ravel())
+        bar.update(i + 1)
+    bar.close()
+    loads = np.array(loads)
+    stepper = fem.HeatStepper(mesh, TABLE["VHC"], TABLE["TC"], HS.dt)
+    probe = fem.probe_matrix(mesh, np.zeros((3, 1)))
+    T = np.zeros((len(cases), mesh.p.shape[1]))
+    times = HS.step_times()
+    out = [np.zeros(len(cases))]
+    for t in times:
+        power = HS.laser_power(t - 0.5 * HS.dt)
+        T = stepper.step(T, power * loads if power else None)
+        out.append((probe @ T.T)[0])
+    out = np.array(out)
+    res = {"times": np.r_[0.0, times], "mua": {}, "mus": {}}
+    for i, (which, v, _, _) in enumerate(cases):
+        res[which][v] = out[:, i]
+    return res
+
+
+def plot_sensitivity(path, res: dict) -> None:
+    """Sensor temperature for each mua (left) and each mus (right), pulse shaded."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, axes = plt.subplots(1, 2, figsize=(10, 3.8), constrained_layout=True, sharey=True)
+    for ax, which, label in ((axes[0], "mua", "$\\mu_a$"), (axes[1], "mus", "$\\mu_s$")):
+        ax.axvspan(0, 5, color="0.88", lw=0)
+        for v, series in res[which].items():
+            ax.plot(res["times"], series, label=f"{label} = {v:g} cm$^{{-1}}$")
+        ax.set(xlabel="time [s]", title=f"sensitivity to {label}")
+        ax.legend(fontsize=8)
+    axes[0].set_ylabel("T at (0, 0, 0) [$^\\circ$C]")
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
