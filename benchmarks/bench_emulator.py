@@ -1,0 +1,63 @@
+"""Absorption emulator: evaluation for 50 members, and the table build.
+
+    python benchmarks/bench_emulator.py            # evaluation (builds/loads the cached table)
+    python benchmarks/bench_emulator.py --rebuild  # also time a build from scratch (minutes)
+
+The filter's emulator: Monte Carlo on the paper's 100 x 100 x 50 voxels, nodal loads on the
+20 x 20 x 10 mesh; and the plain voxel emulator on 20 x 20 x 10.
+"""
+
+from __future__ import annotations
+
+import argparse
+import tempfile
+import time
+
+import numpy as np
+
+from enkf.paper import emulator_for, paper_model
+from mcmatlab_py.emulator import AbsorptionEmulator, EmulatorSpec
+
+
+def time_eval(emu, repeat=2000):
+    rng = np.random.default_rng(0)
+    mua = rng.uniform(0.5, 2.0, 50)
+    mus = rng.uniform(50, 200, 50)
+    emu.unique(mua, mus)  # compile / warm up
+    best = []
+    for f in (emu.unique, emu):
+        t = []
+        for _ in range(repeat // 10):
+            t0 = time.perf_counter()
+            for _ in range(10):
+                f(mua, mus)
+            t.append((time.perf_counter() - t0) / 10)
+        best.append(np.median(t))
+    return best
+
+
+def main(argv=None):
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--rebuild", action="store_true")
+    args = ap.parse_args(argv)
+    for label, make in [
+        ("nodal loads, MC 100x100x50 -> mesh 20x20x10", lambda cache: emulator_for(
+            cache_dir=cache, progress=False)),
+        ("voxel NA, 20x20x10", lambda cache: AbsorptionEmulator.build(
+            EmulatorSpec.from_model(paper_model((20, 20, 10), progress=False)),
+            cache_dir=cache, progress=False)),
+    ]:
+        emu = make(None)
+        u, full = time_eval(emu)
+        print(f"{label}: evaluation of 50 members {1e3 * u:.3f} ms (orbit values, "
+              f"{emu.log_na.shape[2]} per member), {1e3 * full:.3f} ms (full field "
+              f"{np.prod(emu.shape)}); recorded build {emu.build_seconds:.0f} s")
+        if args.rebuild:
+            with tempfile.TemporaryDirectory() as tmp:
+                t0 = time.perf_counter()
+                make(tmp)
+                print(f"  build from scratch: {time.perf_counter() - t0:.0f} s")
+
+
+if __name__ == "__main__":
+    main()
