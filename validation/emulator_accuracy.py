@@ -46,9 +46,9 @@ def main(argv=None):
              f"Command: `python validation/emulator_accuracy.py --ref-photons {args.ref_photons} "
              f"--grids {' '.join(map(str, args.grids))}`", "",
              "Relative L2 error of NA over the voxels holding 99% of the absorbed power. "
-             "`ref noise` is the same metric between two independent references (each with "
-             "the reference photon count) divided by sqrt(2): the part of the error that is "
-             "the reference's own noise.", ""]
+             "The reference is the mean of two independent runs (each with the reference photon "
+             "count); `ref noise` is the metric between the two runs divided by 2, the noise "
+             "of their mean: the part of the error that is the reference's own.", ""]
     for n in args.grids:
         grid = (n, n, n // 2)
         spec = EmulatorSpec.from_model(paper_model(grid, progress=False),
