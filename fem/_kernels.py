@@ -246,49 +246,77 @@ def locate_points(x, p, t, lo, inv_h, nb, start, items, tol, elem, bary):
             bary[a, q] = lam[a] / s
 
 
-@numba.njit(cache=True, nogil=True)
+@numba.njit(cache=True, nogil=True, fastmath=True)
 def edge_partials(X, dinv, Fz, Fx, Z1, X1):
     """Thin contractions of Y = X * dinv (B, Px, Py, Pz) onto boundary rows.
 
     Z1[b, p, q, k] = sum_r Y[b, p, q, r] Fz[b', k, r] and
     X1[b, i, q, r] = sum_p Fx[b'', i, p] Y[b, p, q, r], where b' = b if the
-    basis is per member (leading size B) else 0; one pass over Y.
+    basis is per member (leading size B) else 0; one pass over Y.  Fz and Fx
+    have exactly 2 rows (zero-padded by the caller) so the loops vectorize.
     """
     B, Px, Py, Pz = X.shape
-    nbz, nbx = Fz.shape[1], Fx.shape[1]
-    Z1[:] = 0.0
-    X1[:] = 0.0
     for b in range(B):
         bz = b if Fz.shape[0] > 1 else 0
         bx = b if Fx.shape[0] > 1 else 0
+        fz0 = Fz[bz, 0]
+        fz1 = Fz[bz, 1]
+        X1[b] = 0.0
         for p in range(Px):
+            fx0 = Fx[bx, 0, p]
+            fx1 = Fx[bx, 1, p]
             for q in range(Py):
+                x = X[b, p, q]
+                d = dinv[b, p, q]
+                o0 = X1[b, 0, q]
+                o1 = X1[b, 1, q]
+                a0 = 0.0
+                a1 = 0.0
                 for r in range(Pz):
-                    y = X[b, p, q, r] * dinv[b, p, q, r]
-                    for k in range(nbz):
-                        Z1[b, p, q, k] += y * Fz[bz, k, r]
-                    for i in range(nbx):
-                        X1[b, i, q, r] += Fx[bx, i, p] * y
+                    y = x[r] * d[r]
+                    a0 += y * fz0[r]
+                    a1 += y * fz1[r]
+                    o0[r] += fx0 * y
+                    o1[r] += fx1 * y
+                Z1[b, p, q, 0] = a0
+                Z1[b, p, q, 1] = a1
 
 
-@numba.njit(cache=True, nogil=True)
+@numba.njit(cache=True, nogil=True, fastmath=True)
 def correct_modes(X, dinv, Axy, Fz, Bz, Fx, out):
     """out = (X - Axy . Fz - Fx^T . Bz) * dinv: the corrected mode coefficients.
 
-    Axy (B, Px, Py, nbz) expands along z with Fz (., nbz, Pz); Bz (B, nbx, Py, Pz)
-    expands along x with Fx (., nbx, Px); one pass over the full arrays.
+    Axy (B, Px, Py, 2) expands along z with Fz (., 2, Pz); Bz (B, 2, Py, Pz)
+    expands along x with Fx (., 2, Px); one pass over the full arrays.
     """
     B, Px, Py, Pz = X.shape
-    nbz, nbx = Axy.shape[3], Bz.shape[1]
     for b in range(B):
         bz = b if Fz.shape[0] > 1 else 0
         bx = b if Fx.shape[0] > 1 else 0
+        fz0 = Fz[bz, 0]
+        fz1 = Fz[bz, 1]
         for p in range(Px):
+            fx0 = Fx[bx, 0, p]
+            fx1 = Fx[bx, 1, p]
             for q in range(Py):
+                x = X[b, p, q]
+                d = dinv[b, p, q]
+                g0 = Bz[b, 0, q]
+                g1 = Bz[b, 1, q]
+                a0 = Axy[b, p, q, 0]
+                a1 = Axy[b, p, q, 1]
+                o = out[b, p, q]
                 for r in range(Pz):
-                    v = X[b, p, q, r]
-                    for k in range(nbz):
-                        v -= Axy[b, p, q, k] * Fz[bz, k, r]
-                    for i in range(nbx):
-                        v -= Fx[bx, i, p] * Bz[b, i, q, r]
-                    out[b, p, q, r] = v * dinv[b, p, q, r]
+                    o[r] = (x[r] - a0 * fz0[r] - a1 * fz1[r] - fx0 * g0[r] - fx1 * g1[r]) * d[r]
+
+
+@numba.njit(cache=True, nogil=True)
+def lumped_rhs(T, a, m, g, f, out):
+    """out[n, i] = a[n] m[i] T[n, i] + g[i] + f[n or 0, i]: one pass over the ensemble."""
+    N, n = T.shape
+    one = f.shape[0] == 1
+    for k in range(N):
+        fk = f[0] if one else f[k]
+        ak = a[k]
+        for i in range(n):
+            out[k, i] = ak * m[i] * T[k, i] + g[i] + fk[i]

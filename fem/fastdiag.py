@@ -284,10 +284,14 @@ class KroneckerSolver:
         np.add.at(self.dK, (loc[dK.row], loc[dK.col]), dK.data)
         self.m = m
 
-    def _rows3(self, Phi: np.ndarray, rows: np.ndarray) -> np.ndarray:
-        """Rows of a shared (L, P) or per-member (B, L, P) basis as a 3-D array."""
+    def _rows2(self, Phi: np.ndarray, rows: np.ndarray) -> np.ndarray:
+        """Rows of a shared (L, P) or per-member (B, L, P) basis as (B or 1, 2, P),
+        zero-padded to 2 rows (a box axis has at most 2 boundary nodes)."""
         R = _rows(Phi, rows)
-        return np.ascontiguousarray(R[None] if R.ndim == 2 else R)
+        R = R[None] if R.ndim == 2 else R
+        out = np.zeros((R.shape[0], 2, R.shape[2]))
+        out[:, :R.shape[1]] = R
+        return out
 
     def _gather(self, X: np.ndarray, dinv: np.ndarray, Phis) -> np.ndarray:
         """Node values on E of the modes Y = X * dinv (B, Px, Py, Pz) -> (B, m).
@@ -298,10 +302,11 @@ class KroneckerSolver:
         (bx, by, bz), (_, iy, iz) = self._bnd, self._inn
         B = X.shape[0]
         Px, Py, Pz = self.shape_f
-        Z1 = np.empty((B, Px, Py, bz.size))
-        X1 = np.empty((B, bx.size, Py, Pz))
-        _kernels.edge_partials(X, dinv, self._rows3(Phis[2], bz), self._rows3(Phis[0], bx),
+        Z1 = np.empty((B, Px, Py, 2))
+        X1 = np.empty((B, 2, Py, Pz))
+        _kernels.edge_partials(X, dinv, self._rows2(Phis[2], bz), self._rows2(Phis[0], bx),
                                Z1, X1)
+        Z1, X1 = Z1[..., :bz.size], X1[:, :bx.size]
 
         def T(a, rows):
             return _transpose(_rows(Phis[a], rows))
@@ -322,20 +327,20 @@ class KroneckerSolver:
         Px, Py, Pz = self.shape_f
         n0, n1 = Px * by.size * bz.size, bx.size * iy.size * bz.size
         sx, sy, sz = s[:, :n0], s[:, n0:n0 + n1], s[:, n0 + n1:]
-        Axy = np.zeros((B, Px, Py, bz.size))
+        Axy = np.zeros((B, Px, Py, 2))
         if n0:
             Y = _contract(sx.reshape(B, Px, by.size, bz.size), Phis[0], 0)
-            Axy += _contract(Y, _rows(Phis[1], by), 1)
+            Axy[..., :bz.size] += _contract(Y, _rows(Phis[1], by), 1)
         if n1:
             Y = _contract(sy.reshape(B, bx.size, iy.size, bz.size), _rows(Phis[1], iy), 1)
-            Axy += _contract(Y, _rows(Phis[0], bx), 0)
-        Bz = np.zeros((B, bx.size, Py, Pz))
+            Axy[..., :bz.size] += _contract(Y, _rows(Phis[0], bx), 0)
+        Bz = np.zeros((B, 2, Py, Pz))
         if sz.shape[1]:
             Y = _contract(sz.reshape(B, bx.size, by.size, iz.size), _rows(Phis[2], iz), 2)
-            Bz += _contract(Y, _rows(Phis[1], by), 1)
+            Bz[:, :bx.size] += _contract(Y, _rows(Phis[1], by), 1)
         out = np.empty_like(X)
-        _kernels.correct_modes(X, dinv, Axy, self._rows3(Phis[2], bz), Bz,
-                               self._rows3(Phis[0], bx), out)
+        _kernels.correct_modes(X, dinv, Axy, self._rows2(Phis[2], bz), Bz,
+                               self._rows2(Phis[0], bx), out)
         return out
 
     def _edge_green(self, dinv: np.ndarray, Phis) -> np.ndarray:
@@ -409,8 +414,10 @@ class KroneckerSolver:
                 P = [Ph[sl] if Ph.ndim == 3 else Ph for Ph in Phis]
                 out[sl] = self._solve_block(r[sl], dinv[sl], P, None if W is None else W[sl])
 
-            futures = [_pool().submit(run, i0, i1) for i0, i1 in zip(bounds[:-1], bounds[1:],
+            # the calling thread takes the last block itself
+            futures = [_pool().submit(run, i0, i1) for i0, i1 in zip(bounds[:-2], bounds[1:-1],
                                                                      strict=True)]
+            run(bounds[-2], bounds[-1])
             for f in futures:
                 f.result()
             return out
@@ -450,5 +457,6 @@ _POOL = None
 def _pool() -> ThreadPoolExecutor:
     global _POOL
     if _POOL is None:
-        _POOL = ThreadPoolExecutor(max_workers=_DEFAULT_THREADS, thread_name_prefix="fem-fd")
+        _POOL = ThreadPoolExecutor(max_workers=max(1, _DEFAULT_THREADS - 1),
+                                   thread_name_prefix="fem-fd")
     return _POOL

@@ -32,6 +32,7 @@ from __future__ import annotations
 import numpy as np
 import scipy.sparse as sp
 
+from . import _kernels
 from .assembly import (
     element_coefficient,
     lumped_mass,
@@ -259,20 +260,23 @@ class HeatStepper:
         b = self._scales(tc_scale, N, "tc_scale")
         th = self.theta
 
-        if self._m_lumped is not None:
-            rhs = T2 * (a[:, None] * self._m_lumped)
-        else:
-            rhs = self._apply(self.M, T2) * a[:, None]
-        if self.g.any():
-            rhs += self.g
-        if th != 1.0:
-            rhs -= (1.0 - th) * (self._apply(self.K, T2) * b[:, None] + self._apply(self.R, T2))
+        f = None
         if load is not None:
             f = np.asarray(load, dtype=float)
             if f.shape not in ((self.npoints,), (N, self.npoints)):
                 raise ValueError(f"load must have shape ({self.npoints},) or "
                                  f"({N}, {self.npoints}), got {f.shape}")
-            rhs += f
+        if self._m_lumped is not None:
+            f2 = np.zeros((1, self.npoints)) if f is None else f.reshape(-1, self.npoints)
+            rhs = np.empty((N, self.npoints))
+            _kernels.lumped_rhs(np.ascontiguousarray(T2), np.ascontiguousarray(a),
+                                self._m_lumped, self.g, np.ascontiguousarray(f2), rhs)
+        else:
+            rhs = self._apply(self.M, T2) * a[:, None] + self.g
+            if f is not None:
+                rhs += f
+        if th != 1.0:
+            rhs -= (1.0 - th) * (self._apply(self.K, T2) * b[:, None] + self._apply(self.R, T2))
 
         if self.fixed.size == 0 and self._identity_order:
             x = self._solve(rhs, a, b, T2)
