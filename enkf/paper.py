@@ -152,7 +152,7 @@ def noisy_sensor(truth: Truth, seed: int, variance: float = 0.01) -> np.ndarray:
 
 
 def filter_setup(scenario: str, absorption, *, seed: int = 0, n_members: int = 50,
-                 coarse=(20, 20, 10), method: str = "enkf"):
+                 coarse=(20, 20, 10), method: str = "enkf", **overrides):
     """The filter of a scenario: the coarse model, the paper's priors, our C and E."""
     import fem
     from mcmatlab_py.heat import HeatSimulation
@@ -164,12 +164,13 @@ def filter_setup(scenario: str, absorption, *, seed: int = 0, n_members: int = 5
     # constant: parameters believed fixed (small walk); time-varying: they may drift
     rw = 0.002 if scenario == "constant" else (
         [0.03, 0.03] if scenario == "time-varying" else [0.03, 0.03, 0.005, 0.005])
+    overrides.setdefault("random_walk_std", rw)
     return TissueFilterSetup(
         grid=fem.BoxGrid(*coarse, 0.5, 0.5, 0.25), absorption=absorption,
         power=HS.laser_power, nominal=dict(TABLE), estimate=estimate,
         sensor_positions=np.zeros((1, 3)), sensor_noise_var=0.01,
         tracked_positions=np.array([[0.0, 0.0, z] for z in TRACKED_DEPTHS]),
-        T_initial=0.0, random_walk_std=rw, n_members=n_members, seed=seed, method=method)
+        T_initial=0.0, n_members=n_members, seed=seed, method=method, **overrides)
 
 
 def emulator_for(coarse=(20, 20, 10), n_photons: int = 250_000, *, progress=True,
@@ -203,8 +204,12 @@ class PaperRun:
 
 def run_experiment(scenario: str, seed: int = 0, *, n_members: int = 50, method: str = "enkf",
                    truth_config: TruthConfig | None = None, emulator_photons: int = 250_000,
-                   exact: bool = False, cache_dir=None, progress: bool = True) -> PaperRun:
-    """Truth (cached), noisy data (``seed``), and the filter (``seed``) for one scenario."""
+                   exact: bool = False, cache_dir=None, progress: bool = True,
+                   **overrides) -> PaperRun:
+    """Truth (cached), noisy data (``seed``), and the filter (``seed``) for one scenario.
+
+    ``overrides`` go to :class:`~enkf.tissue.TissueFilterSetup` (e.g. ``model_noise_std``).
+    """
     import time
 
     from mcmatlab_py._progress import Progress
@@ -224,7 +229,8 @@ def run_experiment(scenario: str, seed: int = 0, *, n_members: int = 50, method:
         from mcmatlab_py.emulator import DirectMonteCarloAbsorption
 
         absorption = DirectMonteCarloAbsorption(emu.spec)
-    setup = filter_setup(scenario, absorption, seed=seed, n_members=n_members, method=method)
+    setup = filter_setup(scenario, absorption, seed=seed, n_members=n_members, method=method,
+                         **overrides)
     bar = Progress(len(truth.times) - 1, "filter", enabled=progress)
     est = identify(setup, truth.times[1:], data[:, None], callback=lambda r: bar.update(r.step))
     bar.close()

