@@ -95,6 +95,10 @@ class TissueFilterSetup:
     inflation: float = 1.0
     seed: int = 0
     theta: float = 1.0  #: time scheme of the heat steps (1: backward Euler)
+    #: "kronecker" (default): the tensor-product operator of :class:`fem.HeatStepper`, equal
+    #: to P1 away from the box edges, with no per-member cost when VHC and TC are estimated;
+    #: "p1": the exact P1 matrices (an edge correction per new pair of member scales)
+    heat_operator: str = "kronecker"
 
     def __post_init__(self):
         est = tuple(self.estimate)
@@ -171,7 +175,8 @@ class TissueForwardModel:
         if key not in self.steppers:
             s = self.setup
             self.steppers[key] = fem.HeatStepper(self.mesh, s.nominal["VHC"], s.nominal["TC"], dt,
-                                                 theta=s.theta, boundary=s.heat_boundary)
+                                                 theta=s.theta, boundary=s.heat_boundary,
+                                                 operator=s.heat_operator)
         return self.steppers[key]
 
     def warm_up(self, dt: float) -> None:
