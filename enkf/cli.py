@@ -55,6 +55,8 @@ def build_parser() -> argparse.ArgumentParser:
                               "change; default 1e7 constant, 1e6 per step)")
     p_paper.add_argument("--emulator-photons", type=int, default=250_000,
                          help="photons per emulator table point at mus = 100 (default 2.5e5)")
+    p_paper.add_argument("--emulator-table", type=int, default=12, metavar="N",
+                         help="N x N log-spaced (mua, mus) table points (default 12)")
     p_paper.add_argument("--exact", action="store_true",
                          help="direct Monte Carlo per member and step instead of the emulator "
                               "(slow: for checking)")
@@ -157,7 +159,8 @@ def cmd_paper(args) -> int:
               "(both cached after the first run) ...", file=sys.stderr)
     run = paper.run_experiment(args.scenario, 0 if args.seed is None else args.seed,
                                n_members=args.members, method=args.method, truth_config=tcfg,
-                               emulator_photons=args.emulator_photons, exact=args.exact,
+                               emulator_photons=args.emulator_photons,
+                               emulator_table=args.emulator_table, exact=args.exact,
                                cache_dir=args.cache_dir, progress=verbose)
     with atomic_dir(args.out, args.force) as tmp:
         paper.write_run(run, tmp)

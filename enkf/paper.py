@@ -204,8 +204,8 @@ class PaperRun:
 
 def run_experiment(scenario: str, seed: int = 0, *, n_members: int = 50, method: str = "enkf",
                    truth_config: TruthConfig | None = None, emulator_photons: int = 250_000,
-                   exact: bool = False, cache_dir=None, progress: bool = True,
-                   **overrides) -> PaperRun:
+                   emulator_table: int = 12, exact: bool = False, cache_dir=None,
+                   progress: bool = True, **overrides) -> PaperRun:
     """Truth (cached), noisy data (``seed``), and the filter (``seed``) for one scenario.
 
     ``overrides`` go to :class:`~enkf.tissue.TissueFilterSetup` (e.g. ``model_noise_std``).
@@ -223,7 +223,8 @@ def run_experiment(scenario: str, seed: int = 0, *, n_members: int = 50, method:
     tcfg.scenario = scenario
     truth = generate_truth(tcfg, cache_dir=cache_dir, progress=progress)
     data = noisy_sensor(truth, seed)
-    emu = emulator_for(n_photons=emulator_photons, progress=progress, cache_dir=cache_dir)
+    emu = emulator_for(n_photons=emulator_photons, progress=progress, cache_dir=cache_dir,
+                       mc_grid=tcfg.grid, n_mua=emulator_table, n_mus=emulator_table)
     absorption = emu
     if exact:
         from mcmatlab_py.emulator import DirectMonteCarloAbsorption

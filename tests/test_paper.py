@@ -1,0 +1,63 @@
+"""The paper's experiments end to end, on small grids (the full runs are in validation/)."""
+
+import json
+
+import numpy as np
+import pytest
+
+from enkf.cli import main
+from enkf.paper import mua_ramp, mus_ramp, true_parameters
+
+SMALL = ["--fine", "10", "10", "5", "--truth-photons", "3000", "--emulator-photons", "1500",
+         "--emulator-table", "5", "--members", "12", "--quiet"]
+
+
+def test_paper_ramps_are_the_papers():
+    assert mua_ramp(0) == 1 and mua_ramp(5) == pytest.approx(4) and mua_ramp(7) == 4
+    assert mus_ramp(0) == 100 and mus_ramp(5) == pytest.approx(500) and mus_ramp(12) == 500
+    p = true_parameters("constant", np.array([0.0, 15.0]))
+    assert list(p["mua"]) == [1, 1] and list(p["VHC"]) == [3.76, 3.76]
+
+
+@pytest.mark.parametrize("scenario", ["constant", "all-params"])
+def test_paper_command_writes_the_contract(tmp_path, scenario):
+    out = tmp_path / "run"
+    rc = main(["paper", scenario, "--out", str(out), "--seed", "3",
+               "--cache-dir", str(tmp_path / "cache"), *SMALL])
+    assert rc == 0
+    assert {p.name for p in out.iterdir()} == {"estimates.csv", "truth.csv", "summary.json",
+                                               "figures"}
+    assert {p.name for p in (out / "figures").iterdir()} == {"estimates.png", "data.png"}
+    s = json.loads((out / "summary.json").read_text())
+    names = ["mua", "mus"] + (["VHC", "TC"] if scenario == "all-params" else [])
+    assert list(s["parameters"]) == names
+    for p in s["parameters"].values():
+        assert set(p) >= {"truth_final", "estimate_final", "std_final", "relative_error_final",
+                          "rmse", "coverage_2sd"}
+    assert list(s["temperatures"]) == ["z=0.0", "z=0.1", "z=0.2"]
+    assert set(s["timing"]) >= {"filter_wall_s", "step_latency_median_s", "step_latency_max_s",
+                                "steps", "ensemble_size"}
+    assert s["timing"]["steps"] == 150 and s["timing"]["ensemble_size"] == 12
+    assert s["scenario"] == scenario and s["seed"] == 3
+    est = np.genfromtxt(out / "estimates.csv", delimiter=",", names=True)
+    assert est.shape == (151,) and est["time_s"][-1] == pytest.approx(15.0)
+    if scenario == "constant":
+        # the filter learns: the final mua is far closer than the prior's spread
+        assert s["parameters"]["mua"]["relative_error_final"] < 0.3
+
+
+def test_paper_sensitivity(tmp_path):
+    out = tmp_path / "sens"
+    assert main(["paper", "sensitivity", "--out", str(out), "--fine", "8", "8", "4",
+                 "--truth-photons", "2000", "--quiet"]) == 0
+    table = np.genfromtxt(out / "sensitivity.csv", delimiter=",", names=True)
+    peak = {k: table[k][50] for k in table.dtype.names if k != "time_s"}
+    # more absorption heats the surface more; scattering matters less (the paper's Fig. 3)
+    mua_peaks = [peak[f"T_mua_{v}"] for v in (1, 2, 3, 4, 5)]
+    assert np.all(np.diff(mua_peaks) > 0)
+
+
+def test_paper_bad_input(tmp_path, capsys):
+    assert main(["paper", "constant", "--out", str(tmp_path / "o"), "--members", "1",
+                 "--quiet"]) == 2
+    assert "--members must be >= 2, got 1" in capsys.readouterr().err
