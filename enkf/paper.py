@@ -161,9 +161,13 @@ def filter_setup(scenario: str, absorption, *, seed: int = 0, n_members: int = 5
 
     HS = HeatSimulation(P=0.5, duration_on=5.0, duration_off=10.0, dt=0.1)
     estimate = ("mua", "mus", "VHC", "TC") if scenario == "all-params" else ("mua", "mus")
-    # constant: parameters believed fixed (small walk); time-varying: they may drift
+    # constant: parameters believed fixed (small walk). time-varying: they may drift; the
+    # paper's ramp of mus (x5 in 5 s, 0.032 per step in log units) needs a walk on log mus
+    # of about twice that of log mua to be followed at all: [0.03, 0.03] let mus stall
+    # during the pulse and run away after it; [0.03, 0.06] tracked best of the settings
+    # tried (validation/reports/paper_runs.md has the seeds and the misses).
     rw = 0.002 if scenario == "constant" else (
-        [0.03, 0.03] if scenario == "time-varying" else [0.03, 0.03, 0.005, 0.005])
+        [0.03, 0.06] if scenario == "time-varying" else [0.03, 0.06, 0.005, 0.005])
     overrides.setdefault("random_walk_std", rw)
     return TissueFilterSetup(
         grid=fem.BoxGrid(*coarse, 0.5, 0.5, 0.25), absorption=absorption,

@@ -18,8 +18,9 @@ Defaults and their reasons (see also docs/enkf.md):
   is close to the truth, and a larger white nodal noise only makes the members
   rough and lets them disagree with data through noise rather than physics.
 * random walk on log parameters (``E``), per 0.1 s step: ``0.002`` when the
-  parameters are believed constant, ``0.02`` when they may drift (a ramp of
-  mua from 1 to 4 cm^-1 in 5 s is 0.028 per step in log units).
+  parameters are believed constant; when they may drift, ``0.03`` for log mua and
+  ``0.06`` for log mus (the paper's ramps are 0.028 and 0.032 per step in log
+  units; mus, weakly identified, needs the wider walk to be followed at all).
 """
 
 from __future__ import annotations
