@@ -270,11 +270,15 @@ def write_run(run: PaperRun, out_dir: Path) -> None:
 
 def summarize(scenario: str, est, truth: Truth) -> dict:
     """The ``summary.json`` of a run: final errors, RMSE and coverage of the +-2 sd band."""
-    k = len(est.times)
+    # a filter stopped by its health check has NaN statistics at the failing step: the
+    # metrics cover the steps before it, and "diverged" says when and why
+    ok = np.all(np.isfinite(est.param_mean), axis=1) & np.all(np.isfinite(est.tracked_mean),
+                                                               axis=1)
+    k = int(np.argmin(ok)) if not ok.all() else len(est.times)
     params = {}
-    tp = true_parameters(scenario, est.times)
+    tp = true_parameters(scenario, est.times[:k])
     for i, name in enumerate(est.names):
-        mean, sd, tru = est.param_mean[:, i], est.param_std[:, i], tp[name]
+        mean, sd, tru = est.param_mean[:k, i], est.param_std[:k, i], tp[name]
         params[name] = {
             "truth_final": float(tru[-1]), "estimate_final": float(mean[-1]),
             "std_final": float(sd[-1]),
@@ -284,7 +288,7 @@ def summarize(scenario: str, est, truth: Truth) -> dict:
         }
     temps = {}
     for j, z in enumerate(TRACKED_DEPTHS):
-        mean, sd = est.tracked_mean[1:, j], est.tracked_std[1:, j]
+        mean, sd = est.tracked_mean[1:k, j], est.tracked_std[1:k, j]
         tru = truth.temps[1:k, j]
         temps[f"z={z:.1f}"] = {
             "rmse": float(np.sqrt(np.mean((mean - tru) ** 2))),
@@ -300,6 +304,7 @@ def summarize(scenario: str, est, truth: Truth) -> dict:
                    "ensemble_size": int(est.result.state_ensemble.shape[0])
                    if est.result is not None else None},
         "diverged": est.diverged,
+        "final_time": float(est.times[k - 1]),
     }
 
 

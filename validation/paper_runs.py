@@ -32,6 +32,7 @@ def checks(s: dict) -> dict[str, bool]:
             out[f"{k} within 10%"] = p[k]["relative_error_final"] <= 0.10
     for z, t in s["temperatures"].items():
         out[f"coverage {z} >= 0.9"] = t["coverage_2sd"] >= 0.9
+    out["ran to t = 15 s"] = not s["diverged"]
     out["filter <= 15 s"] = s["timing"]["filter_wall_s"] <= 15
     out["max step <= 100 ms"] = s["timing"]["step_latency_max_s"] <= 0.1
     return out
@@ -61,10 +62,11 @@ def main(argv=None):
             temps = ", ".join(f"{z}: rmse {t['rmse']:.2f}, cov {t['coverage_2sd']:.2f}"
                               for z, t in s["temperatures"].items())
             tm = s["timing"]
-            rows.append(f"| {seed} | {par} | {temps} | {tm['filter_wall_s']:.1f} s, max step "
+            stop = f" **stopped: {s['diverged']}**" if s["diverged"] else ""
+            rows.append(f"| {seed} | {par}{stop} | {temps} | {tm['filter_wall_s']:.1f} s, max step "
                         f"{1e3 * tm['step_latency_max_s']:.0f} ms |")
             print(sc, seed, par, temps, flush=True)
-        lines += ["| seed | parameters at t = 15 s (rel. error) | temperatures | filter |",
+        lines += ["| seed | parameters at the end (rel. error) | temperatures | filter |",
                   "|---|---|---|---|", *rows, "", "| target | seeds passing |", "|---|---|"]
         lines += [f"| {k} | {sum(v)}/{len(v)} |" for k, v in passed.items()]
         lines.append("")
