@@ -47,7 +47,9 @@ def build_parser() -> argparse.ArgumentParser:
                                               "sensitivity"),
                          help="an experiment, or 'sensitivity' for the paper's sensitivity study")
     p_paper.add_argument("--members", type=int, default=50, help="ensemble size N (default 50)")
-    p_paper.add_argument("--method", choices=("enkf", "etkf"), default="enkf")
+    p_paper.add_argument("--method", choices=("enkf", "etkf"), default="etkf",
+                         help="analysis: deterministic ETKF (default) or the paper's EnKF "
+                              "with perturbed observations")
     p_paper.add_argument("--fine", type=int, nargs=3, default=(100, 100, 50),
                          metavar=("NX", "NY", "NZ"), help="truth grid (default 100 100 50)")
     p_paper.add_argument("--truth-photons", type=int, default=None,

@@ -157,6 +157,9 @@ class FilterProblem:
     transforms: Transform | Sequence[Transform] = field(default_factory=IdentityTransform)
     t0: float = 0.0
     tracked: Sequence[int] = ()
+    #: optional ``scale(t0, t1) -> float >= 0`` multiplying the random-walk standard
+    #: deviation of the step from t0 to t1 (e.g. 0 while nothing can change the parameters)
+    param_noise_scale: Callable[[float, float], float] | None = None
 
     def __post_init__(self):
         set_ = object.__setattr__  # frozen: store the validated arrays
@@ -493,6 +496,11 @@ def run_filter(
             X[:, noisy] += sd_model[noisy] * rng.standard_normal((N, noisy.size))
         if rw_on:
             xi = rng.standard_normal((N, n_par))
+            if P.param_noise_scale is not None:
+                scale = float(P.param_noise_scale(float(times[k - 1]), float(times[k])))
+                if not (np.isfinite(scale) and scale >= 0):
+                    raise ValueError(f"param_noise_scale must return a number >= 0, got {scale!r}")
+                xi *= scale
             U = U + (xi * rw_root if rw_root.ndim == 1 else xi @ rw_root.T)
         y = P.obs_data[k - 1]
         if not np.all(np.isnan(y)):

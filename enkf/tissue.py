@@ -91,6 +91,10 @@ class TissueFilterSetup:
     prior_range: tuple[float, float] = (0.5, 2.0)
     model_noise_std: float = 0.002  #: deg C per step, C = std^2 I
     random_walk_std: float | Sequence[float] = 0.002  #: log units per step, E = std^2 I
+    #: factor on the random walk for steps with the laser off: 1 walks always (the paper);
+    #: 0 holds the parameters still when nothing heats the tissue, which is what changes
+    #: them (and, with the laser off, they no longer act on the forecast at all)
+    random_walk_when_off: float = 1.0
     n_members: int = 50
     method: str = "enkf"
     inflation: float = 1.0
@@ -258,7 +262,10 @@ def identify(setup: TissueFilterSetup, times: np.ndarray, data: np.ndarray, *,
     problem = FilterProblem(
         forecast=model, observation=P_obs, obs_times=times, obs_data=data, obs_cov=noise_var,
         prior=prior, model_noise=setup.model_noise_std ** 2, param_noise=rw,
-        transforms=LogTransform(), t0=0.0)
+        transforms=LogTransform(), t0=0.0,
+        param_noise_scale=None if setup.random_walk_when_off == 1.0 else (
+            lambda t0, t1: 1.0 if setup.power(0.5 * (t0 + t1)) > 0
+            else setup.random_walk_when_off))
     config = FilterConfig(n_members=setup.n_members, method=setup.method,
                           inflation=setup.inflation, seed=setup.seed)
     if param_bounds is None:
