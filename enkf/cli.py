@@ -54,7 +54,7 @@ def build_parser() -> argparse.ArgumentParser:
                          metavar=("NX", "NY", "NZ"), help="truth grid (default 100 100 50)")
     p_paper.add_argument("--truth-photons", type=int, default=None,
                          help="photons of the truth's Monte Carlo (per step when the optics "
-                              "change; default 1e7 constant, 1e6 per step)")
+                              "change; default 1e7 constant, 5e5 per step)")
     p_paper.add_argument("--emulator-photons", type=int, default=250_000,
                          help="photons per emulator table point at mus = 100 (default 2.5e5)")
     p_paper.add_argument("--emulator-table", type=int, default=12, metavar="N",

@@ -14,7 +14,7 @@ Where the paper is silent we do what MCmatlab does by default, and say so:
 matched interfaces (``matchedInterfaces = true``: no Fresnel reflection at the
 cuboid faces), boundary type 1 (photons escape through every face), insulating
 heat boundaries (``heatBoundaryType = 0``), backward-Euler steps of 0.1 s (one per
-sensor reading), and 10^7 photons for a constant-property map, 10^6 per step
+sensor reading), and 10^7 photons for a constant-property map, 5 x 10^5 per step
 while the properties ramp.
 """
 
@@ -92,7 +92,7 @@ class TruthConfig:
     scenario: str = "constant"
     grid: tuple = (100, 100, 50)
     n_photons_constant: int = 10**7  #: photons of a constant-property map
-    n_photons_per_step: int = 10**6  #: photons per step while the properties change
+    n_photons_per_step: int = 500_000  #: photons per step while the properties change
     mc_seed: int = 1
 
     def key(self) -> str:
