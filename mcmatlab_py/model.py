@@ -69,31 +69,37 @@ class Geometry:
             m.__post_init__()  # re-check values changed after construction
 
     @property
+    def grid(self):
+        """The voxel grid as a :class:`fem.BoxGrid` (one definition of coordinates)."""
+        from fem import BoxGrid
+
+        return BoxGrid(self.nx, self.ny, self.nz, self.Lx, self.Ly, self.Lz)
+
+    @property
     def dx(self) -> float:
-        return self.Lx / self.nx
+        """cm, voxel size along x (likewise ``dy``, ``dz``)."""
+        return self.grid.dx
 
     @property
     def dy(self) -> float:
-        return self.Ly / self.ny
+        return self.grid.dy
 
     @property
     def dz(self) -> float:
-        return self.Lz / self.nz
+        return self.grid.dz
 
     @property
     def x(self) -> np.ndarray:
-        """(nx,) voxel-centre x coordinates, cm."""
-        return (np.arange(self.nx) + 0.5) * self.dx - self.Lx / 2
+        """(nx,) voxel-centre x coordinates, cm (likewise ``y``, ``z``)."""
+        return self.grid.x
 
     @property
     def y(self) -> np.ndarray:
-        """(ny,) voxel-centre y coordinates, cm."""
-        return (np.arange(self.ny) + 0.5) * self.dy - self.Ly / 2
+        return self.grid.y
 
     @property
     def z(self) -> np.ndarray:
-        """(nz,) voxel-centre z coordinates, cm."""
-        return (np.arange(self.nz) + 0.5) * self.dz
+        return self.grid.z
 
     def medium_map(self) -> np.ndarray:
         """(nx, ny, nz) int32 medium index of every voxel (MCmatlab's ``M``), validated."""
