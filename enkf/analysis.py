@@ -32,10 +32,15 @@ by the push-through identity
       = A^\mathsf{T} S\,\big(S^\mathsf{T}S + (N-1)I_p\big)^{-1} L^{-1}
       = A^\mathsf{T} \big(SS^\mathsf{T} + (N-1)I_N\big)^{-1} S L^{-1}.
 
-Only the :math:`N\times N` matrix :math:`SS^\mathsf{T} + (N-1)I_N` is factorised;
-its eigenvalues are at least :math:`N-1`, so the solve is well conditioned. The
-cost is :math:`O(N^2(n+p) + N^3)` plus, for a full ``R``, one :math:`O(p^3)`
-Cholesky; the :math:`n\times n` covariance is never formed.
+Both updates use the thin singular value decomposition
+:math:`S = U\Sigma V^\mathsf{T}` (:math:`r = \min(N, p)` singular values
+:math:`\sigma_i`), which diagonalises
+:math:`SS^\mathsf{T} + (N-1)I_N = U(\Sigma^2 + (N-1)I_r)U^\mathsf{T} + (N-1)(I_N - UU^\mathsf{T})`
+and whose eigenvalues are at least :math:`N-1`, so nothing is ill conditioned
+(the ``"svd"`` variant of DAPPER). The cost is :math:`O(Nr(n + p))`, linear in
+the state size :math:`n` and in :math:`N`, whichever of :math:`N` and :math:`p`
+is small, plus one :math:`O(p^3)` Cholesky for a full ``R``. Neither the
+:math:`n\times n` covariance nor an :math:`N\times N` matrix is formed.
 
 Observations given as NaN are dropped (rows and columns of ``R`` too). When no
 observation is left there is nothing to assimilate, and the forecast is returned
@@ -119,12 +124,12 @@ def _prepare(E, Y, y, R):
     return E, Y, y, y_mean, S, whiten
 
 
-def _ens_gram(S: np.ndarray) -> np.ndarray:
-    """:math:`SS^T + (N-1)I_N`."""
-    N = S.shape[0]
-    G = S @ S.T
-    G[np.diag_indices(N)] += N - 1
-    return G
+def _thin_svd(S: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """``U (N, r), s (r,), Vt (r, p)`` with ``S = U diag(s) Vt``, ``r = min(N, p)``."""
+    try:
+        return sla.svd(S, full_matrices=False, check_finite=False)
+    except np.linalg.LinAlgError:  # gesdd rarely fails to converge; gesvd is the robust one
+        return sla.svd(S, full_matrices=False, check_finite=False, lapack_driver="gesvd")
 
 
 def enkf_perturbed_obs(
@@ -151,8 +156,8 @@ def enkf_perturbed_obs(
 
     .. math::
 
-        E^a = E + W A, \qquad
-        W = \Delta S^\mathsf{T}\,(SS^\mathsf{T} + (N-1)I_N)^{-1},
+        E^a = E + \Delta S^\mathsf{T}\,(SS^\mathsf{T} + (N-1)I_N)^{-1} A
+            = E + \Delta V\,\Sigma(\Sigma^2 + (N-1)I_r)^{-1}\,U^\mathsf{T}A,
 
     where row :math:`n` of :math:`\Delta` is :math:`(y - Y_n)L^{-\mathsf{T}} + \zeta_n`
     and :math:`\zeta_n = L^{-1}w_n \sim \mathcal{N}(0, I_p)` is drawn directly in
@@ -200,9 +205,9 @@ def enkf_perturbed_obs(
     if center:
         zeta -= zeta.mean(axis=0)
     Delta = whiten(y - Y) + zeta  # whitened d_n - G(z_n)
-    W = sla.cho_solve(sla.cho_factor(_ens_gram(S), lower=True), S @ Delta.T).T
-    A = E - E.mean(axis=0)
-    return E + W @ A
+    U, s, Vt = _thin_svd(S)
+    A = E - E.mean(axis=0)  # anomalies
+    return E + ((Delta @ Vt.T) * (s / (s**2 + (N - 1)))) @ (U.T @ A)
 
 
 def etkf(E: np.ndarray, Y: np.ndarray, y: np.ndarray, R: np.ndarray) -> np.ndarray:
@@ -213,14 +218,19 @@ def etkf(E: np.ndarray, Y: np.ndarray, y: np.ndarray, R: np.ndarray) -> np.ndarr
 
     .. math::
 
-        \tilde{P} = (SS^\mathsf{T} + (N-1)I_N)^{-1} = V D^{-1} V^\mathsf{T}, \qquad
+        \tilde{P} = (SS^\mathsf{T} + (N-1)I_N)^{-1}, \qquad
         \bar{w} = \tilde{P} S\,L^{-1}(y - \bar{y}), \qquad
-        T = \sqrt{N-1}\; V D^{-1/2} V^\mathsf{T},
+        T = \sqrt{N-1}\;\tilde{P}^{1/2},
 
     .. math::
 
         E^a = \mathbf{1}\bar{x}^\mathsf{T}
               + (\mathbf{1}\bar{w}^\mathsf{T} + T)\,A .
+
+    With the thin SVD :math:`S = U\Sigma V^\mathsf{T}` these are
+    :math:`\bar{w} = U\Sigma(\Sigma^2 + (N-1)I_r)^{-1}V^\mathsf{T}L^{-1}(y - \bar{y})`
+    and :math:`T = I_N + U\big[(N-1)^{1/2}(\Sigma^2 + (N-1)I_r)^{-1/2} - I_r\big]U^\mathsf{T}`,
+    applied to :math:`A` without forming any :math:`N\times N` matrix.
 
     The analysis mean is :math:`\bar{x} + A^\mathsf{T}\bar{w} = \bar{x} + K(y -
     \bar{y})` and the analysis anomalies :math:`TA` have sample covariance
@@ -250,11 +260,14 @@ def etkf(E: np.ndarray, Y: np.ndarray, y: np.ndarray, R: np.ndarray) -> np.ndarr
         return np.array(E, dtype=float)
     E, Y, y, y_mean, S, whiten = prep
     N = E.shape[0]
-    d, V = sla.eigh(_ens_gram(S))
-    w = (V / d) @ (V.T @ (S @ whiten(y - y_mean)))
-    T = (V * np.sqrt((N - 1) / d)) @ V.T
+    U, s, Vt = _thin_svd(S)
+    d = s**2 + (N - 1)  # eigenvalues of S S^T + (N-1) I on span(U)
     x_mean = E.mean(axis=0)
-    return x_mean + (T + w) @ (E - x_mean)
+    A = E - x_mean  # anomalies
+    UA = U.T @ A
+    w_coef = (s / d) * (Vt @ whiten(y - y_mean))  # mean weights: w = U @ w_coef
+    t_coef = np.sqrt((N - 1) / d) - 1.0  # T - I = U diag(t_coef) U^T
+    return x_mean + (w_coef @ UA) + A + U @ (t_coef[:, None] * UA)
 
 
 def inflate(E: np.ndarray, factor: float | np.ndarray) -> np.ndarray:
