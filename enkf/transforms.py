@@ -69,7 +69,10 @@ class LogTransform:
         return np.log(theta)
 
     def inverse(self, u: np.ndarray) -> np.ndarray:
-        return np.exp(np.asarray(u, dtype=float))
+        # exp underflows to 0 below u ~ -745; the smallest normal double keeps theta > 0
+        # (and forward(inverse(u)) finite). Overflow to inf is left to the health check.
+        with np.errstate(over="ignore"):
+            return np.maximum(np.exp(np.asarray(u, dtype=float)), np.finfo(float).tiny)
 
 
 @dataclass(frozen=True)
