@@ -1,0 +1,244 @@
+"""The augmented-state driver: exact Kalman filter on a linear augmented system,
+Lorenz-96 parameter estimation, NaN gaps, reproducibility, health checks, input checks.
+"""
+
+import numpy as np
+import pytest
+
+from enkf import (
+    FilterConfig,
+    FilterDivergence,
+    FilterProblem,
+    HealthCheck,
+    LogTransform,
+    run_filter,
+    uniform_prior,
+)
+from enkf.models import kalman_filter, lorenz96_step
+
+# Linear state with a parameter forcing it: x_{k+1} = F x_k + g theta_k + q_k,
+# theta_{k+1} = theta_k + xi_k (Arnold & Fichera's random walk). In the augmented
+# variable z = [x; theta] this is linear-Gaussian, so the Kalman filter is exact.
+F2 = np.array([[0.8, 0.1], [0.2, 0.7]])
+G2 = np.array([0.5, 0.2])
+C = np.array([0.05, 0.1])  # model-noise variances
+E_RW = 0.01  # random-walk variance
+H = np.array([[1.0, 0.0]])  # only x_0 is observed
+R = np.array([0.2])
+M0 = np.array([0.0, 1.0, 2.0])  # prior mean of [x; theta]
+S0 = np.array([0.5, 0.5, 1.0])  # prior std
+THETA_TRUE = 3.0
+
+
+def linear_forecast(X, theta, t0, t1):
+    return X @ F2.T + theta[:, :1] * G2
+
+
+def gaussian_prior(rng, N):
+    Z = M0 + S0 * rng.standard_normal((N, 3))
+    return Z[:, :2], Z[:, 2:]
+
+
+def linear_problem(M=10, gap=None, theta_true=THETA_TRUE, **kw):
+    rng = np.random.default_rng(0)
+    x = np.array([0.0, 1.0])
+    data = np.empty((M, 1))
+    for k in range(M):
+        x = F2 @ x + G2 * theta_true + np.sqrt(C) * rng.standard_normal(2)
+        data[k] = H @ x + np.sqrt(R) * rng.standard_normal(1)
+    if gap is not None:
+        data[gap] = np.nan
+    args = dict(forecast=linear_forecast, observation=H, obs_times=np.arange(1.0, M + 1),
+                obs_data=data, obs_cov=R, prior=gaussian_prior, model_noise=C,
+                param_noise=E_RW, tracked=[0, 1])
+    args.update(kw)
+    return FilterProblem(**args)
+
+
+def augmented_kalman(problem):
+    Fa = np.block([[F2, G2[:, None]], [np.zeros((1, 2)), np.ones((1, 1))]])
+    Ha = np.hstack([H, np.zeros((1, 1))])
+    return kalman_filter(M0, np.diag(S0**2), Fa, np.append(C, E_RW), Ha, R, problem.obs_data)
+
+
+@pytest.mark.parametrize("method", ["enkf", "etkf"])
+def test_driver_matches_augmented_kalman_filter(method):
+    # N = 20000: the mean of a component with variance s^2 has standard error
+    # s / sqrt(N), its std about s / sqrt(2 (N - 1)); we allow 5 of them (iid-like
+    # errors, see test_enkf_analysis). A data gap at step 4 is a forecast-only step.
+    N = 20000
+    problem = linear_problem(gap=3)
+    res = run_filter(problem, FilterConfig(n_members=N, method=method, seed=1))
+    means, covs = augmented_kalman(problem)
+    sd = np.sqrt(np.diagonal(covs, axis1=1, axis2=2))  # (M + 1, 3)
+    mean_ens = np.hstack([res.tracked_mean, res.param_mean])
+    std_ens = np.hstack([res.tracked_std, res.param_std])
+    assert np.all(np.abs(mean_ens - means) < 5 * sd / np.sqrt(N))
+    assert np.all(np.abs(std_ens - sd) < 5 * sd / np.sqrt(2 * (N - 1)))
+    assert res.analysed.tolist() == [True] * 3 + [False] + [True] * 6
+    # The parameter is learnt through its correlation with the observed state only.
+    assert res.param_std[-1, 0] < 0.5 * res.param_std[0, 0]
+
+
+def test_result_shapes_and_callback():
+    problem = linear_problem(M=6)
+    reports = []
+    res = run_filter(problem, FilterConfig(n_members=20), callback=reports.append)
+    assert res.times.shape == (7,) and res.times[0] == 0.0
+    assert res.param_mean.shape == res.param_std.shape == (7, 1)
+    assert res.tracked_mean.shape == res.tracked_std.shape == (7, 2)
+    assert res.step_latency_s.shape == res.analysis_latency_s.shape == (6,)
+    assert np.all(res.step_latency_s > 0) and np.all(res.analysis_latency_s <= res.step_latency_s)
+    assert res.state_ensemble.shape == (20, 2) and res.param_ensemble.shape == (20, 1)
+    assert [r.step for r in reports] == list(range(7))
+    assert reports[-1].time == 6.0
+    np.testing.assert_array_equal(reports[3].param_mean, res.param_mean[3])
+
+
+def test_all_missing_data_is_a_pure_forecast():
+    # No datum, no analysis: with no noise the ensemble mean follows the model.
+    problem = linear_problem(M=5, obs_data=np.full((5, 1), np.nan), model_noise=0.0,
+                             param_noise=0.0)
+    res = run_filter(problem, FilterConfig(n_members=30, seed=3))
+    assert not res.analysed.any()
+    X, th = gaussian_prior(np.random.default_rng(3), 30)
+    for _ in range(5):
+        X = linear_forecast(X, th, 0, 1)
+    np.testing.assert_allclose(res.state_ensemble, X, atol=1e-12)
+    np.testing.assert_allclose(res.param_mean[-1], th.mean(0), atol=1e-12)
+
+
+@pytest.mark.parametrize("method", ["enkf", "etkf"])
+def test_same_seed_same_numbers(method):
+    problem = linear_problem()
+    a = run_filter(problem, FilterConfig(n_members=25, method=method, seed=7))
+    b = run_filter(problem, FilterConfig(n_members=25, method=method, seed=7))
+    c = run_filter(problem, FilterConfig(n_members=25, method=method, seed=8))
+    for name in ("param_mean", "param_std", "tracked_mean", "tracked_std", "state_ensemble"):
+        np.testing.assert_array_equal(getattr(a, name), getattr(b, name))
+    assert not np.array_equal(a.param_mean, c.param_mean)
+
+
+def test_log_transform_keeps_parameters_positive_and_reports_physical_stats():
+    # A parameter near zero with a wide prior: the identity transform pushes members
+    # negative, the log transform cannot; statistics come from exp(u).
+    problem = linear_problem(theta_true=0.05, prior=uniform_prior([0.0, 1.0], [0.01], [4.0]),
+                             param_noise=0.05)
+    ident = run_filter(problem, FilterConfig(n_members=50, seed=2))
+    assert np.any(ident.param_ensemble <= 0)
+    res = run_filter(FilterProblem(**{**problem.__dict__, "transforms": LogTransform()}),
+                     FilterConfig(n_members=50, seed=2))
+    assert np.all(res.param_ensemble > 0)
+    np.testing.assert_allclose(res.param_mean[-1], res.param_ensemble.mean(0))
+    np.testing.assert_allclose(res.param_std[-1], res.param_ensemble.std(0, ddof=1))
+
+
+def test_lorenz96_forcing_is_identified():
+    # Nonlinear augmented test: estimate F of Lorenz-96 from half the variables.
+    rng = np.random.default_rng(0)
+    K, dt = 200, 0.05
+    xs = [lorenz96_step(8 + rng.standard_normal(40), dt, n_steps=500)]
+    for _ in range(K):
+        xs.append(lorenz96_step(xs[-1], dt))
+    xs = np.array(xs)
+    y = xs[1:] + rng.standard_normal((K, 40))
+    y[:, 1::2] = np.nan
+    problem = FilterProblem(
+        forecast=lambda X, th, t0, t1: lorenz96_step(X, t1 - t0, force=th[:, :1]),
+        observation=np.eye(40), obs_times=dt * np.arange(1, K + 1), obs_data=y,
+        obs_cov=np.ones(40), prior=uniform_prior(xs[0], [6.0], [10.0], state_std=1.0),
+        transforms=LogTransform(), param_noise=1e-6)
+    res = run_filter(problem, FilterConfig(n_members=40, inflation=1.06, seed=1))
+    assert abs(res.param_mean[-1, 0] - 8.0) < 0.25
+    assert res.param_std[-1, 0] < 0.2 * res.param_std[0, 0]
+
+
+def test_health_nonfinite_forecast_raises_with_step_and_time():
+    def forecast(X, theta, t0, t1):
+        Xn = linear_forecast(X, theta, t0, t1)
+        if t1 >= 4.0:
+            Xn[3, 1] = np.nan
+        return Xn
+
+    with pytest.raises(FilterDivergence) as info:
+        run_filter(linear_problem(forecast=forecast), FilterConfig(n_members=10))
+    err = info.value
+    assert (err.step, err.time) == (4, 4.0)
+    assert "non-finite state" in err.what and "columns [1]" in err.what
+    assert err.result.times.tolist() == [0.0, 1.0, 2.0, 3.0, 4.0]
+    assert np.all(np.isfinite(err.result.param_mean[:4]))
+    assert "step 4" in str(err)
+
+
+def test_health_bounds_collapse_and_custom_hook():
+    problem = linear_problem()
+    with pytest.raises(FilterDivergence) as info:
+        run_filter(problem, FilterConfig(n_members=30),
+                   health=HealthCheck(param_bounds=[[0.0, 2.5]]))
+    assert info.value.step > 0 and "parameter 0 mean" in info.value.what
+    assert info.value.result.param_mean[-1, 0] > 2.5
+    # Collapse: prior std 1 passes, no random walk and data shrink it below 0.3.
+    with pytest.raises(FilterDivergence) as info:
+        run_filter(linear_problem(param_noise=0.0), FilterConfig(n_members=30),
+                   health=HealthCheck(min_param_std=0.3))
+    assert info.value.step > 0 and "collapsed" in info.value.what
+
+    def hook(X, theta):
+        return "too warm" if X[:, 0].mean() > 1.0 else None
+
+    with pytest.raises(FilterDivergence, match="too warm") as info:
+        run_filter(problem, FilterConfig(n_members=30), health=hook)
+    assert info.value.result.tracked_mean[-1, 0] > 1.0
+
+
+@pytest.mark.parametrize(
+    "kwargs, field",
+    [
+        ({"n_members": 1}, "n_members"),
+        ({"n_members": 2.5}, "n_members"),
+        ({"method": "4dvar"}, "method"),
+        ({"inflation": -1.0}, "inflation"),
+        ({"seed": None}, "seed"),
+    ],
+)
+def test_bad_config(kwargs, field):
+    with pytest.raises(ValueError, match=rf"^{field}\b"):
+        FilterConfig(**kwargs)
+
+
+@pytest.mark.parametrize(
+    "kwargs, field",
+    [
+        ({"obs_data": np.zeros((4, 1))}, "obs_data"),  # rows differ from obs_times
+        ({"obs_times": np.array([1.0, 3.0, 2.0] + list(range(4, 11)))}, "obs_times"),
+        ({"obs_times": np.arange(0.0, 10.0)}, "obs_times"),  # not after t0
+        ({"obs_cov": np.array([-0.2])}, "obs_cov"),
+        ({"obs_cov": np.ones(2)}, "obs_cov"),
+        ({"model_noise": np.array([0.1, -0.1])}, "model_noise"),
+        ({"param_noise": -1.0}, "param_noise"),
+        ({"observation": np.ones((2, 2))}, "observation"),
+        ({"tracked": [-1]}, "tracked"),
+        ({"forecast": 3}, "forecast"),
+    ],
+)
+def test_bad_problem(kwargs, field):
+    with pytest.raises(ValueError, match=rf"^{field}\b"):
+        linear_problem(**kwargs)
+
+
+@pytest.mark.parametrize(
+    "kwargs, field",
+    [
+        ({"model_noise": np.ones(3)}, "model_noise"),  # n_state is 2
+        ({"param_noise": np.ones(2)}, "param_noise"),  # n_par is 1
+        ({"observation": np.ones((1, 3))}, "observation"),
+        ({"tracked": [2]}, "tracked"),
+        ({"forecast": lambda X, th, t0, t1: X[:, :1]}, "forecast"),
+        ({"observation": lambda X: X}, "observation"),  # maps to 2 values, data has 1
+        ({"prior": lambda rng, N: (np.zeros((N - 1, 2)), np.zeros((N - 1, 1)))}, "prior"),
+        ({"transforms": [LogTransform(), LogTransform()]}, "transforms"),
+    ],
+)
+def test_bad_sizes_found_at_run(kwargs, field):
+    with pytest.raises(ValueError, match=rf"^{field}\b"):
+        run_filter(linear_problem(**kwargs), FilterConfig(n_members=5))
