@@ -144,6 +144,10 @@ class FilterProblem:
     tracked : sequence of int
         Indices into the state whose mean and std are recorded every step
         (e.g. probe nodes).
+    param_noise_scale : callable, optional
+        ``scale(t0, t1) -> float >= 0`` multiplying the random-walk standard
+        deviation of the step from ``t0`` to ``t1``, e.g. 0 while nothing can
+        change the parameters (laser off). Default: 1 for every step.
     """
 
     forecast: Forecast

@@ -242,3 +242,14 @@ def test_bad_problem(kwargs, field):
 def test_bad_sizes_found_at_run(kwargs, field):
     with pytest.raises(ValueError, match=rf"^{field}\b"):
         run_filter(linear_problem(**kwargs), FilterConfig(n_members=5))
+
+
+def test_param_noise_scale_holds_the_random_walk_still():
+    # Scale 0 on every step with no data: the parameters never move.
+    problem = linear_problem(M=4, obs_data=np.full((4, 1), np.nan), param_noise=0.5,
+                             param_noise_scale=lambda t0, t1: 0.0)
+    res = run_filter(problem, FilterConfig(n_members=10))
+    np.testing.assert_array_equal(res.param_mean, np.repeat(res.param_mean[:1], 5, axis=0))
+    bad = linear_problem(param_noise_scale=lambda t0, t1: -1.0)
+    with pytest.raises(ValueError, match="^param_noise_scale"):
+        run_filter(bad, FilterConfig(n_members=10))
