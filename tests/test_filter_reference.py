@@ -1,4 +1,7 @@
-"""The generic ensemble Kalman filter: exact Kalman filter, Lorenz-96, NaN data, transforms, seeds."""
+"""The generic ensemble Kalman filter: exact Kalman filter, NaN data, transforms, seeds.
+
+(Lorenz-96 against Sakov & Oke is in test_enkf_lorenz96.py.)
+"""
 
 import numpy as np
 import pytest
@@ -12,11 +15,10 @@ from enkf import (
     LogTransform,
     enkf_perturbed_obs,
     etkf,
-    inflate,
     run_filter,
     uniform_prior,
 )
-from enkf.models import kalman_analysis, lorenz96_step
+from enkf.models import kalman_analysis
 
 MU = np.array([1.0, -1.0, 0.5])
 P = np.array([[1.0, 0.3, 0.0], [0.3, 2.0, 0.2], [0.0, 0.2, 0.5]])
@@ -51,22 +53,6 @@ def test_perturbed_obs_enkf_matches_the_kalman_filter_within_sampling_error():
     # against the exact (population) Kalman filter: prior and perturbation sampling
     mu_x, P_x = kalman_analysis(MU, P, H, R, Y_OBS)
     assert np.all(np.abs(Ea.mean(0) - mu_x) < 4 * np.sqrt(np.diag(P) / N))
-
-
-def test_lorenz96_rmse_matches_sakov_and_oke():
-    """40 variables, dt 0.05, all observed (var 1), N 40, inflation 1.06: RMSE ~ 0.22."""
-    rng = np.random.default_rng(0)
-    x = lorenz96_step(8 + rng.standard_normal(40), 0.05, n_steps=2000)
-    E = x + rng.standard_normal((40, 40))
-    err = []
-    for k in range(1200):
-        x = lorenz96_step(x, 0.05)
-        E = lorenz96_step(E, 0.05)
-        y = x + rng.standard_normal(40)
-        E = inflate(enkf_perturbed_obs(E, E, y, np.ones(40), rng), 1.06)
-        if k >= 200:
-            err.append(np.sqrt(np.mean((E.mean(0) - x) ** 2)))
-    assert abs(np.mean(err) - 0.22) < 0.022
 
 
 def _linear_problem(data, **kw):
