@@ -18,7 +18,7 @@ error covariance; ``K`` Kalman gain; ``theta`` parameters in physical units;
 variances; ``E_rw`` random-walk covariance. See docs/enkf.md.
 """
 
-from .analysis import enkf_perturbed_obs, etkf, inflate
+from .analysis import enkf_perturbed_obs, etkf, inflate, random_rotation
 from .driver import (
     FilterConfig,
     FilterDivergence,
@@ -44,6 +44,7 @@ __all__ = [
     "enkf_perturbed_obs",
     "etkf",
     "inflate",
+    "random_rotation",
     "run_filter",
     "uniform_prior",
 ]

@@ -74,7 +74,7 @@ import scipy.linalg as sla
 
 from ._validate import as_generator, covariance, float_array
 
-__all__ = ["analysis", "enkf_perturbed_obs", "etkf", "inflate"]
+__all__ = ["analysis", "enkf_perturbed_obs", "etkf", "inflate", "random_rotation"]
 
 METHODS = ("enkf", "etkf")
 
@@ -301,6 +301,44 @@ def inflate(E: np.ndarray, factor: float | np.ndarray) -> np.ndarray:
         raise ValueError(f"factor must be positive, got min {lam.min()!r}")
     x_mean = E.mean(axis=0)
     return x_mean + lam * (E - x_mean)
+
+
+def random_rotation(E: np.ndarray, rng: np.random.Generator | int) -> np.ndarray:
+    r"""Rotate the anomalies by a random mean-preserving orthogonal matrix.
+
+    .. math::
+
+        E \leftarrow \mathbf{1}\bar{x}^\mathsf{T} + \Omega A, \qquad
+        \Omega = \tfrac{1}{N}\mathbf{1}\mathbf{1}^\mathsf{T} + B\,O\,B^\mathsf{T},
+
+    with :math:`B` an orthonormal basis of :math:`\mathbf{1}^\perp` and :math:`O`
+    Haar-distributed in :math:`O(N-1)`, so :math:`\Omega\mathbf{1} = \mathbf{1}` and
+    the mean and sample covariance are unchanged. Used after the deterministic
+    ETKF it spreads the ensemble over its subspace and prevents the outlier
+    members that can make a symmetric square-root filter diverge on long runs
+    (Sakov & Oke 2008; DAPPER's ``rot=True``). Cost :math:`O(N^3 + N^2 n)`.
+
+    Parameters
+    ----------
+    E : ndarray, shape (N, n)
+    rng : numpy.random.Generator or int
+
+    Returns
+    -------
+    ndarray, shape (N, n)
+    """
+    rng = as_generator(rng)
+    E = float_array(E, "E", 2)
+    N = E.shape[0]
+    if N < 2:
+        raise ValueError(f"E must hold at least 2 members (rows), got N = {N}")
+    # Orthonormal basis of the complement of 1: QR of [1, I] minus its first column.
+    B = np.linalg.qr(np.column_stack([np.ones(N), np.eye(N)[:, : N - 1]]))[0][:, 1:]
+    q, r = np.linalg.qr(rng.standard_normal((N - 1, N - 1)))
+    O = q * np.sign(np.diag(r))  # sign fix makes O Haar-distributed (Mezzadri 2007)
+    x_mean = E.mean(axis=0)
+    A = E - x_mean
+    return x_mean + B @ (O @ (B.T @ A))
 
 
 def analysis(

@@ -45,7 +45,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ._validate import as_generator, cov_sqrt, covariance, float_array, variances
-from .analysis import METHODS, analysis, inflate
+from .analysis import METHODS, analysis, inflate, random_rotation
 from .transforms import IdentityTransform, Transform, as_transforms, to_filter_space, to_physical
 
 __all__ = [
@@ -87,7 +87,11 @@ class FilterConfig:
         (default True; False reproduces the paper's plain perturbations).
     seed : int
         Seed of the single Generator that draws the prior, model noise, random
-        walk and observation perturbations, in that order each step.
+        walk and observation perturbations (and rotations), in that order each step.
+    rotate : bool
+        After each analysis, rotate the anomalies by a random mean-preserving
+        orthogonal matrix (:func:`enkf.analysis.random_rotation`; DAPPER's
+        ``rot=True``). Recommended for long ETKF runs with little inflation.
     """
 
     n_members: int = 50
@@ -95,6 +99,7 @@ class FilterConfig:
     inflation: float = 1.0
     center_perturbations: bool = True
     seed: int = 0
+    rotate: bool = False
 
     def __post_init__(self):
         if (not isinstance(self.n_members, numbers.Integral) or isinstance(self.n_members, bool)
@@ -523,6 +528,8 @@ def run_filter(
                          center=config.center_perturbations)
             if config.inflation != 1.0:
                 Z = inflate(Z, config.inflation)
+            if config.rotate:
+                Z = random_rotation(Z, rng)
             X, U = Z[:, :n_state], Z[:, n_state:]
             analysed[k - 1] = True
             ana_latency[k - 1] = time.perf_counter() - tic_a

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 import scipy.linalg as sla
 
-from enkf import enkf_perturbed_obs, etkf, inflate
+from enkf import enkf_perturbed_obs, etkf, inflate, random_rotation
 from enkf.models import kalman_analysis, kalman_filter, simulate_linear_gaussian
 
 # A small linear-Gaussian system: 3 states, 2 correlated observations.
@@ -191,6 +191,15 @@ def test_inflate():
     np.testing.assert_allclose(np.cov(Ei.T), 1.21 * np.cov(E.T), atol=1e-13)
     lam = np.array([1.0, 2.0, 1.0, 0.5])
     np.testing.assert_allclose(np.var(inflate(E, lam), 0), lam**2 * np.var(E, 0))
+
+
+def test_random_rotation_preserves_mean_and_covariance():
+    E = np.random.default_rng(15).standard_normal((9, 5))
+    Er = random_rotation(E, 3)
+    np.testing.assert_allclose(Er.mean(0), E.mean(0), atol=1e-14)
+    np.testing.assert_allclose(np.cov(Er.T), np.cov(E.T), atol=1e-13)
+    assert not np.allclose(Er, E)
+    np.testing.assert_array_equal(Er, random_rotation(E, 3))
 
 
 def test_same_seed_same_numbers():

@@ -3,8 +3,9 @@
 40 variables, dt = 0.05, all observed every step with variance 1, N = 40,
 perturbed observations, inflation 1.06: the published time-averaged analysis RMSE
 is 0.22 (Sakov & Oke 2008, Table 1; DAPPER ``mods/Lorenz96/sakov2008.py``).
-The square-root filter with N = 24 and inflation 1.013 gives 0.18 there (with a
-random rotation; ours has none). Here 2000 steps after 200 of spin-up; the full
+The square-root filter is checked at N = 20, inflation 1.04: 0.20 (Bocquet et al.
+2015, listed in DAPPER); Sakov & Oke's N = 24, inflation 1.013 setting is marginal
+over long runs (see the validation report). Here 2000 steps after 200 of spin-up; the full
 study (10^4 steps, several seeds) is validation/enkf_lorenz96.py. Over seeds the
 2000-step average varies by about 0.006, a tenth of the 10 % band.
 """
@@ -20,7 +21,7 @@ SPINUP, STEPS = 200, 2000
 
 @pytest.mark.parametrize(
     "method, N, inflation, published",
-    [("enkf", 40, 1.06, 0.22), ("etkf", 24, 1.013, 0.18)],
+    [("enkf", 40, 1.06, 0.22), ("etkf", 20, 1.04, 0.20)],
 )
 def test_sakov_oke_rmse(method, N, inflation, published):
     times, truth, obs = lorenz96_twin(SPINUP + STEPS, np.random.default_rng(2008))

@@ -7,7 +7,7 @@ anomalies. Score: the spatial RMSE of the analysis mean against the truth,
 averaged over the steps after the burn-in. Published (expected) values are those
 listed in DAPPER for Table 1 of Sakov & Oke (2008) and its other references.
 
-Run ``python validation/enkf_lorenz96.py`` (about 2 minutes on 2 cores); it
+Run ``python validation/enkf_lorenz96.py`` (about 5 minutes on 2 cores); it
 writes validation/reports/enkf_lorenz96.md.
 """
 
@@ -33,6 +33,7 @@ class Case:
     center: bool
     published: float | None
     source: str
+    rotate: bool = False
 
 
 CASES = (
@@ -40,7 +41,10 @@ CASES = (
     Case("enkf", 40, 1.06, False, 0.22, "same, plain (uncentred) Burgers perturbations"),
     Case("enkf", 28, 1.08, True, 0.24, "Sakov & Oke 2008, Table 1 (PertObs)"),
     Case("etkf", 24, 1.013, True, 0.18, "Sakov & Oke 2008, Table 1 (Sqrt, with rotation)"),
+    Case("etkf", 24, 1.013, True, 0.18, "same, with random rotation", rotate=True),
+    Case("etkf", 24, 1.02, True, None, "inflation raised for robustness"),
     Case("etkf", 20, 1.04, True, 0.20, "Bocquet 2015, Fig. 3 (Sqrt, with rotation)"),
+    Case("etkf", 40, 1.02, True, None, "the ensemble size of the EnKF rows"),
 )
 
 
@@ -53,7 +57,8 @@ def run_case(case: Case, seed: int, n_steps: int, burn_in: int) -> dict:
         prior=lambda rng, n: (truth[0] + rng.standard_normal((n, 40)), None),
         tracked=np.arange(40))
     config = FilterConfig(n_members=case.n_members, method=case.method,
-                          inflation=case.inflation, center_perturbations=case.center, seed=seed)
+                          inflation=case.inflation, center_perturbations=case.center,
+                          rotate=case.rotate, seed=seed)
     tic = time.perf_counter()
     res = run_filter(problem, config)
     wall = time.perf_counter() - tic
@@ -66,16 +71,19 @@ def run_case(case: Case, seed: int, n_steps: int, burn_in: int) -> dict:
 
 
 def main(n_steps: int = 10_000, burn_in: int = 1000, seeds: tuple[int, ...] = (0, 1, 2),
-         out: Path = REPORT) -> str:
+         out: Path = REPORT, cases: tuple[Case, ...] = CASES) -> str:
     rows = []
-    for case in CASES:
+    for case in cases:
         runs = [run_case(case, s, n_steps, burn_in) for s in seeds]
         rmse = np.array([r["rmse"] for r in runs])
-        rel = (rmse.mean() / case.published - 1) if case.published else np.nan
+        ok = rmse < 1.0  # a diverged run sits near the climatological RMSE (~3.6)
+        rmse_ok = rmse[ok].mean() if ok.any() else np.nan
+        rel = (rmse_ok / case.published - 1) if case.published else np.nan
+        method = case.method + (" + rotation" if case.rotate else "")
         rows.append(
-            f"| {case.method} | {case.n_members} | {case.inflation} | "
-            f"{'yes' if case.center else 'no'} | {rmse.mean():.3f} | "
-            f"{rmse.min():.3f}-{rmse.max():.3f} | "
+            f"| {method} | {case.n_members} | {case.inflation} | "
+            f"{'yes' if case.center else 'no'} | {rmse_ok:.3f} | "
+            f"{', '.join(f'{r:.3f}' for r in rmse)} | {np.count_nonzero(~ok)} | "
             f"{np.mean([r['spread'] for r in runs]):.3f} | {case.published} | {100 * rel:+.1f} % | "
             f"{np.mean([r['step_ms'] for r in runs]):.2f} | "
             f"{np.mean([r['analysis_ms'] for r in runs]):.2f} | {case.source} |")
@@ -92,14 +100,19 @@ def main(n_steps: int = 10_000, burn_in: int = 1000, seeds: tuple[int, ...] = (0
         "sqrt of the mean ensemble variance. Inflation multiplies the analysis anomalies "
         "(as in DAPPER). Latencies are medians per step on this machine (2 cores).",
         "",
-        "| method | N | inflation | centred perturbations | RMSE (mean) | RMSE (seeds) "
-        "| spread | published | difference | step ms | analysis ms | reference |",
-        "|---|---|---|---|---|---|---|---|---|---|---|---|",
+        "| method | N | inflation | centred perturbations | RMSE (mean of converged) "
+        "| RMSE per seed | diverged | spread | published | difference | step ms | analysis ms "
+        "| reference |",
+        "|---|---|---|---|---|---|---|---|---|---|---|---|---|",
         *rows,
         "",
         "Published values as listed in DAPPER (`dapper/mods/Lorenz96/sakov2008.py`). "
         "The square-root rows are published with a random mean-preserving rotation "
-        "(`rot=True`); ours is the plain symmetric square root.",
+        "(`rot=True`). A run counts as diverged when its RMSE exceeds 1 (the "
+        "climatological RMSE is about 3.6). The symmetric ETKF at N = 24 with the "
+        "published inflation 1.013 is marginal over 10^4 steps: with or without random "
+        "rotation some seeds diverge (DAPPER's own check runs only 10^3 steps); "
+        "inflation 1.02 is robust.",
         "",
     ])
     out.parent.mkdir(parents=True, exist_ok=True)
