@@ -66,7 +66,7 @@ def build_parser() -> argparse.ArgumentParser:
                          help="where emulator tables and truths are cached "
                               "(default $TISSUE_ENKF_CACHE or ~/.cache/tissue-enkf)")
     _common(p_paper)
-    p_paper.set_defaults(func=cmd_paper, out_default=None)
+    p_paper.set_defaults(func=cmd_paper)
     return parser
 
 
