@@ -84,7 +84,8 @@ def main(n_steps: int = 10_000, burn_in: int = 1000, seeds: tuple[int, ...] = (0
             f"| {method} | {case.n_members} | {case.inflation} | "
             f"{'yes' if case.center else 'no'} | {rmse_ok:.3f} | "
             f"{', '.join(f'{r:.3f}' for r in rmse)} | {np.count_nonzero(~ok)} | "
-            f"{np.mean([r['spread'] for r in runs]):.3f} | {case.published} | {100 * rel:+.1f} % | "
+            f"{np.mean([r['spread'] for r in runs]):.3f} | {case.published or '-'} | "
+            f"{f'{100 * rel:+.1f} %' if case.published else '-'} | "
             f"{np.mean([r['step_ms'] for r in runs]):.2f} | "
             f"{np.mean([r['analysis_ms'] for r in runs]):.2f} | {case.source} |")
         print(rows[-1], flush=True)
