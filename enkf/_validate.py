@@ -21,9 +21,7 @@ def as_generator(rng: np.random.Generator | int, name: str = "rng") -> np.random
         return rng
     if isinstance(rng, numbers.Integral) and not isinstance(rng, bool) and rng >= 0:
         return np.random.default_rng(int(rng))
-    raise ValueError(
-        f"{name} must be a numpy.random.Generator or a non-negative int seed, got {rng!r}"
-    )
+    raise ValueError(f"{name} must be a numpy.random.Generator or a non-negative int seed, got {rng!r}")
 
 
 def float_array(x, name: str, ndim: int | tuple[int, ...], finite: bool = True) -> np.ndarray:
@@ -34,11 +32,9 @@ def float_array(x, name: str, ndim: int | tuple[int, ...], finite: bool = True) 
         raise ValueError(f"{name} must be a numeric array, got {type(x).__name__}") from err
     ndims = (ndim,) if isinstance(ndim, int) else ndim
     if a.ndim not in ndims:
-        raise ValueError(f"{name} must have {' or '.join(map(str, ndims))} dimension(s), "
-                         f"got shape {a.shape}")
+        raise ValueError(f"{name} must have {' or '.join(map(str, ndims))} dimension(s), got shape {a.shape}")
     if finite and not np.all(np.isfinite(a)):
-        raise ValueError(f"{name} must be finite, got {np.count_nonzero(~np.isfinite(a))} "
-                         f"non-finite entries")
+        raise ValueError(f"{name} must be finite, got {np.count_nonzero(~np.isfinite(a))} non-finite entries")
     return a
 
 
@@ -69,8 +65,9 @@ def covariance(x, name: str, n: int, allow_singular: bool = True) -> np.ndarray:
         raise ValueError(f"{name} must have shape ({n},) or ({n}, {n}), got {a.shape}")
     scale = max(float(np.abs(a).max()), np.finfo(float).tiny)
     if not np.allclose(a, a.T, rtol=1e-10, atol=1e-12 * scale):
-        raise ValueError(f"{name} must be symmetric, got max |{name} - {name}^T| = "
-                         f"{np.abs(a - a.T).max():.3g}")
+        raise ValueError(
+            f"{name} must be symmetric, got max |{name} - {name}^T| = {np.abs(a - a.T).max():.3g}"
+        )
     a = 0.5 * (a + a.T)
     lam_min = float(np.linalg.eigvalsh(a)[0]) if n else 0.0
     if lam_min < -1e-12 * scale or (not allow_singular and lam_min <= 0):

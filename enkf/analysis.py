@@ -89,8 +89,7 @@ def _check(E, Y, y, R) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     if Y.shape[0] != N:
         raise ValueError(f"Y must have one row per member of E (N = {N}), got shape {Y.shape}")
     if Y.shape[1] != y.shape[0]:
-        raise ValueError(f"y must have shape ({Y.shape[1]},) to match Y {Y.shape}, "
-                         f"got {y.shape}")
+        raise ValueError(f"y must have shape ({Y.shape[1]},) to match Y {Y.shape}, got {y.shape}")
     if np.any(np.isinf(y)):
         raise ValueError("y must be finite or NaN (missing), got an infinite entry")
     R = covariance(R, "R", y.shape[0], allow_singular=False)
@@ -295,8 +294,7 @@ def inflate(E: np.ndarray, factor: float | np.ndarray) -> np.ndarray:
     E = float_array(E, "E", 2, finite=False)
     lam = float_array(factor, "factor", (0, 1))
     if lam.ndim == 1 and lam.shape != (E.shape[1],):
-        raise ValueError(f"factor must be a scalar or have shape ({E.shape[1]},), "
-                         f"got {lam.shape}")
+        raise ValueError(f"factor must be a scalar or have shape ({E.shape[1]},), got {lam.shape}")
     if np.any(lam <= 0):
         raise ValueError(f"factor must be positive, got min {lam.min()!r}")
     x_mean = E.mean(axis=0)

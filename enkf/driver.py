@@ -102,13 +102,17 @@ class FilterConfig:
     rotate: bool = False
 
     def __post_init__(self):
-        if (not isinstance(self.n_members, numbers.Integral) or isinstance(self.n_members, bool)
-                or self.n_members < 2):
+        if (
+            not isinstance(self.n_members, numbers.Integral)
+            or isinstance(self.n_members, bool)
+            or self.n_members < 2
+        ):
             raise ValueError(f"n_members must be an int >= 2, got {self.n_members!r}")
         if self.method not in METHODS:
             raise ValueError(f"method must be one of {METHODS}, got {self.method!r}")
-        if not (isinstance(self.inflation, numbers.Real) and np.isfinite(self.inflation)
-                and self.inflation > 0):
+        if not (
+            isinstance(self.inflation, numbers.Real) and np.isfinite(self.inflation) and self.inflation > 0
+        ):
             raise ValueError(f"inflation must be a finite number > 0, got {self.inflation!r}")
         as_generator(self.seed, "seed")
 
@@ -177,8 +181,10 @@ class FilterProblem:
         if not callable(self.prior):
             raise ValueError(f"prior must be callable, got {self.prior!r}")
         if not (callable(self.observation) or hasattr(self.observation, "shape")):
-            raise ValueError("observation must be a (p, n_state) matrix or a callable, "
-                             f"got {type(self.observation).__name__}")
+            raise ValueError(
+                "observation must be a (p, n_state) matrix or a callable, "
+                f"got {type(self.observation).__name__}"
+            )
         t0 = float(self.t0)
         if not np.isfinite(t0):
             raise ValueError(f"t0 must be finite, got {self.t0!r}")
@@ -187,15 +193,18 @@ class FilterProblem:
         if times.size == 0:
             raise ValueError("obs_times must hold at least one time, got shape (0,)")
         if times[0] <= t0 or np.any(np.diff(times) <= 0):
-            raise ValueError(f"obs_times must be strictly increasing and after t0 = {t0}, "
-                             f"got {times[:5]}{'...' if times.size > 5 else ''}")
+            raise ValueError(
+                f"obs_times must be strictly increasing and after t0 = {t0}, "
+                f"got {times[:5]}{'...' if times.size > 5 else ''}"
+            )
         set_(self, "obs_times", times)
         data = float_array(self.obs_data, "obs_data", (1, 2), finite=False)
         if data.ndim == 1:
             data = data[:, None]
         if data.shape[0] != times.shape[0]:
-            raise ValueError(f"obs_data must have one row per obs_times entry "
-                             f"({times.shape[0]}), got shape {data.shape}")
+            raise ValueError(
+                f"obs_data must have one row per obs_times entry ({times.shape[0]}), got shape {data.shape}"
+            )
         if np.any(np.isinf(data)):
             raise ValueError("obs_data must be finite or NaN (missing), got an infinite entry")
         set_(self, "obs_data", data)
@@ -203,8 +212,10 @@ class FilterProblem:
         set_(self, "obs_cov", covariance(self.obs_cov, "obs_cov", p, allow_singular=False))
         if hasattr(self.observation, "shape") and not callable(self.observation):
             if len(self.observation.shape) != 2 or self.observation.shape[0] != p:
-                raise ValueError(f"observation must have shape ({p}, n_state) to match "
-                                 f"obs_data, got {self.observation.shape}")
+                raise ValueError(
+                    f"observation must have shape ({p}, n_state) to match "
+                    f"obs_data, got {self.observation.shape}"
+                )
         set_(self, "model_noise", variances(self.model_noise, "model_noise"))
         pn = float_array(self.param_noise, "param_noise", (0, 1, 2))
         if pn.ndim < 2 and np.any(pn < 0):
@@ -214,8 +225,7 @@ class FilterProblem:
         if tracked.size == 0:
             tracked = np.zeros(0, dtype=np.intp)
         if tracked.ndim != 1 or not np.issubdtype(tracked.dtype, np.integer) or np.any(tracked < 0):
-            raise ValueError("tracked must be a sequence of non-negative ints, "
-                             f"got {self.tracked!r}")
+            raise ValueError(f"tracked must be a sequence of non-negative ints, got {self.tracked!r}")
         set_(self, "tracked", tracked.astype(np.intp))
 
 
@@ -249,33 +259,39 @@ class HealthCheck:
                 raise ValueError(f"param_bounds must be (n_par, 2) with lo < hi, got {b!r}")
             object.__setattr__(self, "param_bounds", b)
         if self.min_param_std is not None:
-            object.__setattr__(self, "min_param_std",
-                               variances(self.min_param_std, "min_param_std"))
+            object.__setattr__(self, "min_param_std", variances(self.min_param_std, "min_param_std"))
 
     def __call__(self, E_state: np.ndarray, theta: np.ndarray) -> str | None:
         for name, X in (("state", E_state), ("parameter", theta)):
             bad = ~np.isfinite(X)
             if bad.any():
                 cols = np.flatnonzero(bad.any(axis=0))
-                return (f"non-finite {name} values in {bad.any(axis=1).sum()} member(s), "
-                        f"{name} columns {cols[:10].tolist()}{'...' if cols.size > 10 else ''}")
+                return (
+                    f"non-finite {name} values in {bad.any(axis=1).sum()} member(s), "
+                    f"{name} columns {cols[:10].tolist()}{'...' if cols.size > 10 else ''}"
+                )
         if self.param_bounds is not None:
             if self.param_bounds.shape[0] != theta.shape[1]:
-                raise ValueError(f"param_bounds must have {theta.shape[1]} rows, "
-                                 f"got {self.param_bounds.shape[0]}")
+                raise ValueError(
+                    f"param_bounds must have {theta.shape[1]} rows, got {self.param_bounds.shape[0]}"
+                )
             m = theta.mean(axis=0)
             out = (m < self.param_bounds[:, 0]) | (m > self.param_bounds[:, 1])
             if out.any():
                 i = int(np.flatnonzero(out)[0])
-                return (f"parameter {i} mean {m[i]:.6g} outside bounds "
-                        f"[{self.param_bounds[i, 0]:.6g}, {self.param_bounds[i, 1]:.6g}]")
+                return (
+                    f"parameter {i} mean {m[i]:.6g} outside bounds "
+                    f"[{self.param_bounds[i, 0]:.6g}, {self.param_bounds[i, 1]:.6g}]"
+                )
         if self.min_param_std is not None and theta.shape[1]:
             s = theta.std(axis=0, ddof=1)
             low = s < np.broadcast_to(self.min_param_std, s.shape)
             if low.any():
                 i = int(np.flatnonzero(low)[0])
-                return (f"parameter {i} spread collapsed: std {s[i]:.3g} < "
-                        f"{np.broadcast_to(self.min_param_std, s.shape)[i]:.3g}")
+                return (
+                    f"parameter {i} spread collapsed: std {s[i]:.3g} < "
+                    f"{np.broadcast_to(self.min_param_std, s.shape)[i]:.3g}"
+                )
         return None
 
 
@@ -448,11 +464,9 @@ def run_filter(
 
     X, theta = P.prior(rng, N)
     X = float_array(X, "prior state", 2, finite=False)
-    theta = np.zeros((N, 0)) if theta is None else float_array(theta, "prior theta", 2,
-                                                               finite=False)
+    theta = np.zeros((N, 0)) if theta is None else float_array(theta, "prior theta", 2, finite=False)
     if X.shape[0] != N or theta.shape[0] != N:
-        raise ValueError(f"prior must return {N} rows (n_members), got state {X.shape}, "
-                         f"theta {theta.shape}")
+        raise ValueError(f"prior must return {N} rows (n_members), got state {X.shape}, theta {theta.shape}")
     n_state, n_par = X.shape[1], theta.shape[1]
     transforms = as_transforms(P.transforms, n_par)
     U = to_filter_space(transforms, theta)
@@ -462,8 +476,10 @@ def run_filter(
     rw_root = cov_sqrt(rw)
     rw_on = bool(n_par) and np.any(rw != 0)
     if not callable(P.observation) and P.observation.shape[1] != n_state:
-        raise ValueError(f"observation must have shape ({p}, {n_state}) (n_state from the "
-                         f"prior), got {P.observation.shape}")
+        raise ValueError(
+            f"observation must have shape ({p}, {n_state}) (n_state from the "
+            f"prior), got {P.observation.shape}"
+        )
     tracked = P.tracked
     if tracked.size and tracked.max() >= n_state:
         raise ValueError(f"tracked indices must be < n_state = {n_state}, got max {tracked.max()}")
@@ -478,10 +494,18 @@ def run_filter(
     ana_latency = np.zeros(M)
 
     def result(k: int) -> FilterResult:
-        return FilterResult(times[: k + 1].copy(), param_mean[: k + 1].copy(),
-                            param_std[: k + 1].copy(), tr_mean[: k + 1].copy(),
-                            tr_std[: k + 1].copy(), analysed[:k].copy(), latency[:k].copy(),
-                            ana_latency[:k].copy(), X, theta)
+        return FilterResult(
+            times[: k + 1].copy(),
+            param_mean[: k + 1].copy(),
+            param_std[: k + 1].copy(),
+            tr_mean[: k + 1].copy(),
+            tr_std[: k + 1].copy(),
+            analysed[:k].copy(),
+            latency[:k].copy(),
+            ana_latency[:k].copy(),
+            X,
+            theta,
+        )
 
     def record(k: int, step_s: float) -> None:
         param_mean[k], param_std[k] = _stats(theta)
@@ -490,9 +514,20 @@ def run_filter(
         if what:
             raise FilterDivergence(k, float(times[k]), what, result(k))
         if callback is not None:
-            callback(StepReport(k, float(times[k]), bool(analysed[k - 1]) if k else False,
-                                step_s, param_mean[k], param_std[k], tr_mean[k], tr_std[k],
-                                X, theta))
+            callback(
+                StepReport(
+                    k,
+                    float(times[k]),
+                    bool(analysed[k - 1]) if k else False,
+                    step_s,
+                    param_mean[k],
+                    param_std[k],
+                    tr_mean[k],
+                    tr_std[k],
+                    X,
+                    theta,
+                )
+            )
 
     record(0, 0.0)
     for k in range(1, M + 1):
@@ -516,16 +551,14 @@ def run_filter(
             tic_a = time.perf_counter()
             Y = _observe(P.observation, X)
             if Y.shape != (N, p):
-                raise ValueError(f"observation must map the ensemble to shape ({N}, {p}), "
-                                 f"got {Y.shape}")
+                raise ValueError(f"observation must map the ensemble to shape ({N}, {p}), got {Y.shape}")
             Z = np.concatenate([X, U], axis=1)  # augmented state z = [x; u], paper eq. (z)
             if not (np.all(np.isfinite(Z)) and np.all(np.isfinite(Y))):
                 theta = to_physical(transforms, U)
                 latency[k - 1] = time.perf_counter() - tic
                 record(k, latency[k - 1])  # the health check names what went wrong
                 raise FilterDivergence(k, float(times[k]), "non-finite forecast", result(k))
-            Z = analysis(Z, Y, y, P.obs_cov, config.method, rng,
-                         center=config.center_perturbations)
+            Z = analysis(Z, Y, y, P.obs_cov, config.method, rng, center=config.center_perturbations)
             if config.inflation != 1.0:
                 Z = inflate(Z, config.inflation)
             if config.rotate:

@@ -75,9 +75,7 @@ def rk4_step(f: Callable[[np.ndarray], np.ndarray], x: np.ndarray, dt: float) ->
     return x + (dt / 6.0) * (k1 + 2.0 * (k2 + k3) + k4)
 
 
-def lorenz96_step(
-    x: np.ndarray, dt: float, force: float | np.ndarray = 8.0, n_steps: int = 1
-) -> np.ndarray:
+def lorenz96_step(x: np.ndarray, dt: float, force: float | np.ndarray = 8.0, n_steps: int = 1) -> np.ndarray:
     """Advance Lorenz-96 states ``(..., n)`` by ``n_steps`` RK4 steps of size ``dt``.
 
     A numpy implementation: for the 40-variable, 40-member test one step costs

@@ -98,8 +98,10 @@ class LogitTransform:
     def forward(self, theta: np.ndarray) -> np.ndarray:
         theta = np.asarray(theta, dtype=float)
         if np.any(~((theta > self.lo) & (theta < self.hi))):
-            raise ValueError(f"theta must lie in ({self.lo}, {self.hi}) for LogitTransform, "
-                             f"got range [{np.min(theta)!r}, {np.max(theta)!r}]")
+            raise ValueError(
+                f"theta must lie in ({self.lo}, {self.hi}) for LogitTransform, "
+                f"got range [{np.min(theta)!r}, {np.max(theta)!r}]"
+            )
         # log(x - lo) - log(hi - x) keeps precision near either end.
         return np.log(theta - self.lo) - np.log(self.hi - theta)
 
@@ -117,8 +119,7 @@ def as_transforms(transforms: Transform | Sequence[Transform], n_par: int) -> tu
         return (transforms,) * n_par
     transforms = tuple(transforms)
     if len(transforms) != n_par:
-        raise ValueError(f"transforms must be one transform or {n_par} of them, "
-                         f"got {len(transforms)}")
+        raise ValueError(f"transforms must be one transform or {n_par} of them, got {len(transforms)}")
     for i, tr in enumerate(transforms):
         if not isinstance(tr, Transform):
             raise ValueError(f"transforms[{i}] must have forward() and inverse(), got {tr!r}")

@@ -43,8 +43,7 @@ def cov_se(G, M, N):
     Var = (M_ij^2 + M_ii M_jj + G_ii M_jj + G_jj M_ii + 2 G_ij M_ij) / (N - 1).
     """
     g, m = np.diag(G), np.diag(M)
-    return np.sqrt((M**2 + np.outer(m, m) + np.outer(g, m) + np.outer(m, g) + 2 * G * M)
-                   / (N - 1))
+    return np.sqrt((M**2 + np.outer(m, m) + np.outer(g, m) + np.outer(m, g) + 2 * G * M) / (N - 1))
 
 
 @pytest.mark.parametrize("R_form", ["full", "diag"])
@@ -110,8 +109,9 @@ def test_diagonal_R_fast_path_equals_full():
     y = rng.standard_normal(4)
     r = np.array([0.3, 1.0, 2.0, 0.5])
     np.testing.assert_allclose(etkf(E, Y, y, r), etkf(E, Y, y, np.diag(r)), atol=1e-13)
-    np.testing.assert_allclose(enkf_perturbed_obs(E, Y, y, r, 3),
-                               enkf_perturbed_obs(E, Y, y, np.diag(r), 3), atol=1e-13)
+    np.testing.assert_allclose(
+        enkf_perturbed_obs(E, Y, y, r, 3), enkf_perturbed_obs(E, Y, y, np.diag(r), 3), atol=1e-13
+    )
 
 
 @pytest.mark.parametrize("center", [True, False])
@@ -178,10 +178,10 @@ def test_nan_observations(method):
     # Some data: identical to the update with the missing components removed.
     y = np.array([0.3, np.nan, -0.2])
     keep = [0, 2]
-    np.testing.assert_allclose(update(y, r, Y), update(y[keep], r[keep], Y[:, keep]),
-                               atol=1e-14)
-    np.testing.assert_allclose(update(y, np.diag(r), Y),
-                               update(y[keep], np.diag(r[keep]), Y[:, keep]), atol=1e-14)
+    np.testing.assert_allclose(update(y, r, Y), update(y[keep], r[keep], Y[:, keep]), atol=1e-14)
+    np.testing.assert_allclose(
+        update(y, np.diag(r), Y), update(y[keep], np.diag(r[keep]), Y[:, keep]), atol=1e-14
+    )
 
 
 def test_inflate():
@@ -230,8 +230,13 @@ def test_same_seed_same_numbers():
     ],
 )
 def test_bad_input_names_the_field(kwargs, field):
-    args = {"E": np.ones((5, 3)) + np.arange(5)[:, None], "Y": np.arange(10.0).reshape(5, 2),
-            "y": np.zeros(2), "R": np.ones(2), "rng": 0}
+    args = {
+        "E": np.ones((5, 3)) + np.arange(5)[:, None],
+        "Y": np.arange(10.0).reshape(5, 2),
+        "y": np.zeros(2),
+        "R": np.ones(2),
+        "rng": 0,
+    }
     args.update(kwargs)
     with pytest.raises(ValueError, match=rf"^{field}\b"):
         enkf_perturbed_obs(**args)

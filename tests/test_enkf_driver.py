@@ -48,9 +48,17 @@ def linear_problem(M=10, gap=None, theta_true=THETA_TRUE, **kw):
         data[k] = H @ x + np.sqrt(R) * rng.standard_normal(1)
     if gap is not None:
         data[gap] = np.nan
-    args = dict(forecast=linear_forecast, observation=H, obs_times=np.arange(1.0, M + 1),
-                obs_data=data, obs_cov=R, prior=gaussian_prior, model_noise=C,
-                param_noise=E_RW, tracked=[0, 1])
+    args = dict(
+        forecast=linear_forecast,
+        observation=H,
+        obs_times=np.arange(1.0, M + 1),
+        obs_data=data,
+        obs_cov=R,
+        prior=gaussian_prior,
+        model_noise=C,
+        param_noise=E_RW,
+        tracked=[0, 1],
+    )
     args.update(kw)
     return FilterProblem(**args)
 
@@ -97,8 +105,7 @@ def test_result_shapes_and_callback():
 
 def test_all_missing_data_is_a_pure_forecast():
     # No datum, no analysis: with no noise the ensemble mean follows the model.
-    problem = linear_problem(M=5, obs_data=np.full((5, 1), np.nan), model_noise=0.0,
-                             param_noise=0.0)
+    problem = linear_problem(M=5, obs_data=np.full((5, 1), np.nan), model_noise=0.0, param_noise=0.0)
     res = run_filter(problem, FilterConfig(n_members=30, seed=3))
     assert not res.analysed.any()
     X, th = gaussian_prior(np.random.default_rng(3), 30)
@@ -122,12 +129,15 @@ def test_same_seed_same_numbers(method):
 def test_log_transform_keeps_parameters_positive_and_reports_physical_stats():
     # A parameter near zero with a wide prior: the identity transform pushes members
     # negative, the log transform cannot; statistics come from exp(u).
-    problem = linear_problem(theta_true=0.05, prior=uniform_prior([0.0, 1.0], [0.01], [4.0]),
-                             param_noise=0.05)
+    problem = linear_problem(
+        theta_true=0.05, prior=uniform_prior([0.0, 1.0], [0.01], [4.0]), param_noise=0.05
+    )
     ident = run_filter(problem, FilterConfig(n_members=50, seed=2))
     assert np.any(ident.param_ensemble <= 0)
-    res = run_filter(FilterProblem(**{**problem.__dict__, "transforms": LogTransform()}),
-                     FilterConfig(n_members=50, seed=2))
+    res = run_filter(
+        FilterProblem(**{**problem.__dict__, "transforms": LogTransform()}),
+        FilterConfig(n_members=50, seed=2),
+    )
     assert np.all(res.param_ensemble > 0)
     np.testing.assert_allclose(res.param_mean[-1], res.param_ensemble.mean(0))
     np.testing.assert_allclose(res.param_std[-1], res.param_ensemble.std(0, ddof=1))
@@ -145,9 +155,14 @@ def test_lorenz96_forcing_is_identified():
     y[:, 1::2] = np.nan
     problem = FilterProblem(
         forecast=lambda X, th, t0, t1: lorenz96_step(X, t1 - t0, force=th[:, :1]),
-        observation=np.eye(40), obs_times=dt * np.arange(1, K + 1), obs_data=y,
-        obs_cov=np.ones(40), prior=uniform_prior(xs[0], [6.0], [10.0], state_std=1.0),
-        transforms=LogTransform(), param_noise=1e-6)
+        observation=np.eye(40),
+        obs_times=dt * np.arange(1, K + 1),
+        obs_data=y,
+        obs_cov=np.ones(40),
+        prior=uniform_prior(xs[0], [6.0], [10.0], state_std=1.0),
+        transforms=LogTransform(),
+        param_noise=1e-6,
+    )
     res = run_filter(problem, FilterConfig(n_members=40, inflation=1.06, seed=1))
     assert abs(res.param_mean[-1, 0] - 8.0) < 0.25
     assert res.param_std[-1, 0] < 0.2 * res.param_std[0, 0]
@@ -173,14 +188,14 @@ def test_health_nonfinite_forecast_raises_with_step_and_time():
 def test_health_bounds_collapse_and_custom_hook():
     problem = linear_problem()
     with pytest.raises(FilterDivergence) as info:
-        run_filter(problem, FilterConfig(n_members=30),
-                   health=HealthCheck(param_bounds=[[0.0, 2.5]]))
+        run_filter(problem, FilterConfig(n_members=30), health=HealthCheck(param_bounds=[[0.0, 2.5]]))
     assert info.value.step > 0 and "parameter 0 mean" in info.value.what
     assert info.value.result.param_mean[-1, 0] > 2.5
     # Collapse: prior std 1 passes, no random walk and data shrink it below 0.3.
     with pytest.raises(FilterDivergence) as info:
-        run_filter(linear_problem(param_noise=0.0), FilterConfig(n_members=30),
-                   health=HealthCheck(min_param_std=0.3))
+        run_filter(
+            linear_problem(param_noise=0.0), FilterConfig(n_members=30), health=HealthCheck(min_param_std=0.3)
+        )
     assert info.value.step > 0 and "collapsed" in info.value.what
 
     def hook(X, theta):
@@ -246,8 +261,9 @@ def test_bad_sizes_found_at_run(kwargs, field):
 
 def test_param_noise_scale_holds_the_random_walk_still():
     # Scale 0 on every step with no data: the parameters never move.
-    problem = linear_problem(M=4, obs_data=np.full((4, 1), np.nan), param_noise=0.5,
-                             param_noise_scale=lambda t0, t1: 0.0)
+    problem = linear_problem(
+        M=4, obs_data=np.full((4, 1), np.nan), param_noise=0.5, param_noise_scale=lambda t0, t1: 0.0
+    )
     res = run_filter(problem, FilterConfig(n_members=10))
     np.testing.assert_array_equal(res.param_mean, np.repeat(res.param_mean[:1], 5, axis=0))
     bad = linear_problem(param_noise_scale=lambda t0, t1: -1.0)

@@ -27,10 +27,13 @@ def test_sakov_oke_rmse(method, N, inflation, published):
     times, truth, obs = lorenz96_twin(SPINUP + STEPS, np.random.default_rng(2008))
     problem = FilterProblem(
         forecast=lambda X, theta, t0, t1: lorenz96_step(X, t1 - t0),
-        observation=np.eye(40), obs_times=times, obs_data=obs, obs_cov=np.ones(40),
+        observation=np.eye(40),
+        obs_times=times,
+        obs_data=obs,
+        obs_cov=np.ones(40),
         prior=lambda rng, n: (truth[0] + rng.standard_normal((n, 40)), None),
-        tracked=np.arange(40))
-    res = run_filter(problem, FilterConfig(n_members=N, method=method, inflation=inflation,
-                                           seed=1))
+        tracked=np.arange(40),
+    )
+    res = run_filter(problem, FilterConfig(n_members=N, method=method, inflation=inflation, seed=1))
     rmse = np.sqrt(np.mean((res.tracked_mean - truth) ** 2, axis=1))
-    assert abs(rmse[SPINUP + 1:].mean() - published) < 0.1 * published
+    assert abs(rmse[SPINUP + 1 :].mean() - published) < 0.1 * published

@@ -48,8 +48,11 @@ def z_scores(method: str, N: int, reps: int, n_cycles: int = 5):
         E = rng.multivariate_normal(MU0, P0, size=N)
         for k in range(n_cycles):
             E = E @ F.T + rng.multivariate_normal(np.zeros(3), Q, size=N)
-            E = (enkf_perturbed_obs(E, E @ H.T, y[k], R, rng) if method == "enkf"
-                 else etkf(E, E @ H.T, y[k], R))
+            E = (
+                enkf_perturbed_obs(E, E @ H.T, y[k], R, rng)
+                if method == "enkf"
+                else etkf(E, E @ H.T, y[k], R)
+            )
         zm[r] = (E.mean(0) - means[-1]) / se_mean
         zc[r] = (np.cov(E.T) - P) / se_cov
     return zm, zc
@@ -73,8 +76,10 @@ def main(reps: int = 300, N: int = 2000, out: Path = REPORT) -> str:
         zm, zc = z_scores(method, N, reps)
         zc = zc[:, iu[0], iu[1]]
         for name, z in (("mean", zm), ("covariance (upper)", zc)):
-            lines.append(f"| {method} | {name} | {np.array2string(z.std(0), precision=2)} | "
-                         f"{np.array2string(z.mean(0), precision=2)} | {np.abs(z).max():.2f} |")
+            lines.append(
+                f"| {method} | {name} | {np.array2string(z.std(0), precision=2)} | "
+                f"{np.array2string(z.mean(0), precision=2)} | {np.abs(z).max():.2f} |"
+            )
             print(lines[-1], flush=True)
     text = "\n".join(lines + [""])
     out.parent.mkdir(parents=True, exist_ok=True)
