@@ -260,7 +260,10 @@ def transport_batch(
                 px += dmin * ux
                 py += dmin * uy
                 pz += dmin * uz
-                # land exactly on the plane crossed and find the neighbour voxel
+                # land exactly on the plane crossed and find the neighbour voxel.
+                # The per-axis branches below are written out on purpose: folding them
+                # into a tuple-returning helper cost 15-20% of the two-thread speed
+                # (4.5e5 -> 3.9e5 photons/s, measured with benchmarks/bench_mc.py).
                 if axis == 0:
                     sgn = 1 if ux > 0.0 else -1
                     if inside and uniform_medium >= 0:
