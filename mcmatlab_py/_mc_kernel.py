@@ -261,9 +261,9 @@ def transport_batch(
                 py += dmin * uy
                 pz += dmin * uz
                 # land exactly on the plane crossed and find the neighbour voxel.
-                # The per-axis branches below are written out on purpose: folding them
-                # into a tuple-returning helper cost 15-20% of the two-thread speed
-                # (4.5e5 -> 3.9e5 photons/s, measured with benchmarks/bench_mc.py).
+                # The per-axis branches are written out: a tuple-returning helper was tried
+                # and measured no faster (benchmarks/bench_mc.py; timings here vary by
+                # about 15% from run to run), so the tested form stays.
                 if axis == 0:
                     sgn = 1 if ux > 0.0 else -1
                     if inside and uniform_medium >= 0:
