@@ -101,7 +101,7 @@ def _number(key: str, value) -> float:
     return float(value)
 
 
-def _region_map(G, regions: list) -> callable:
+def _region_map(regions: list) -> callable:
     boxes = []
     for i, region in enumerate(regions):
         key = f"G.regions[{i}]"
@@ -165,7 +165,7 @@ def model_from_config(cfg: dict) -> Model:
     if "regions" in G_cfg:
         if not isinstance(G_cfg["regions"], list):
             raise ConfigError(f"G.regions must be an array of tables, got {G_cfg['regions']!r}")
-        model.G.geom_func = _region_map(model.G, G_cfg["regions"])
+        model.G.geom_func = _region_map(G_cfg["regions"])
     MC_cfg = check_keys("MC", cfg.get("MC", {}), _MC_KEYS)
     _set(model.MC, "MC", MC_cfg, skip=("light_source",))
     src_cfg = check_keys("MC.light_source", MC_cfg.get("light_source", {}), _SOURCE_KEYS)

@@ -161,3 +161,16 @@ def test_cli_bad_input_exits_2_and_writes_nothing(tmp_path, capsys, text, messag
 def test_cli_missing_file_exits_2(tmp_path, capsys):
     assert main(["mc", str(tmp_path / "nope.toml"), "--out", str(tmp_path / "o")]) == 2
     assert "does not exist" in capsys.readouterr().err
+
+
+def test_config_regions_fill_boxes_with_other_media():
+    from mcmatlab_py.config import model_from_config
+
+    cfg = {"G": {"nx": 4, "ny": 4, "nz": 4, "Lx": 1, "Ly": 1, "Lz": 1,
+                 "media": [{"mua": 1, "mus": 10}, {"mua": 2, "mus": 20}],
+                 "regions": [{"medium": 1, "z_min": 0.5}]}}
+    M = model_from_config(cfg).G.medium_map()
+    assert (M[:, :, :2] == 0).all() and (M[:, :, 2:] == 1).all()
+    cfg["G"]["regions"] = [{"medium": 1, "depth": 0.5}]
+    with pytest.raises(ValueError, match="unknown key G.regions\\[0\\].depth"):
+        model_from_config(cfg)
