@@ -15,22 +15,13 @@ import resource
 
 import numba
 
-from mcmatlab_py import Medium, Model
+from enkf.paper import paper_model
 
 
-def standard_model(n_photons: int, threads: int) -> Model:
-    model = Model()
-    model.G.nx, model.G.ny, model.G.nz = 100, 100, 50
-    model.G.Lx, model.G.Ly, model.G.Lz = 0.5, 0.5, 0.25
-    model.G.media = [Medium("standard tissue", mua=1.0, mus=100.0, g=0.9, n=1.3)]
-    model.MC.n_photons_requested = n_photons
-    model.MC.seed = 1
-    model.MC.matched_interfaces = True
-    model.MC.boundary_type = 1
-    model.MC.light_source.source_type = "tophat"
-    model.MC.light_source.radius = 0.1
+def standard_model(n_photons: int, threads: int):
+    """The paper's block (enkf.paper.paper_model) with a thread count."""
+    model = paper_model((100, 100, 50), n_photons=n_photons, seed=1, progress=False)
     model.MC.n_threads = threads
-    model.MC.progress = False
     return model
 
 
