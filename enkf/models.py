@@ -252,3 +252,24 @@ def simulate_linear_gaussian(
         x[k + 1] = F @ x[k] + rng.multivariate_normal(np.zeros(n), Qm)
     y = x[1:] @ H.T + rng.multivariate_normal(np.zeros(p), Rm, size=n_steps)
     return x, y
+
+
+def lorenz96_filter_problem(n_steps: int, rng: np.random.Generator | int):
+    """Sakov & Oke's (2008) twin experiment as a :class:`enkf.driver.FilterProblem`.
+
+    All 40 variables observed every 0.05 with unit variance; the prior is the truth's
+    initial state plus N(0, I). Returns ``(problem, truth)``, truth ``(n_steps + 1, 40)``.
+    """
+    from .driver import FilterProblem
+
+    times, truth, obs = lorenz96_twin(n_steps, rng)
+    problem = FilterProblem(
+        forecast=lambda X, theta, t0, t1: lorenz96_step(X, t1 - t0),
+        observation=np.eye(40),
+        obs_times=times,
+        obs_data=obs,
+        obs_cov=np.ones(40),
+        prior=lambda r, n: (truth[0] + r.standard_normal((n, 40)), None),
+        tracked=np.arange(40),
+    )
+    return problem, truth

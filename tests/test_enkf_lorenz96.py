@@ -13,8 +13,8 @@ study (10^4 steps, several seeds) is validation/enkf_lorenz96.py. Over seeds the
 import numpy as np
 import pytest
 
-from enkf import FilterConfig, FilterProblem, run_filter
-from enkf.models import lorenz96_step, lorenz96_twin
+from enkf import FilterConfig, run_filter
+from enkf.models import lorenz96_filter_problem
 
 SPINUP, STEPS = 200, 2000
 
@@ -24,16 +24,7 @@ SPINUP, STEPS = 200, 2000
     [("enkf", 40, 1.06, 0.22), ("etkf", 20, 1.04, 0.20)],
 )
 def test_sakov_oke_rmse(method, N, inflation, published):
-    times, truth, obs = lorenz96_twin(SPINUP + STEPS, np.random.default_rng(2008))
-    problem = FilterProblem(
-        forecast=lambda X, theta, t0, t1: lorenz96_step(X, t1 - t0),
-        observation=np.eye(40),
-        obs_times=times,
-        obs_data=obs,
-        obs_cov=np.ones(40),
-        prior=lambda rng, n: (truth[0] + rng.standard_normal((n, 40)), None),
-        tracked=np.arange(40),
-    )
+    problem, truth = lorenz96_filter_problem(SPINUP + STEPS, np.random.default_rng(2008))
     res = run_filter(problem, FilterConfig(n_members=N, method=method, inflation=inflation, seed=1))
     rmse = np.sqrt(np.mean((res.tracked_mean - truth) ** 2, axis=1))
     assert abs(rmse[SPINUP + 1 :].mean() - published) < 0.1 * published

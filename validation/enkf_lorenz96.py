@@ -19,8 +19,8 @@ from pathlib import Path
 
 import numpy as np
 
-from enkf import FilterConfig, FilterProblem, run_filter
-from enkf.models import lorenz96_step, lorenz96_twin
+from enkf import FilterConfig, run_filter
+from enkf.models import lorenz96_filter_problem
 
 REPORT = Path(__file__).parent / "reports" / "enkf_lorenz96.md"
 
@@ -50,16 +50,7 @@ CASES = (
 
 def run_case(case: Case, seed: int, n_steps: int, burn_in: int) -> dict:
     """One twin experiment; returns mean analysis RMSE, mean spread, latency."""
-    times, truth, obs = lorenz96_twin(burn_in + n_steps, np.random.default_rng(10_000 + seed))
-    problem = FilterProblem(
-        forecast=lambda X, theta, t0, t1: lorenz96_step(X, t1 - t0),
-        observation=np.eye(40),
-        obs_times=times,
-        obs_data=obs,
-        obs_cov=np.ones(40),
-        prior=lambda rng, n: (truth[0] + rng.standard_normal((n, 40)), None),
-        tracked=np.arange(40),
-    )
+    problem, truth = lorenz96_filter_problem(burn_in + n_steps, np.random.default_rng(10_000 + seed))
     config = FilterConfig(
         n_members=case.n_members,
         method=case.method,
