@@ -25,6 +25,7 @@ import math
 import numba
 import numpy as np
 
+from ._atomic import fetch_add
 from ._rng import next_double, seed_stream
 
 W_ONE = 2**36  # fixed-point weight of a launched packet (about 1.5e-11 resolution)
@@ -439,18 +440,24 @@ def run_batches(
     boundary_type, n_out, matched, roulette, weight_threshold, chance,
     src_type, src, seed, batch_size, n_total, batch_start, batch_stop, acc, tally,
 ):  # fmt: skip
-    """Run batches ``[batch_start, batch_stop)`` in parallel.
+    """Run batches ``[batch_start, batch_stop)`` on ``acc.shape[0]`` workers in parallel.
 
-    ``acc`` is (n_slots, nvox) and ``tally`` (n_slots, N_TALLY), one row per numba
-    thread (``n_slots >= numba.get_num_threads()``); batches are handed out one at a
-    time for load balance. The result of a batch depends only on ``(seed, batch)``
-    and integer sums are exact, so the reduced totals do not depend on which
-    thread ran which batch, nor on the number of threads.
+    ``acc`` is (n_workers, nvox) and ``tally`` (n_workers, N_TALLY or more), one row
+    per worker; the workers (one per thread) claim batches one at a time from a
+    shared atomic counter, so a thread on a slower core runs fewer batches instead
+    of holding up the others. The result of a batch depends only on
+    ``(seed, batch)`` and integer sums are exact, so the reduced totals do not
+    depend on which worker ran which batch, nor on the number of threads.
     """
-    for b in numba.prange(batch_start, batch_stop):
-        k = numba.get_thread_id()
-        transport_batch(
-            b, M, mua, mus, g, nref, uniform_medium, nx, ny, nz, dx, dy, dz,
-            boundary_type, n_out, matched, roulette, weight_threshold, chance,
-            src_type, src, seed, batch_size, n_total, acc[k], tally[k],
-        )  # fmt: skip
+    n_workers = acc.shape[0]
+    counter = np.zeros(1, dtype=np.int64)
+    for k in numba.prange(n_workers):
+        while True:
+            b = batch_start + fetch_add(counter, 0, 1)
+            if b >= batch_stop:
+                break
+            transport_batch(
+                b, M, mua, mus, g, nref, uniform_medium, nx, ny, nz, dx, dy, dz,
+                boundary_type, n_out, matched, roulette, weight_threshold, chance,
+                src_type, src, seed, batch_size, n_total, acc[k], tally[k],
+            )  # fmt: skip

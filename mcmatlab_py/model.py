@@ -188,7 +188,9 @@ class MonteCarloSimulation:
       outside the top face), ``roulette_gain_fraction`` (net weight created by Russian
       roulette; zero in expectation): with these, every launched packet is accounted
       for exactly (``energy_balance`` is 1 up to rounding).
-    * ``n_photons``, ``photons_per_second``, ``simulation_time`` (s, kernel only).
+    * ``n_photons``, ``photons_per_second``, ``simulation_time`` (s, kernel only),
+      ``cores_used`` (kernel CPU time over wall time: below ``n_threads`` when other
+      programs took the cores).
     """
 
     n_photons_requested: int | None = None
@@ -218,6 +220,7 @@ class MonteCarloSimulation:
     n_photons: int | None = None
     photons_per_second: float | None = None
     simulation_time: float | None = None
+    cores_used: float | None = None
     seed_used: int | None = None
 
     @property

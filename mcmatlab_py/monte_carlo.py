@@ -32,6 +32,7 @@ class MCResult:
     tally: np.ndarray
     n_photons: int
     kernel_seconds: float
+    kernel_cpu_seconds: float = 0.0  #: process CPU time spent in the kernel (all threads)
 
 
 def optical_arrays(media) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
@@ -57,7 +58,7 @@ def simulate(G, MC, M: np.ndarray, mua, mus, g, nref, *, seed: int, n_photons: i
     Mf = np.ascontiguousarray(M, dtype=np.int32).ravel()
     uniform = int(Mf[0]) if np.all(Mf == Mf[0]) else -1
     n_threads = min(MC.n_threads or numba.get_num_threads(), numba.config.NUMBA_NUM_THREADS)
-    n_slots = n_threads
+    n_slots = n_threads  # one worker per thread, each with its own tally rows
     acc = np.zeros((n_slots, Mf.size), dtype=np.int64)
     # rows padded to 512 bytes so that threads do not share cache lines
     tally = np.zeros((n_slots, 64), dtype=np.int64)
@@ -71,19 +72,21 @@ def simulate(G, MC, M: np.ndarray, mua, mus, g, nref, *, seed: int, n_photons: i
 
     old_threads = numba.get_num_threads()
     numba.set_num_threads(n_threads)
-    old_chunk = numba.set_parallel_chunksize(1)  # one batch at a time: load balance
     try:
         K.run_batches(*args, 0, 0, acc, tally)  # compile (or load from cache) outside timing
         total = n_batches if n_batches is not None else time_limit_s
         bar = Progress(total, label, enabled=MC.progress)
         done = 0
         kernel_s = 0.0
+        kernel_cpu = 0.0
         per_round = 8 * n_slots
         while True:
             stop = done + per_round if n_batches is None else min(done + per_round, n_batches)
             t0 = time.perf_counter()
+            c0 = time.process_time()
             K.run_batches(*args, done, stop, acc, tally)
             dt = time.perf_counter() - t0
+            kernel_cpu += time.process_time() - c0
             kernel_s += dt
             n_round = stop - done
             done = stop
@@ -103,11 +106,10 @@ def simulate(G, MC, M: np.ndarray, mua, mus, g, nref, *, seed: int, n_photons: i
         bar.close()
     finally:
         numba.set_num_threads(old_threads)
-        numba.set_parallel_chunksize(old_chunk)
     n_done = n_photons if n_photons is not None else done * bs
     absorbed = acc.sum(axis=0).reshape(nx, ny, nz) / K.W_ONE
     return MCResult(absorbed=absorbed, tally=tally.sum(axis=0)[: K.N_TALLY], n_photons=int(n_done),
-                    kernel_seconds=kernel_s)
+                    kernel_seconds=kernel_s, kernel_cpu_seconds=kernel_cpu)
 
 
 def run_monte_carlo(model) -> None:
@@ -149,3 +151,5 @@ def store_results(MC, res: MCResult, M: np.ndarray, mua: np.ndarray, dV: float) 
     MC.n_photons = res.n_photons
     MC.simulation_time = res.kernel_seconds
     MC.photons_per_second = res.n_photons / max(res.kernel_seconds, 1e-12)
+    # cores actually used by the kernel: below n_threads when the machine is busy
+    MC.cores_used = res.kernel_cpu_seconds / max(res.kernel_seconds, 1e-12)

@@ -146,6 +146,31 @@ def test_same_seed_same_result_any_thread_count():
     assert not np.array_equal(results[0], other)
 
 
+def test_atomic_counter_hands_out_each_batch_exactly_once():
+    """The work queue of run_batches: every index claimed once, by whichever thread."""
+    import numba
+
+    from mcmatlab_py._atomic import fetch_add
+
+    @numba.njit(parallel=True)
+    def claim(n_items, n_workers):
+        counter = np.zeros(1, dtype=np.int64)
+        owner = np.full(n_items, -1, dtype=np.int64)
+        hits = np.zeros(n_items, dtype=np.int64)
+        for k in numba.prange(n_workers):
+            while True:
+                i = fetch_add(counter, 0, 1)
+                if i >= n_items:
+                    break
+                owner[i] = k
+                hits[i] += 1
+        return owner, hits
+
+    owner, hits = claim(20_000, 4)
+    np.testing.assert_array_equal(hits, 1)
+    assert set(np.unique(owner)) <= {0, 1, 2, 3}
+
+
 def test_noise_falls_as_one_over_sqrt_photons():
     """||NA(seed a) - NA(seed b)|| shrinks by 2 when the photon count grows by 4."""
     def spread(n):
