@@ -157,6 +157,12 @@ class FilterProblem:
         ``scale(t0, t1) -> float >= 0`` multiplying the random-walk standard
         deviation of the step from ``t0`` to ``t1``, e.g. 0 while nothing can
         change the parameters (laser off). Default: 1 for every step.
+    param_dynamics : callable, optional
+        ``dynamics(U, t0, t1) -> U``: a deterministic move of the parameter ensemble
+        ``U`` (N, n_par), in *transformed* units, applied after the state forecast
+        and before the random walk, e.g. a drift ``u += v (t1 - t0)`` whose rate
+        ``v`` is itself a filtered parameter (a local linear trend). Default: none
+        (the pure random walk of the paper).
     """
 
     forecast: Forecast
@@ -173,6 +179,8 @@ class FilterProblem:
     #: optional ``scale(t0, t1) -> float >= 0`` multiplying the random-walk standard
     #: deviation of the step from t0 to t1 (e.g. 0 while nothing can change the parameters)
     param_noise_scale: Callable[[float, float], float] | None = None
+    #: optional ``dynamics(U, t0, t1) -> U`` on the transformed parameters (a drift)
+    param_dynamics: Callable[[np.ndarray, float, float], np.ndarray] | None = None
 
     def __post_init__(self):
         set_ = object.__setattr__  # frozen: store the validated arrays
@@ -538,6 +546,10 @@ def run_filter(
         if noisy.size:
             X = X.copy()  # the forecast may hand back a view of its own buffers
             X[:, noisy] += sd_model[noisy] * rng.standard_normal((N, noisy.size))
+        if P.param_dynamics is not None:
+            U = np.asarray(P.param_dynamics(U, float(times[k - 1]), float(times[k])), dtype=float)
+            if U.shape != (N, n_par):
+                raise ValueError(f"param_dynamics must return shape ({N}, {n_par}), got {U.shape}")
         if rw_on:
             xi = rng.standard_normal((N, n_par))
             if P.param_noise_scale is not None:

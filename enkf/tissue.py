@@ -46,7 +46,7 @@ from .driver import (
     run_filter,
     uniform_prior,
 )
-from .transforms import LogTransform
+from .transforms import IdentityTransform, LogTransform
 
 PARAMETER_NAMES = ("mua", "mus", "VHC", "TC")
 PARAMETER_UNITS = {"mua": "cm^-1", "mus": "cm^-1", "VHC": "J cm^-3 K^-1", "TC": "W cm^-1 K^-1"}
@@ -95,6 +95,14 @@ class TissueFilterSetup:
     #: 0 holds the parameters still when nothing heats the tissue, which is what changes
     #: them (and, with the laser off, they no longer act on the forecast at all)
     random_walk_when_off: float = 1.0
+    #: "random_walk" (the paper): log theta_(n+1) = log theta_n + xi. "trend": a local
+    #: linear trend, log theta_(n+1) = log theta_n + v_n dt + xi, v_(n+1) = v_n + eta,
+    #: with the rates v (1/s, in log units) filtered beside the parameters: a smooth
+    #: drift (heating that changes the tissue steadily) is followed with a much smaller
+    #: walk, so the data of many steps add up instead of being forgotten.
+    parameter_model: str = "random_walk"
+    trend_prior_std: float = 0.2  #: 1/s, prior spread of each rate v (mean 0)
+    trend_noise_std: float | Sequence[float] = 0.02  #: 1/s per step, std of eta
     n_members: int = 50
     method: str = "enkf"
     inflation: float = 1.0
@@ -122,7 +130,10 @@ class TissueFilterSetup:
                              f"{self.prior_range!r}")
         self.sensor_positions = np.atleast_2d(np.asarray(self.sensor_positions, float))
         self.tracked_positions = np.atleast_2d(np.asarray(self.tracked_positions, float))
-        for name in ("model_noise_std",):
+        if self.parameter_model not in ("random_walk", "trend"):
+            raise ValueError(f"parameter_model must be 'random_walk' or 'trend', got "
+                             f"{self.parameter_model!r}")
+        for name in ("model_noise_std", "trend_prior_std"):
             if not (np.isfinite(getattr(self, name)) and getattr(self, name) >= 0):
                 raise ValueError(f"{name} must be >= 0, got {getattr(self, name)!r}")
 
@@ -256,20 +267,44 @@ def identify(setup: TissueFilterSetup, times: np.ndarray, data: np.ndarray, *,
     nominal = np.array([setup.nominal[n] for n in names])
     lo, hi = setup.prior_range
     prior = uniform_prior(np.full(npts, float(setup.T_initial)), lo * nominal, hi * nominal)
-    rw = np.broadcast_to(np.asarray(setup.random_walk_std, float), (len(names),)) ** 2
+    n = len(names)
+    rw = np.broadcast_to(np.asarray(setup.random_walk_std, float), (n,)) ** 2
+
+    def walk_scale(t0, t1):
+        return 1.0 if setup.power(0.5 * (t0 + t1)) > 0 else setup.random_walk_when_off
+
+    transforms = LogTransform()
+    dynamics = None
+    bounds_extra = np.zeros((0, 2))
+    if setup.parameter_model == "trend":
+        level_prior, sv = prior, float(setup.trend_prior_std)
+
+        def prior(rng, N):  # noqa: F811 - the levels' prior plus zero-mean rates
+            X0, th = level_prior(rng, N)
+            return X0, np.hstack([th, sv * rng.standard_normal((N, n))])
+
+        rw = np.concatenate([rw, np.broadcast_to(
+            np.asarray(setup.trend_noise_std, float), (n,)) ** 2])
+        transforms = [LogTransform()] * n + [IdentityTransform()] * n
+
+        def dynamics(U, t0, t1):
+            U = U.copy()
+            U[:, :n] += U[:, n:] * ((t1 - t0) * walk_scale(t0, t1))
+            return U
+
+        bounds_extra = np.tile([-1e3, 1e3], (n, 1))  # rates: no physical bound
     noise_var = np.broadcast_to(np.asarray(setup.sensor_noise_var, float),
                                 (setup.sensor_positions.shape[0],))
     problem = FilterProblem(
         forecast=model, observation=P_obs, obs_times=times, obs_data=data, obs_cov=noise_var,
         prior=prior, model_noise=setup.model_noise_std ** 2, param_noise=rw,
-        transforms=LogTransform(), t0=0.0,
-        param_noise_scale=None if setup.random_walk_when_off == 1.0 else (
-            lambda t0, t1: 1.0 if setup.power(0.5 * (t0 + t1)) > 0
-            else setup.random_walk_when_off))
+        transforms=transforms, t0=0.0, param_dynamics=dynamics,
+        param_noise_scale=None if setup.random_walk_when_off == 1.0 else walk_scale)
     config = FilterConfig(n_members=setup.n_members, method=setup.method,
                           inflation=setup.inflation, seed=setup.seed)
     if param_bounds is None:
         param_bounds = np.column_stack([nominal / 20, nominal * 20])
+    param_bounds = np.vstack([param_bounds, bounds_extra])
     health = HealthCheck(param_bounds=param_bounds)
     M = len(times)
     tr_mean = np.full((M + 1, P_track.shape[0]), np.nan)
@@ -295,7 +330,8 @@ def identify(setup: TissueFilterSetup, times: np.ndarray, data: np.ndarray, *,
     wall = time.perf_counter() - t0
     k = len(res.times)
     return TissueEstimates(
-        times=res.times, names=names, param_mean=res.param_mean, param_std=res.param_std,
+        times=res.times, names=names, param_mean=res.param_mean[:, :n],
+        param_std=res.param_std[:, :n],
         tracked_positions=setup.tracked_positions, tracked_mean=tr_mean[:k],
         tracked_std=tr_std[:k], analysed=res.analysed, step_latency_s=res.step_latency_s,
         filter_wall_s=wall, result=res, diverged=diverged)

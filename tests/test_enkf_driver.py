@@ -269,3 +269,17 @@ def test_param_noise_scale_holds_the_random_walk_still():
     bad = linear_problem(param_noise_scale=lambda t0, t1: -1.0)
     with pytest.raises(ValueError, match="^param_noise_scale"):
         run_filter(bad, FilterConfig(n_members=10))
+
+
+def test_param_dynamics_moves_the_parameters_before_the_walk():
+    # No data, no walk: the parameters follow the deterministic drift exactly.
+    problem = linear_problem(
+        M=4, obs_data=np.full((4, 1), np.nan), param_noise=0.0,
+        param_dynamics=lambda U, t0, t1: U + 2.0 * (t1 - t0),
+    )
+    res = run_filter(problem, FilterConfig(n_members=10))
+    drift = res.param_mean - res.param_mean[:1]
+    np.testing.assert_allclose(drift[:, 0], 2.0 * (res.times - res.times[0]), atol=1e-12)
+    bad = linear_problem(param_dynamics=lambda U, t0, t1: U[:, :0])
+    with pytest.raises(ValueError, match="^param_dynamics"):
+        run_filter(bad, FilterConfig(n_members=10))

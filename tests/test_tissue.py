@@ -70,6 +70,19 @@ def test_random_walk_held_when_the_laser_is_off():
     assert np.ptp(on[:, 0]) > 0 and np.ptp(off, axis=0).max() == 0
 
 
+def test_trend_model_follows_a_steady_drift_with_no_data():
+    """parameter_model="trend" and no data: log mua drifts at each member's rate while
+    the laser is on, and holds still when it is off (random_walk_when_off = 0)."""
+    s = setup(parameter_model="trend", random_walk_std=0.0, trend_noise_std=0.0,
+              trend_prior_std=0.5, random_walk_when_off=0.0, n_members=200)
+    times = 0.1 * np.arange(1, 21)
+    est = identify(s, times, np.full((20, 1), np.nan))
+    assert est.param_mean.shape == (21, 2)  # the rates are filtered but not reported
+    on, off = est.param_std[1:11, 0], est.param_mean[11:]
+    assert np.all(np.diff(on) > 0)  # members drift apart at their own rates
+    assert np.ptp(off, axis=0).max() == 0
+
+
 def test_divergence_is_reported_with_the_estimates_so_far():
     s = setup()
     times, data = twin_data(s, 1.0, 100.0)
@@ -83,6 +96,7 @@ def test_divergence_is_reported_with_the_estimates_so_far():
     (dict(nominal={**NOMINAL, "mua": -1.0}), r"nominal\['mua'\] must be > 0"),
     (dict(prior_range=(2.0, 0.5)), "prior_range"),
     (dict(model_noise_std=float("nan")), "model_noise_std"),
+    (dict(parameter_model="spline"), "parameter_model must be"),
 ])
 def test_bad_setup(kw, pattern):
     with pytest.raises(ValueError, match=pattern):
