@@ -92,6 +92,15 @@ class FilterConfig:
         After each analysis, rotate the anomalies by a random mean-preserving
         orthogonal matrix (:func:`enkf.analysis.random_rotation`; DAPPER's
         ``rot=True``). Recommended for long ETKF runs with little inflation.
+    mda : int
+        Analysis iterations per observed step (1: the usual filter). With ``mda > 1``
+        each observed step is an ensemble smoother with multiple data assimilation
+        over that one step (Emerick & Reynolds 2013): the members' start (state and
+        parameters) is updated ``mda`` times with the observation-error covariance
+        times ``mda``, and the step is re-run from the updated start each time, so
+        ``mda + 1`` forecasts per step. Equal to one analysis for a linear model;
+        for a strongly nonlinear one (a parameter that acts only through a
+        saturating map) it replaces one large linear jump by several small ones.
     """
 
     n_members: int = 50
@@ -100,6 +109,7 @@ class FilterConfig:
     center_perturbations: bool = True
     seed: int = 0
     rotate: bool = False
+    mda: int = 1
 
     def __post_init__(self):
         if (
@@ -114,6 +124,8 @@ class FilterConfig:
             isinstance(self.inflation, numbers.Real) and np.isfinite(self.inflation) and self.inflation > 0
         ):
             raise ValueError(f"inflation must be a finite number > 0, got {self.inflation!r}")
+        if not isinstance(self.mda, numbers.Integral) or isinstance(self.mda, bool) or self.mda < 1:
+            raise ValueError(f"mda must be an int >= 1, got {self.mda!r}")
         as_generator(self.seed, "seed")
 
 
@@ -537,40 +549,78 @@ def run_filter(
                 )
             )
 
+    def advance(X0, U0, theta0, t_a, t_b, v, dU):
+        """Members from t_a to t_b: forecast, model noise, parameter dynamics and walk."""
+        X1 = np.asarray(P.forecast(X0, theta0, t_a, t_b), dtype=float)
+        if X1.shape != (N, n_state):
+            raise ValueError(f"forecast must return shape ({N}, {n_state}), got {X1.shape}")
+        if v is not None:
+            X1 = X1.copy()  # the forecast may hand back a view of its own buffers
+            X1[:, noisy] += v
+        U1 = U0
+        if P.param_dynamics is not None:
+            U1 = np.asarray(P.param_dynamics(U0, t_a, t_b), dtype=float)
+            if U1.shape != (N, n_par):
+                raise ValueError(f"param_dynamics must return shape ({N}, {n_par}), "
+                                 f"got {U1.shape}")
+        if dU is not None:
+            U1 = U1 + dU
+        return X1, U1
+
+    def checked_observe(Xf, Uf, k, tic):
+        Y = _observe(P.observation, Xf)
+        if Y.shape != (N, p):
+            raise ValueError(f"observation must map the ensemble to shape ({N}, {p}), got {Y.shape}")
+        if not (np.all(np.isfinite(Xf)) and np.all(np.isfinite(Uf)) and np.all(np.isfinite(Y))):
+            nonlocal theta
+            theta = to_physical(transforms, Uf)
+            latency[k - 1] = time.perf_counter() - tic
+            record(k, latency[k - 1])  # the health check names what went wrong
+            raise FilterDivergence(k, float(times[k]), "non-finite forecast", result(k))
+        return Y
+
     record(0, 0.0)
     for k in range(1, M + 1):
         tic = time.perf_counter()
-        X = np.asarray(P.forecast(X, theta, float(times[k - 1]), float(times[k])), dtype=float)
-        if X.shape != (N, n_state):
-            raise ValueError(f"forecast must return shape ({N}, {n_state}), got {X.shape}")
-        if noisy.size:
-            X = X.copy()  # the forecast may hand back a view of its own buffers
-            X[:, noisy] += sd_model[noisy] * rng.standard_normal((N, noisy.size))
-        if P.param_dynamics is not None:
-            U = np.asarray(P.param_dynamics(U, float(times[k - 1]), float(times[k])), dtype=float)
-            if U.shape != (N, n_par):
-                raise ValueError(f"param_dynamics must return shape ({N}, {n_par}), got {U.shape}")
+        t_a, t_b = float(times[k - 1]), float(times[k])
+        # this step's noises, drawn once (they belong to the step, not to an iteration)
+        v = sd_model[noisy] * rng.standard_normal((N, noisy.size)) if noisy.size else None
+        dU = None
         if rw_on:
             xi = rng.standard_normal((N, n_par))
             if P.param_noise_scale is not None:
-                scale = float(P.param_noise_scale(float(times[k - 1]), float(times[k])))
+                scale = float(P.param_noise_scale(t_a, t_b))
                 if not (np.isfinite(scale) and scale >= 0):
                     raise ValueError(f"param_noise_scale must return a number >= 0, got {scale!r}")
                 xi *= scale
-            U = U + (xi * rw_root if rw_root.ndim == 1 else xi @ rw_root.T)
+            dU = xi * rw_root if rw_root.ndim == 1 else xi @ rw_root.T
+
         y = P.obs_data[k - 1]
-        if not np.all(np.isnan(y)):
+        observed = not np.all(np.isnan(y))
+        if observed and config.mda > 1:
+            # one-step ensemble smoother with multiple data assimilation (Emerick & Reynolds
+            # 2013): update the members' start (state, parameters and this step's noises)
+            # config.mda times with the error variance times mda, re-running the step from
+            # the updated start each time; for a linear model the result has the moments of
+            # one analysis, for a nonlinear one each update is a small, nearly linear move
             tic_a = time.perf_counter()
-            Y = _observe(P.observation, X)
-            if Y.shape != (N, p):
-                raise ValueError(f"observation must map the ensemble to shape ({N}, {p}), got {Y.shape}")
-            Z = np.concatenate([X, U], axis=1)  # augmented state z = [x; u], paper eq. (z)
-            if not (np.all(np.isfinite(Z)) and np.all(np.isfinite(Y))):
-                theta = to_physical(transforms, U)
-                latency[k - 1] = time.perf_counter() - tic
-                record(k, latency[k - 1])  # the health check names what went wrong
-                raise FilterDivergence(k, float(times[k]), "non-finite forecast", result(k))
-            Z = analysis(Z, Y, y, P.obs_cov, config.method, rng, center=config.center_perturbations)
+            # the step's noises are unknowns of the step too: they are updated with the start
+            V = v if v is not None else np.zeros((N, 0))
+            D = dU if dU is not None else np.zeros((N, 0))
+            cuts = np.cumsum([n_state, n_par, V.shape[1]])
+            X0, U0 = X, U
+            for _ in range(config.mda):
+                Xf, Uf = advance(X0, U0, to_physical(transforms, U0), t_a, t_b,
+                                 V if v is not None else None, D if dU is not None else None)
+                Y = checked_observe(Xf, Uf, k, tic)
+                Z = analysis(np.concatenate([X0, U0, V, D], axis=1), Y, y, config.mda * P.obs_cov,
+                             config.method, rng, center=config.center_perturbations)
+                X0, U0, V, D = np.split(Z, cuts, axis=1)
+            v = V if v is not None else None
+            dU = D if dU is not None else None
+            with np.errstate(over="ignore"):
+                X, U = advance(X0, U0, to_physical(transforms, U0), t_a, t_b, v, dU)
+            Z = np.concatenate([X, U], axis=1)
             if config.inflation != 1.0:
                 Z = inflate(Z, config.inflation)
             if config.rotate:
@@ -578,6 +628,21 @@ def run_filter(
             X, U = Z[:, :n_state], Z[:, n_state:]
             analysed[k - 1] = True
             ana_latency[k - 1] = time.perf_counter() - tic_a
+        else:
+            X, U = advance(X, U, theta, t_a, t_b, v, dU)
+            if observed:
+                tic_a = time.perf_counter()
+                Y = checked_observe(X, U, k, tic)
+                Z = np.concatenate([X, U], axis=1)  # augmented state z = [x; u], paper eq. (z)
+                Z = analysis(Z, Y, y, P.obs_cov, config.method, rng,
+                             center=config.center_perturbations)
+                if config.inflation != 1.0:
+                    Z = inflate(Z, config.inflation)
+                if config.rotate:
+                    Z = random_rotation(Z, rng)
+                X, U = Z[:, :n_state], Z[:, n_state:]
+                analysed[k - 1] = True
+                ana_latency[k - 1] = time.perf_counter() - tic_a
         with np.errstate(over="ignore"):
             theta = to_physical(transforms, U)
         latency[k - 1] = time.perf_counter() - tic

@@ -106,6 +106,7 @@ class TissueFilterSetup:
     n_members: int = 50
     method: str = "enkf"
     inflation: float = 1.0
+    mda: int = 1  #: analysis iterations per step (see enkf.driver.FilterConfig.mda)
     seed: int = 0
     theta: float = 1.0  #: time scheme of the heat steps (1: backward Euler)
     #: "kronecker" (default): the tensor-product operator of :class:`fem.HeatStepper`, equal
@@ -301,7 +302,7 @@ def identify(setup: TissueFilterSetup, times: np.ndarray, data: np.ndarray, *,
         transforms=transforms, t0=0.0, param_dynamics=dynamics,
         param_noise_scale=None if setup.random_walk_when_off == 1.0 else walk_scale)
     config = FilterConfig(n_members=setup.n_members, method=setup.method,
-                          inflation=setup.inflation, seed=setup.seed)
+                          inflation=setup.inflation, seed=setup.seed, mda=setup.mda)
     if param_bounds is None:
         param_bounds = np.column_stack([nominal / 20, nominal * 20])
     param_bounds = np.vstack([param_bounds, bounds_extra])

@@ -283,3 +283,18 @@ def test_param_dynamics_moves_the_parameters_before_the_walk():
     bad = linear_problem(param_dynamics=lambda U, t0, t1: U[:, :0])
     with pytest.raises(ValueError, match="^param_dynamics"):
         run_filter(bad, FilterConfig(n_members=10))
+
+
+def test_mda_on_a_linear_model_has_the_moments_of_one_analysis():
+    """ES-MDA over one step (FilterConfig.mda) updates start, parameters and the step's
+    noises mda times with mda x R; for a linear model with the deterministic ETKF the
+    ensemble mean and spread then equal those of the one-analysis filter."""
+    problem = linear_problem(M=6)
+    one = run_filter(problem, FilterConfig(n_members=30, method="etkf", seed=3))
+    three = run_filter(problem, FilterConfig(n_members=30, method="etkf", seed=3, mda=3))
+    np.testing.assert_allclose(three.param_mean, one.param_mean, rtol=1e-9, atol=1e-9)
+    np.testing.assert_allclose(three.param_std, one.param_std, rtol=1e-9, atol=1e-9)
+    np.testing.assert_allclose(three.tracked_mean, one.tracked_mean, rtol=1e-9, atol=1e-9)
+    np.testing.assert_allclose(three.tracked_std, one.tracked_std, rtol=1e-9, atol=1e-9)
+    with pytest.raises(ValueError, match="^mda"):
+        FilterConfig(mda=0)
