@@ -1,0 +1,78 @@
+"""How far the filter's coarse heat model is from the fine truth at the true parameters.
+
+The paper's constant case: the fine-grid truth (100 x 100 x 50 voxels, 10^7 photons,
+backward Euler at 0.1 s) against the same absorbed power integrated exactly onto
+coarser meshes and stepped with the filter's operator. The error at the three tracked
+points is the model error the filter has to live with; the 20 x 20 x 10 row is the
+filter's model. Writes validation/reports/coarse_model_error.md.
+
+    python validation/coarse_model_error.py [--photons 10000000]
+"""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+import numpy as np
+
+import fem
+from enkf.paper import TRACKED_DEPTHS, TruthConfig, generate_truth, paper_model
+
+SHAPES = [(20, 20, 10), (40, 40, 10), (20, 20, 20), (40, 40, 20), (50, 50, 25)]
+TIMES = (1.0, 3.0, 5.0, 6.0, 7.0, 10.0)
+
+
+def coarse_run(NA: np.ndarray, fine: fem.BoxGrid, shape, times: np.ndarray, power: float = 0.5,
+               t_off: float = 5.0) -> np.ndarray:
+    """Temperatures (len(times), 3) at the tracked points on a coarse mesh of ``shape``."""
+    grid = fem.BoxGrid(*shape, fine.Lx, fine.Ly, fine.Lz)
+    mesh = grid.mesh()
+    load = power * (fem.voxel_load_matrix(mesh, fine) @ NA.ravel())
+    stepper = fem.HeatStepper(mesh, 3.76, 0.0037, float(times[1] - times[0]), operator="kronecker")
+    probes = fem.probe_matrix(mesh, np.array([[0.0, 0.0, z] for z in TRACKED_DEPTHS]).T)
+    T = np.zeros(mesh.p.shape[1])
+    out = [probes @ T]
+    for t0, t1 in zip(times[:-1], times[1:], strict=True):
+        T = stepper.step(T, load if 0.5 * (t0 + t1) < t_off else None)
+        out.append(probes @ T)
+    return np.array(out)
+
+
+def main(argv=None):
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--photons", type=int, default=10**7)
+    ap.add_argument("--out", default=str(Path(__file__).parent / "reports" / "coarse_model_error.md"))
+    args = ap.parse_args(argv)
+    truth = generate_truth(TruthConfig(scenario="constant"))
+    model = paper_model((100, 100, 50), args.photons, 1)
+    model.run_monte_carlo()  # seed 1, as the truth's map
+    fine = fem.BoxGrid(100, 100, 50, 0.5, 0.5, 0.25)
+    idx = [int(np.argmin(np.abs(truth.times - t))) for t in TIMES]
+    head = " | ".join(f"t = {t:g} s" for t in TIMES)
+    lines = ["# Model error of the coarse heat model at the true parameters", "",
+             f"Command: `python validation/coarse_model_error.py --photons {args.photons}`", "",
+             "Constant case (mua 1, mus 100 cm^-1). Relative error (%) of the coarse model "
+             "against the fine-grid truth at z = 0, 0.1, 0.2 cm below the beam centre; the "
+             "absorbed power of the truth is integrated exactly onto each coarse mesh, so "
+             "the emulator plays no part. 20 x 20 x 10 is the filter's model.", "",
+             f"| coarse voxels | {head} |", "|---|" + "---|" * len(TIMES)]
+    for shape in SHAPES:
+        T = coarse_run(model.MC.NA, fine, shape, truth.times)
+        rel = 100 * (T[idx] - truth.temps[idx]) / truth.temps[idx]
+        cells = " | ".join(", ".join(f"{v:+.2f}" for v in row) for row in rel)
+        lines.append(f"| {' x '.join(map(str, shape))} | {cells} |")
+        print(shape, cells, flush=True)
+    lines += ["", "Reading: the surface of the filter's model runs about 1% cold while the "
+              "laser is on. Refining laterally (40 x 40) helps as much as refining in depth; "
+              "the error falls roughly as h^2. One sensor reading carries 0.1 deg C of noise "
+              "on 10-60 deg C (0.2-1%), so over 50 readings this bias is well resolved by the "
+              "data, and the filter moves the weakly identified mus to absorb it "
+              "(validation/reports/paper_runs.md)."]
+    Path(args.out).parent.mkdir(parents=True, exist_ok=True)
+    Path(args.out).write_text("\n".join(lines) + "\n")
+    print(f"report written to {args.out}")
+
+
+if __name__ == "__main__":
+    main()
