@@ -64,7 +64,10 @@ from ._threads import blas_threads
 from .bc import HeatBoundary
 from .mesh import BoxGrid
 
-__all__ = ["KroneckerSolver", "NotApplicable", "one_d_operators"]
+__all__ = ["KroneckerSolver", "MASS_KINDS", "NotApplicable", "one_d_mass", "one_d_operators"]
+
+#: 1-D mass matrices of the tensor-product operator (see :func:`one_d_mass`)
+MASS_KINDS = ("lumped", "averaged")
 
 
 class NotApplicable(Exception):
@@ -78,6 +81,27 @@ def one_d_operators(n: int, h: float) -> tuple[np.ndarray, np.ndarray]:
     K = (np.diag(np.full(n + 1, 2.0)) - np.eye(n + 1, k=1) - np.eye(n + 1, k=-1)) / h
     K[0, 0] = K[-1, -1] = 1.0 / h
     return m, K
+
+
+def one_d_mass(n: int, h: float, kind: str = "lumped") -> np.ndarray:
+    """1-D P1 mass matrix ((n+1, n+1), unit coefficient) of the tensor-product operator.
+
+    ``"lumped"``: the row-sum diagonal ``h/2, h, ..., h/2``. ``"averaged"``: the mean of
+    the lumped and the consistent (``h/6 [2 1; 1 2]`` per interval) matrices. Lumping
+    makes the discrete eigenvalues of the Laplacian too low by ``(kh)^2/12`` relative,
+    the consistent mass too high by the same amount; their average cancels that
+    leading term, so the modes (and the surface temperature of a heated block) are
+    fourth-order accurate in h (Marfurt, Geophysics 49, 1984, for the same cancellation
+    in wave propagation). On the filter's 20 x 20 x 10 mesh this takes the surface
+    error at the true parameters from -1.1% to +0.1% (validation/coarse_model_error.py).
+    """
+    if kind not in MASS_KINDS:
+        raise ValueError(f"mass must be one of {MASS_KINDS}, got {kind!r}")
+    m, _ = one_d_operators(n, h)
+    if kind == "lumped":
+        return np.diag(m)
+    consistent = (np.diag(2.0 * m) + (np.eye(n + 1, k=1) + np.eye(n + 1, k=-1)) * h / 2) / 3
+    return 0.5 * (np.diag(m) + consistent)
 
 
 def _contract(X: np.ndarray, Phi: np.ndarray, axis: int) -> np.ndarray:
@@ -139,6 +163,9 @@ class KroneckerSolver:
         Apply the box-edge correction (default).  Without it the solver
         inverts the Kronecker operator only, a preconditioner for the P1 system
         (``M_true``, ``K_true``, ``R_true`` may then be None).
+    mass : {"lumped", "averaged"}
+        The 1-D mass matrices (:func:`one_d_mass`); ``"averaged"`` needs
+        ``exact=False`` (it is its own operator, not a route to the lumped P1 one).
 
     Raises
     ------
@@ -148,12 +175,16 @@ class KroneckerSolver:
     """
 
     def __init__(self, grid: BoxGrid, boundary: HeatBoundary, vhc: float, tc: float,
-                 dt: float, theta: float, M_true, K_true, R_true, free, exact: bool = True):
+                 dt: float, theta: float, M_true, K_true, R_true, free, exact: bool = True,
+                 mass: str = "lumped"):
         self.grid, self.theta, self.dt, self.vhc, self.tc = grid, theta, dt, vhc, tc
+        if exact and mass != "lumped":
+            raise NotApplicable(f"the exact P1 correction needs the lumped mass, not {mass!r}")
         sizes = grid.shape
         self.m1, self.K1, self.H1, self.free1 = [], [], [], []
         for a, (n, h) in enumerate(zip(sizes, grid.spacing, strict=True)):
-            m, K = one_d_operators(n, h)
+            _, K = one_d_operators(n, h)
+            m = one_d_mass(n, h, mass)
             H = np.zeros(n + 1)
             keep = np.ones(n + 1, dtype=bool)
             for side, node in (("-", 0), ("+", n)):
@@ -166,7 +197,7 @@ class KroneckerSolver:
             if idx.size == 0:
                 raise NotApplicable(f"no free nodes along axis {'xyz'[a]}")
             self.free1.append(idx)
-            self.m1.append(m[idx])
+            self.m1.append(m[np.ix_(idx, idx)])  # (n_free, n_free) 1-D mass
             self.K1.append(K[np.ix_(idx, idx)])
             self.H1.append(H[idx])
         self.shape_f = tuple(len(i) for i in self.free1)
@@ -178,7 +209,7 @@ class KroneckerSolver:
         self._shared = {}
         for a in range(3):
             if not np.any(self.H1[a]):
-                mu, Phi = sla.eigh(self.K1[a], np.diag(self.m1[a]))
+                mu, Phi = sla.eigh(self.K1[a], self.m1[a])
                 self._shared[a] = (mu, Phi)
         self._eig_cache: dict = {}
         self._W_cache: dict = {}
@@ -197,7 +228,7 @@ class KroneckerSolver:
         key = (a, beta)
         if key not in self._eig_cache:
             S = beta * self.K1[a] + self.theta * np.diag(self.H1[a])
-            self._eig_cache[key] = sla.eigh(S, np.diag(self.m1[a]))
+            self._eig_cache[key] = sla.eigh(S, self.m1[a])
         return self._eig_cache[key]
 
     def _member_data(self, alpha: np.ndarray, beta: np.ndarray):

@@ -42,7 +42,7 @@ from .assembly import (
     stiffness_matrix,
 )
 from .bc import FACES, HeatBoundary, face_nodes
-from .fastdiag import KroneckerSolver, NotApplicable, one_d_operators
+from .fastdiag import MASS_KINDS, KroneckerSolver, NotApplicable, one_d_mass, one_d_operators
 from .linsolve import BatchedPCG, DirectSolver
 from .mesh import element_volumes, structured_grid
 
@@ -78,6 +78,12 @@ class HeatStepper:
         accurate away from them and, unlike P1, needs no per-member edge correction
         when every member has its own VHC and TC, so ensembles whose scales change at
         every step (joint estimation of VHC, TC) cost the same as fixed ones.
+    mass : {"lumped", "averaged"}
+        With ``operator="kronecker"``: the 1-D mass matrices of the tensor product
+        (:func:`fem.fastdiag.one_d_mass`). ``"averaged"`` (the mean of the lumped and
+        the consistent mass) cancels the leading dispersion error of both: fourth-order
+        modes on the same mesh, at the cost of a 27-point mass stencil in the
+        right-hand side. Ignored (must stay ``"lumped"``) with ``operator="p1"``.
     method : {"auto", "fast", "direct", "pcg"}
     direct_max_nodes : int
         Largest mesh for the sparse LU path under ``"auto"``.
@@ -115,7 +121,7 @@ class HeatStepper:
     def __init__(self, mesh, vhc, tc, dt: float, theta: float = 1.0,
                  boundary: HeatBoundary | None = None, lumped: bool = True,
                  method: str = "auto", direct_max_nodes: int = 150_000, rtol: float = 1e-9,
-                 operator: str = "p1"):
+                 operator: str = "p1", mass: str = "lumped"):
         self.mesh = mesh
         n = mesh.p.shape[1]
         self.vhc = element_coefficient(mesh, vhc, "vhc")
@@ -144,6 +150,11 @@ class HeatStepper:
         if operator not in ("p1", "kronecker"):
             raise ValueError(f"operator must be 'p1' or 'kronecker', got {operator!r}")
         self.operator = operator
+        if mass not in MASS_KINDS:
+            raise ValueError(f"mass must be one of {MASS_KINDS}, got {mass!r}")
+        if mass != "lumped" and operator != "kronecker":
+            raise ValueError(f"mass={mass!r} needs operator='kronecker'")
+        self.mass = mass
         if operator == "kronecker":
             self._kronecker_operators()
 
@@ -172,31 +183,40 @@ class HeatStepper:
         if why is not None:
             raise ValueError(f"operator='kronecker' is not applicable: {why}")
         grid = self._grid
-        m1, K1 = zip(*(one_d_operators(n, h) for n, h in zip(grid.shape, grid.spacing,
-                                                           strict=True)), strict=True)
+        K1 = [one_d_operators(n, h)[1] for n, h in zip(grid.shape, grid.spacing, strict=True)]
+        M1 = [one_d_mass(n, h, self.mass) for n, h in zip(grid.shape, grid.spacing, strict=True)]
         c, k = float(self.vhc[0]), float(self.tc[0])
-        mass = np.einsum("i,j,k->ijk", *m1).ravel()
-        Ms = [sp.diags_array(m) for m in m1]
+        Ms = [sp.csr_array(m) for m in M1]
         K = (sp.kron(sp.kron(sp.csr_array(K1[0]), Ms[1]), Ms[2])
              + sp.kron(sp.kron(Ms[0], sp.csr_array(K1[1])), Ms[2])
              + sp.kron(sp.kron(Ms[0], Ms[1]), sp.csr_array(K1[2])))
-        R = np.zeros(mass.size)
-        g = np.zeros(mass.size)
+        R = sp.csr_array((K.shape[0], K.shape[0]))
+        g = np.zeros(K.shape[0])
         for face in FACES:
             bc = self.boundary[face]
             if bc.kind != "convective":
                 continue
             a = "xyz".index(face[0])
-            w = [m.copy() for m in m1]
-            w[a] = np.zeros(grid.shape[a] + 1)
-            w[a][0 if face[1] == "-" else -1] = 1.0
-            area = np.einsum("i,j,k->ijk", *w).ravel()  # lumped face area per node, cm^2
-            R += bc.h * area
-            g += bc.h * bc.temperature * area
-        self._m_lumped = c * mass
-        self.M = sp.diags_array(self._m_lumped, format="csr")
+            w = list(Ms)
+            e = np.zeros(grid.shape[a] + 1)
+            e[0 if face[1] == "-" else -1] = 1.0
+            w[a] = sp.csr_array(np.diag(e))
+            area = sp.kron(sp.kron(w[0], w[1]), w[2]).tocsr()  # face mass, cm^2
+            R = R + bc.h * area
+            g += bc.h * bc.temperature * np.asarray(area.sum(axis=1)).ravel()
+        if self.mass == "lumped":
+            mass = np.einsum("i,j,k->ijk", *(np.diag(m) for m in M1)).ravel()
+            self._m_lumped = c * mass
+            self.M = sp.diags_array(self._m_lumped, format="csr")
+            self.R = sp.diags_array(R.diagonal(), format="csr")
+        else:
+            self._m_lumped = None
+            self.M = sp.csr_matrix(c * sp.kron(sp.kron(Ms[0], Ms[1]), Ms[2]))
+            self.R = sp.csr_matrix(R)
+            # the right-hand side's mass product, axis by axis (numba), not the 27-point M
+            self._m_tridiag = (c, grid.node_shape, [np.ascontiguousarray(np.diagonal(m))
+                                                    for m in M1], [float(m[0, 1]) for m in M1])
         self.K = sp.csr_matrix(k * K)
-        self.R = sp.diags_array(R, format="csr")
         self.g = g
 
     def _choose(self, method: str, direct_max_nodes: int, rtol: float) -> str:
@@ -210,7 +230,7 @@ class HeatStepper:
                         self._grid, self.boundary, float(self.vhc[0]), float(self.tc[0]),
                         self.dt, self.theta, self._m_lumped if exact else None,
                         self.K if exact else None, self.R.diagonal() if exact else None,
-                        self._free_mask(), exact=exact)
+                        self._free_mask(), exact=exact, mass=self.mass)
                     self._order = self._solver.free_nodes
                     self._identity_order = np.array_equal(self._order, np.arange(self.npoints))
                     return "fast"
@@ -257,7 +277,7 @@ class HeatStepper:
         return mask
 
     def _fast_unavailable(self) -> str | None:
-        if not self.lumped:
+        if not self.lumped and self.mass == "lumped":
             return "consistent mass is not a Kronecker product"
         if np.ptp(self.vhc) != 0 or np.ptp(self.tc) != 0:
             return "VHC and TC must be homogeneous"
@@ -321,6 +341,13 @@ class HeatStepper:
             rhs = np.empty((N, self.npoints))
             _kernels.lumped_rhs(np.ascontiguousarray(T2), np.ascontiguousarray(a),
                                 self._m_lumped, self.g, np.ascontiguousarray(f2), rhs)
+        elif getattr(self, "_m_tridiag", None) is not None:
+            c, shape, d, o = self._m_tridiag
+            f2 = np.zeros((1, self.npoints)) if f is None else f.reshape(-1, self.npoints)
+            rhs = np.empty((N, self.npoints))
+            _kernels.tridiag3_rhs(np.ascontiguousarray(T2).reshape(N, *shape),
+                                  np.ascontiguousarray(a), d[0], o[0], d[1], o[1], d[2], o[2],
+                                  c, self.g, np.ascontiguousarray(f2), rhs)
         else:
             rhs = self._apply(self.M, T2) * a[:, None] + self.g
             if f is not None:

@@ -17,14 +17,16 @@ def mesh():
     fem.HeatBoundary({"z-": fem.FaceBC("convective", temperature=5.0, h=2e-3),
                       "z+": fem.FaceBC("fixed", temperature=37.0)}),
 ])
-def test_fast_path_equals_sparse_lu_with_member_scales(mesh, boundary):
+@pytest.mark.parametrize("mass", ["lumped", "averaged"])
+def test_fast_path_equals_sparse_lu_with_member_scales(mesh, boundary, mass):
     rng = np.random.default_rng(0)
     n = mesh.p.shape[1]
     T, f = rng.random((4, n)), 1e-3 * rng.random((4, n))
     s1, s2 = rng.uniform(0.5, 2, 4), rng.uniform(0.5, 2, 4)
-    fast = fem.HeatStepper(mesh, 3.76, 0.0037, 0.1, boundary=boundary, operator="kronecker")
+    fast = fem.HeatStepper(mesh, 3.76, 0.0037, 0.1, boundary=boundary, operator="kronecker",
+                           mass=mass)
     lu = fem.HeatStepper(mesh, 3.76, 0.0037, 0.1, boundary=boundary, operator="kronecker",
-                         method="direct")
+                         method="direct", mass=mass)
     assert fast.method == "fast" and lu.method == "direct"
     np.testing.assert_allclose(fast.step(T, f, s1, s2), lu.step(T, f, s1, s2), atol=1e-11)
 
@@ -52,3 +54,33 @@ def test_needs_a_structured_homogeneous_mesh(mesh):
                         operator="kronecker")
     with pytest.raises(ValueError, match="operator must be"):
         fem.HeatStepper(mesh, 3.76, 0.0037, 0.1, operator="fd")
+
+
+def test_averaged_mass_gives_fourth_order_modes():
+    """Lowest Neumann mode of the 1-D pencil (K, M): exact (pi/L)^2. The lumped mass errs
+    as h^2 (error / 4 when h halves), the averaged one as h^4 (error / 16)."""
+    import scipy.linalg as sla
+
+    from fem.fastdiag import one_d_mass, one_d_operators
+
+    def err(n, kind):
+        h = 1.0 / n
+        lam = sla.eigh(one_d_operators(n, h)[1], one_d_mass(n, h, kind), eigvals_only=True)[1]
+        return abs(lam - np.pi ** 2) / np.pi ** 2
+
+    assert 3.5 < err(8, "lumped") / err(16, "lumped") < 4.5
+    assert 14 < err(8, "averaged") / err(16, "averaged") < 18
+    assert err(16, "averaged") < err(16, "lumped") / 50
+
+
+def test_averaged_mass_conserves_energy(mesh):
+    stepper = fem.HeatStepper(mesh, 3.76, 0.0037, 0.1, operator="kronecker", mass="averaged")
+    rng = np.random.default_rng(1)
+    T = rng.random(mesh.p.shape[1])
+    f = 1e-3 * rng.random(mesh.p.shape[1])
+    T1 = stepper.step(T, f)
+    np.testing.assert_allclose(stepper.energy(T1), stepper.energy(T) + 0.1 * f.sum(), rtol=1e-12)
+    with pytest.raises(ValueError, match="needs operator='kronecker'"):
+        fem.HeatStepper(mesh, 3.76, 0.0037, 0.1, mass="averaged")
+    with pytest.raises(ValueError, match="mass must be one of"):
+        fem.HeatStepper(mesh, 3.76, 0.0037, 0.1, operator="kronecker", mass="spectral")
