@@ -430,13 +430,21 @@ def plot_data(path, scenario: str, truth: Truth, data: np.ndarray) -> None:
     plt.close(fig)
 
 
+def _sensitivity_na(grid, n_photons: int, coefficients: tuple[float, float]) -> np.ndarray:
+    """NA of one sensitivity case (a task body: the same seed on any worker)."""
+    m = paper_model(grid, n_photons=n_photons, progress=False)
+    m.G.media[0].mua, m.G.media[0].mus = coefficients
+    return m.run_monte_carlo().MC.NA
+
+
 def sensitivity_study(grid=(100, 100, 50), n_photons: int = 10**6, *, progress=True,
                       mua_values=(1.0, 2.0, 3.0, 4.0, 5.0),
-                      mus_values=(100.0, 200.0, 300.0, 400.0, 500.0)) -> dict:
+                      mus_values=(100.0, 200.0, 300.0, 400.0, 500.0), client=None) -> dict:
     """The paper's sensitivity study (its Fig. "sens"): sensor temperature against mua and mus.
 
     One Monte Carlo per case on ``grid`` (mus fixed at 100 while mua varies, mua at 1
-    while mus varies), then all cases stepped together as one batch of heat fields.
+    while mus varies; one task per case on ``client``, a ``dask.distributed`` client, when
+    given), then all cases stepped together as one batch of heat fields.
 
     Returns ``{"times": (n,), "mua": {value: (n,)}, "mus": {value: (n,)}}`` (deg C).
     """
@@ -449,17 +457,14 @@ def sensitivity_study(grid=(100, 100, 50), n_photons: int = 10**6, *, progress=T
     g = fem.BoxGrid(*grid, 0.5, 0.5, 0.25)
     mesh = g.mesh()
     L = fem.voxel_load_matrix(mesh, g)
-    loads = []
-    from mcmatlab_py._progress import Progress
+    import functools
 
-    bar = Progress(len(cases), "sensitivity: Monte Carlo", enabled=progress, delay=0.5)
-    for i, (_, _, mua, mus) in enumerate(cases):
-        m = paper_model(grid, n_photons=n_photons, progress=False)
-        m.G.media[0].mua, m.G.media[0].mus = mua, mus
-        loads.append(L @ m.run_monte_carlo().MC.NA.ravel())
-        bar.update(i + 1)
-    bar.close()
-    loads = np.array(loads)
+    from mcmatlab_py.distributed import run_tasks
+
+    maps = run_tasks(functools.partial(_sensitivity_na, tuple(grid), n_photons),
+                     [(mua, mus) for _, _, mua, mus in cases], client=client,
+                     progress=progress, label="sensitivity: Monte Carlo")
+    loads = np.array([L @ na.ravel() for na in maps])
     stepper = fem.HeatStepper(mesh, TABLE["VHC"], TABLE["TC"], HS.dt)
     probe = fem.probe_matrix(mesh, np.zeros((3, 1)))
     T = np.zeros((len(cases), mesh.p.shape[1]))

@@ -19,6 +19,7 @@ Monte Carlo per evaluation: the exact mode, for checking.
 
 from __future__ import annotations
 
+import functools
 import hashlib
 import json
 import os
@@ -29,7 +30,6 @@ from pathlib import Path
 import numba
 import numpy as np
 
-from ._progress import Progress
 from .media import Medium
 from .model import Geometry, MonteCarloSimulation
 
@@ -321,15 +321,19 @@ class AbsorptionEmulator:
     # ----------------------------------------------------------------- build & cache
     @classmethod
     def build(cls, spec: EmulatorSpec, *, cache_dir: str | Path | None = None,
-              progress: bool = True, out_of_range: str = "error") -> AbsorptionEmulator:
+              progress: bool = True, out_of_range: str = "error",
+              client=None) -> AbsorptionEmulator:
         """Load the table for ``spec`` from the cache, or run the Monte Carlo and store it.
 
-        Each table point runs ``spec.n_photons`` photons on all cores (photon batches
-        in parallel); a corrupted cache file is detected by its checksum and rebuilt.
+        Each table point runs its photons on all cores (photon batches in parallel), or,
+        with a ``dask.distributed`` ``client`` (:func:`mcmatlab_py.distributed.connect`),
+        one task per table point on the cluster's workers; both give the same table
+        (every point has its own seed). A corrupted cache file is detected by its
+        checksum and rebuilt.
         """
         import time
 
-        from .monte_carlo import optical_arrays, simulate
+        from .distributed import run_tasks
 
         cache = Path(cache_dir) if cache_dir is not None else default_cache_dir()
         path = cache / f"emulator-{spec.key()}.npz"
@@ -337,41 +341,58 @@ class AbsorptionEmulator:
         if loaded is not None:
             return cls(spec=spec, log_na=loaded["log_na"], absorbed=loaded["absorbed"],
                        out_of_range=out_of_range, build_seconds=float(loaded["build_seconds"]))
-        mua_grid, mus_grid = spec.mua_grid(), spec.mus_grid()
-        reps, _ = spec.orbits()
-        log_na = np.empty((spec.n_mua, spec.n_mus, reps.size))
-        L = None
-        if spec.mesh_divisions is not None:
-            import fem
-
-            grid = fem.BoxGrid(spec.nx, spec.ny, spec.nz, spec.Lx, spec.Ly, spec.Lz)
-            mesh = fem.BoxGrid(*spec.mesh_divisions, spec.Lx, spec.Ly, spec.Lz).mesh()
-            L = fem.voxel_load_matrix(mesh, grid)
-        absorbed = np.empty((spec.n_mua, spec.n_mus))
         # cost grows with mus: do the expensive column first so the ETA is honest
         points = [(a, b) for b in range(spec.n_mus)[::-1] for a in range(spec.n_mua)]
-        bar = Progress(len(points), "emulator table", enabled=progress, delay=1.0)
         t0 = time.perf_counter()
-        for k, (a, b) in enumerate(points):
-            m = spec.model(mua_grid[a], mus_grid[b], n_photons=spec.photons_at(mus_grid[b]))
-            M = m.G.medium_map()
-            m.MC.validate(m.G)
-            res = simulate(m.G, m.MC, M, *optical_arrays(m.G.media), seed=spec.seed,
-                           n_photons=m.MC.n_photons_requested)
-            dV = m.G.dx * m.G.dy * m.G.dz
-            na = res.absorbed / (res.n_photons * dV)
-            if L is not None:
-                na = symmetrize(na, spec, voxels=True)
-                na = (L @ na.ravel()).reshape(spec.field_shape)  # W per node per W
-            na = symmetrize(na, spec)
-            log_na[a, b] = np.log(na.ravel()[reps] + spec.offset)
-            absorbed[a, b] = res.absorbed.sum() / res.n_photons
-            bar.update(k + 1)
-        bar.close()
+        results = run_tasks(functools.partial(table_point, spec), points, client=client,
+                            progress=progress, label="emulator table")
+        log_na = np.empty((spec.n_mua, spec.n_mus, spec.orbits()[0].size))
+        absorbed = np.empty((spec.n_mua, spec.n_mus))
+        for (a, b), (row, frac) in zip(points, results, strict=True):
+            log_na[a, b], absorbed[a, b] = row, frac
         seconds = time.perf_counter() - t0
         _store(path, spec, log_na, absorbed, seconds)
         return cls(spec=spec, log_na=log_na, absorbed=absorbed, out_of_range=out_of_range,
                    build_seconds=seconds)
+
+
+_OPERATORS: dict = {}
+
+
+def _load_operator(spec: EmulatorSpec):
+    """The voxel -> P1 node operator of a nodal-load spec (built once per process)."""
+    import fem
+
+    key = (spec.nx, spec.ny, spec.nz, spec.Lx, spec.Ly, spec.Lz, tuple(spec.mesh_divisions))
+    if key not in _OPERATORS:
+        grid = fem.BoxGrid(spec.nx, spec.ny, spec.nz, spec.Lx, spec.Ly, spec.Lz)
+        mesh = fem.BoxGrid(*spec.mesh_divisions, spec.Lx, spec.Ly, spec.Lz).mesh()
+        _OPERATORS.clear()  # one at a time: the matrices of fine grids are large
+        _OPERATORS[key] = fem.voxel_load_matrix(mesh, grid)
+    return _OPERATORS[key]
+
+
+def table_point(spec: EmulatorSpec, point: tuple[int, int]) -> tuple[np.ndarray, float]:
+    """One table point ``(i_mua, i_mus)``: log(NA + offset) at the orbit representatives
+    (n_unique,) and the absorbed fraction. Deterministic (seed ``spec.seed``): the same
+    numbers wherever and on however many threads it runs."""
+    from .monte_carlo import optical_arrays, simulate
+
+    a, b = point
+    mua, mus = spec.mua_grid()[a], spec.mus_grid()[b]
+    m = spec.model(mua, mus, n_photons=spec.photons_at(mus))
+    M = m.G.medium_map()
+    m.MC.validate(m.G)
+    res = simulate(m.G, m.MC, M, *optical_arrays(m.G.media), seed=spec.seed,
+                   n_photons=m.MC.n_photons_requested)
+    dV = m.G.dx * m.G.dy * m.G.dz
+    na = res.absorbed / (res.n_photons * dV)
+    if spec.mesh_divisions is not None:
+        na = symmetrize(na, spec, voxels=True)
+        na = (_load_operator(spec) @ na.ravel()).reshape(spec.field_shape)  # W per node per W
+    na = symmetrize(na, spec)
+    reps, _ = spec.orbits()
+    return np.log(na.ravel()[reps] + spec.offset), float(res.absorbed.sum() / res.n_photons)
 
 
 def symmetrize(na: np.ndarray, spec: EmulatorSpec, voxels: bool = False) -> np.ndarray:
@@ -440,6 +461,7 @@ class DirectMonteCarloAbsorption:
 
     spec: EmulatorSpec
     calls: int = 0
+    client: object = None  #: a dask.distributed client: one task per member
 
     @property
     def shape(self) -> tuple[int, int, int]:
@@ -458,19 +480,20 @@ class DirectMonteCarloAbsorption:
         return self(mua, mus).reshape(np.size(mua), -1)
 
     def __call__(self, mua, mus) -> np.ndarray:
-        mua, mus = np.broadcast_arrays(np.atleast_1d(mua), np.atleast_1d(mus))
-        L = None
-        if self.spec.mesh_divisions is not None:
-            import fem
+        from .distributed import run_tasks
 
-            sp = self.spec
-            L = fem.voxel_load_matrix(
-                fem.BoxGrid(*sp.mesh_divisions, sp.Lx, sp.Ly, sp.Lz).mesh(),
-                fem.BoxGrid(sp.nx, sp.ny, sp.nz, sp.Lx, sp.Ly, sp.Lz))
-        maps = []
-        for a, s in zip(mua.ravel(), mus.ravel(), strict=True):
-            m = self.spec.model(float(a), float(s), seed=self.spec.seed + self.calls)
-            na = m.run_monte_carlo().MC.NA
-            maps.append(na if L is None else (L @ na.ravel()).reshape(self.shape))
+        mua, mus = np.broadcast_arrays(np.atleast_1d(mua), np.atleast_1d(mus))
+        members = [(float(a), float(s)) for a, s in zip(mua.ravel(), mus.ravel(), strict=True)]
+        maps = run_tasks(functools.partial(direct_member, self.spec, self.spec.seed + self.calls),
+                         members, client=self.client)
         self.calls += 1
         return np.stack(maps)
+
+
+def direct_member(spec: EmulatorSpec, seed: int, coefficients: tuple[float, float]) -> np.ndarray:
+    """NA (or the nodal load) of one member by direct Monte Carlo (a task body)."""
+    mua, mus = coefficients
+    na = spec.model(mua, mus, seed=seed).run_monte_carlo().MC.NA
+    if spec.mesh_divisions is None:
+        return na
+    return (_load_operator(spec) @ na.ravel()).reshape(spec.field_shape)

@@ -285,11 +285,15 @@ class Model:
         self.MC = MonteCarloSimulation()
         self.HS = HeatSimulation()
 
-    def run_monte_carlo(self) -> Model:
-        """Run the Monte Carlo light transport; fills ``self.MC`` and returns ``self``."""
+    def run_monte_carlo(self, client=None) -> Model:
+        """Run the Monte Carlo light transport; fills ``self.MC`` and returns ``self``.
+
+        ``client``: a ``dask.distributed`` client (:func:`mcmatlab_py.distributed.connect`)
+        to spread the photon batches over a cluster; the same seed gives the same ``NA``.
+        """
         from .monte_carlo import run_monte_carlo
 
-        run_monte_carlo(self)
+        run_monte_carlo(self, client=client)
         return self
 
     def simulate_heat_distribution(self) -> Model:

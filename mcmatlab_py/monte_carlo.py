@@ -45,30 +45,27 @@ def optical_arrays(media) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarra
 
 
 def simulate(G, MC, M: np.ndarray, mua, mus, g, nref, *, seed: int, n_photons: int | None,
-             time_limit_s: float | None = None, label: str = "Monte Carlo") -> MCResult:
+             time_limit_s: float | None = None, label: str = "Monte Carlo",
+             client=None) -> MCResult:
     """Run the kernel on a validated geometry; the medium map and properties are given.
 
-    Exactly one of ``n_photons`` and ``time_limit_s`` is used (``n_photons`` wins).
+    Exactly one of ``n_photons`` and ``time_limit_s`` is used (``n_photons`` wins). With a
+    ``dask.distributed`` ``client`` the photon batches are split into ranges, one task
+    each, and the integer tallies summed: the same numbers as here.
     """
-    nx, ny, nz = M.shape
-    src = MC.light_source
-    src_arr = np.array([src.x_focus + G.Lx / 2, src.y_focus + G.Ly / 2, src.radius,
-                        src.x_focus + G.Lx / 2, src.y_focus + G.Ly / 2, src.z_focus],
-                       dtype=np.float64)
-    Mf = np.ascontiguousarray(M, dtype=np.int32).ravel()
-    uniform = int(Mf[0]) if np.all(Mf == Mf[0]) else -1
+    if client is not None:
+        return _simulate_distributed(G, MC, M, mua, mus, g, nref, seed=seed,
+                                     n_photons=n_photons, client=client, label=label)
     n_threads = min(MC.n_threads or numba.get_num_threads(), numba.config.NUMBA_NUM_THREADS)
     n_slots = n_threads  # one worker per thread, each with its own tally rows
-    acc = np.zeros((n_slots, Mf.size), dtype=np.int64)
-    # rows padded to 512 bytes so that threads do not share cache lines
-    tally = np.zeros((n_slots, 64), dtype=np.int64)
     bs = MC.batch_size
     n_total = n_photons if n_photons is not None else np.iinfo(np.int64).max // 4
     n_batches = -(-n_total // bs) if n_photons is not None else None
-    args = (Mf, mua, mus, g, nref, uniform, nx, ny, nz, G.dx, G.dy, G.dz,
-            int(MC.boundary_type), float(MC.n_outside), bool(MC.matched_interfaces),
-            bool(MC.russian_roulette), float(MC.weight_threshold), float(MC.roulette_chance),
-            _SRC_CODES[src.source_type], src_arr, np.uint64(seed), bs, n_total)
+    args = _kernel_args(G, MC, M, mua, mus, g, nref, seed, n_total)
+    nx, ny, nz = M.shape
+    acc = np.zeros((n_slots, args[0].size), dtype=np.int64)
+    # rows padded to 512 bytes so that threads do not share cache lines
+    tally = np.zeros((n_slots, 64), dtype=np.int64)
 
     old_threads = numba.get_num_threads()
     numba.set_num_threads(n_threads)
@@ -112,7 +109,57 @@ def simulate(G, MC, M: np.ndarray, mua, mus, g, nref, *, seed: int, n_photons: i
                     kernel_seconds=kernel_s, kernel_cpu_seconds=kernel_cpu)
 
 
-def run_monte_carlo(model) -> None:
+def _kernel_args(G, MC, M, mua, mus, g, nref, seed, n_total):
+    nx, ny, nz = M.shape
+    src = MC.light_source
+    src_arr = np.array([src.x_focus + G.Lx / 2, src.y_focus + G.Ly / 2, src.radius,
+                        src.x_focus + G.Lx / 2, src.y_focus + G.Ly / 2, src.z_focus],
+                       dtype=np.float64)
+    Mf = np.ascontiguousarray(M, dtype=np.int32).ravel()
+    uniform = int(Mf[0]) if np.all(Mf == Mf[0]) else -1
+    return (Mf, mua, mus, g, nref, uniform, nx, ny, nz, G.dx, G.dy, G.dz,
+            int(MC.boundary_type), float(MC.n_outside), bool(MC.matched_interfaces),
+            bool(MC.russian_roulette), float(MC.weight_threshold), float(MC.roulette_chance),
+            _SRC_CODES[src.source_type], src_arr, np.uint64(seed), MC.batch_size, n_total)
+
+
+def batch_range(args: tuple, batches: tuple[int, int]) -> tuple[np.ndarray, np.ndarray, float]:
+    """Batches ``[start, stop)`` of a run on this machine's threads: summed absorbed weights
+    (nvox,) and tallies (64,), int64 fixed point, and the kernel seconds (a task body)."""
+    n_threads = numba.get_num_threads()
+    acc = np.zeros((n_threads, args[0].size), dtype=np.int64)
+    tally = np.zeros((n_threads, 64), dtype=np.int64)
+    K.run_batches(*args, 0, 0, acc, tally)  # compile or load from the cache first
+    t0 = time.perf_counter()
+    K.run_batches(*args, batches[0], batches[1], acc, tally)
+    return acc.sum(axis=0), tally.sum(axis=0), time.perf_counter() - t0
+
+
+def _simulate_distributed(G, MC, M, mua, mus, g, nref, *, seed, n_photons, client,
+                          label) -> MCResult:
+    import functools
+
+    from .distributed import run_tasks, split_range
+
+    if n_photons is None:
+        raise ValueError("MC.simulation_time_requested cannot be used on a cluster: give "
+                         "MC.n_photons_requested")
+    n_batches = -(-n_photons // MC.batch_size)
+    workers = max(1, len(client.scheduler_info().get("workers", {})))
+    ranges = split_range(n_batches, 4 * workers)  # a few tasks per worker: load balance
+    args = _kernel_args(G, MC, M, mua, mus, g, nref, seed, n_photons)
+    t0 = time.perf_counter()
+    parts = run_tasks(functools.partial(batch_range, args), ranges, client=client,
+                      progress=MC.progress, label=label)
+    wall = time.perf_counter() - t0
+    acc = np.sum([p[0] for p in parts], axis=0)
+    tally = np.sum([p[1] for p in parts], axis=0)
+    return MCResult(absorbed=acc.reshape(M.shape) / K.W_ONE, tally=tally[: K.N_TALLY],
+                    n_photons=int(n_photons), kernel_seconds=wall,
+                    kernel_cpu_seconds=float(sum(p[2] for p in parts)))
+
+
+def run_monte_carlo(model, client=None) -> None:
     """Validate ``model.G`` and ``model.MC``, run the Monte Carlo, and fill ``model.MC``."""
     G, MC = model.G, model.MC
     M = G.medium_map()  # validates G
@@ -125,7 +172,7 @@ def run_monte_carlo(model) -> None:
         minutes = MC.simulation_time_requested if MC.simulation_time_requested else 0.1
         time_limit = 60.0 * minutes
     res = simulate(G, MC, M, mua, mus, g, nref, seed=seed, n_photons=n_photons,
-                   time_limit_s=time_limit)
+                   time_limit_s=time_limit, client=client)
     store_results(MC, res, M, mua, G.dx * G.dy * G.dz)
     MC.seed_used = seed
 
