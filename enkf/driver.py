@@ -45,7 +45,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ._validate import as_generator, cov_sqrt, covariance, float_array, variances
-from .analysis import METHODS, analysis, inflate, random_rotation
+from .analysis import METHODS, analysis, enkf_localized, inflate, random_rotation
 from .transforms import IdentityTransform, Transform, as_transforms, to_filter_space, to_physical
 
 __all__ = [
@@ -175,6 +175,10 @@ class FilterProblem:
         and before the random walk, e.g. a drift ``u += v (t1 - t0)`` whose rate
         ``v`` is itself a filtered parameter (a local linear trend). Default: none
         (the pure random walk of the paper).
+    localization : (rho_xy, rho_yy), optional
+        Schur-product tapers for :func:`enkf.analysis.enkf_localized`, rows of
+        ``rho_xy`` over the augmented state (the state, then the parameters). Only
+        with ``method="enkf"``.
     """
 
     forecast: Forecast
@@ -193,6 +197,9 @@ class FilterProblem:
     param_noise_scale: Callable[[float, float], float] | None = None
     #: optional ``dynamics(U, t0, t1) -> U`` on the transformed parameters (a drift)
     param_dynamics: Callable[[np.ndarray, float, float], np.ndarray] | None = None
+    #: optional covariance localization ``(rho_xy (n_state + n_par, p), rho_yy (p, p))``
+    #: for method "enkf" (see :func:`enkf.analysis.enkf_localized`)
+    localization: tuple | None = None
 
     def __post_init__(self):
         set_ = object.__setattr__  # frozen: store the validated arrays
@@ -500,6 +507,14 @@ def run_filter(
             f"observation must have shape ({p}, {n_state}) (n_state from the "
             f"prior), got {P.observation.shape}"
         )
+    if P.localization is not None:
+        if config.method != "enkf" or config.mda != 1:
+            raise ValueError(f"localization needs method='enkf' and mda=1, got method="
+                             f"{config.method!r}, mda={config.mda}")
+        rxy, ryy = (np.asarray(r) for r in P.localization)
+        if rxy.shape != (n_state + n_par, p) or ryy.shape != (p, p):
+            raise ValueError(f"localization must be (rho_xy ({n_state + n_par}, {p}), rho_yy "
+                             f"({p}, {p})), got {rxy.shape} and {ryy.shape}")
     tracked = P.tracked
     if tracked.size and tracked.max() >= n_state:
         raise ValueError(f"tracked indices must be < n_state = {n_state}, got max {tracked.max()}")
@@ -634,8 +649,12 @@ def run_filter(
                 tic_a = time.perf_counter()
                 Y = checked_observe(X, U, k, tic)
                 Z = np.concatenate([X, U], axis=1)  # augmented state z = [x; u], paper eq. (z)
-                Z = analysis(Z, Y, y, P.obs_cov, config.method, rng,
-                             center=config.center_perturbations)
+                if P.localization is not None:
+                    Z = enkf_localized(Z, Y, y, P.obs_cov, *P.localization, rng,
+                                       center=config.center_perturbations)
+                else:
+                    Z = analysis(Z, Y, y, P.obs_cov, config.method, rng,
+                                 center=config.center_perturbations)
                 if config.inflation != 1.0:
                     Z = inflate(Z, config.inflation)
                 if config.rotate:

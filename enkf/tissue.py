@@ -72,8 +72,15 @@ class TissueFilterSetup:
         ``prior_range`` times the nominal values.
     estimate : tuple of str
         ``("mua", "mus")`` or ``("mua", "mus", "VHC", "TC")``.
-    sensor_positions : (p, 3) cm
+    sensor_positions : (p, 3) cm, point sensors (may be empty, shape (0, 3), with an image)
     sensor_noise_var : float or (p,), deg C^2 (the paper: 0.01)
+    image : enkf.image.ThermalImage, optional
+        A camera's pixels over the top face, observed after the point sensors: the data
+        then have ``p + image.n_pixels`` columns (pixels in C order of the frame).
+    localization_radius : float, optional
+        cm: covariance localization (Gaspari-Cohn taper, zero beyond this distance)
+        between temperatures and observations; the parameters stay global. Needs
+        ``method="enkf"``.
     tracked_positions : (n_tracked, 3) cm, points whose temperature is reported
     """
 
@@ -84,6 +91,8 @@ class TissueFilterSetup:
     estimate: tuple = ("mua", "mus")
     sensor_positions: np.ndarray = field(default_factory=lambda: np.zeros((1, 3)))
     sensor_noise_var: float | np.ndarray = 0.01
+    image: object = None  #: enkf.image.ThermalImage or None
+    localization_radius: float | None = None  #: cm, or None for no localization
     tracked_positions: np.ndarray = field(
         default_factory=lambda: np.array([[0, 0, 0], [0, 0, 0.1], [0, 0, 0.2]], float))
     T_initial: float = 0.0  #: deg C
@@ -134,7 +143,13 @@ class TissueFilterSetup:
         if not 0 < lo < hi:
             raise ValueError(f"prior_range must be (lo, hi) with 0 < lo < hi, got "
                              f"{self.prior_range!r}")
-        self.sensor_positions = np.atleast_2d(np.asarray(self.sensor_positions, float))
+        self.sensor_positions = np.asarray(self.sensor_positions, float).reshape(-1, 3)
+        if self.sensor_positions.shape[0] == 0 and self.image is None:
+            raise ValueError("sensor_positions is empty and there is no image: nothing observed")
+        if self.localization_radius is not None and not (
+                np.isfinite(self.localization_radius) and self.localization_radius > 0):
+            raise ValueError(f"localization_radius must be > 0 (cm) or None, got "
+                             f"{self.localization_radius!r}")
         self.tracked_positions = np.atleast_2d(np.asarray(self.tracked_positions, float))
         if self.parameter_model not in ("random_walk", "trend"):
             raise ValueError(f"parameter_model must be 'random_walk' or 'trend', got "
@@ -248,6 +263,22 @@ class TissueForwardModel:
         return self.stepper(t1 - t0).step(E_state, load, **kw)
 
 
+def observation_operator(setup: TissueFilterSetup, mesh):
+    """``(P (p, n_nodes) csr, noise variances (p,), positions (p, 3) cm)`` of the point
+    sensors followed by the image's pixels (pixel centres on z = 0)."""
+    blocks, var, xyz = [], [], []
+    n_pts = setup.sensor_positions.shape[0]
+    if n_pts:
+        blocks.append(fem.probe_matrix(mesh, setup.sensor_positions.T))  # points are (3, n)
+        var.append(np.broadcast_to(np.asarray(setup.sensor_noise_var, float), (n_pts,)))
+        xyz.append(setup.sensor_positions)
+    if setup.image is not None:
+        blocks.append(setup.image.matrix(mesh))
+        var.append(np.full(setup.image.n_pixels, float(setup.image.noise_var)))
+        xyz.append(setup.image.pixel_centers())
+    return (sp.vstack(blocks).tocsr(), np.concatenate(var), np.vstack(xyz))
+
+
 def identify(setup: TissueFilterSetup, times: np.ndarray, data: np.ndarray, *,
              callback: Callable[[StepReport], None] | None = None,
              param_bounds: np.ndarray | None = None) -> TissueEstimates:
@@ -269,7 +300,7 @@ def identify(setup: TissueFilterSetup, times: np.ndarray, data: np.ndarray, *,
     npts = model.mesh.p.shape[1]
     if len(times):
         model.warm_up(float(times[0]))
-    P_obs = fem.probe_matrix(model.mesh, setup.sensor_positions.T)  # points are (3, n)
+    P_obs, noise_var, obs_xyz = observation_operator(setup, model.mesh)
     P_track = fem.probe_matrix(model.mesh, setup.tracked_positions.T)
     names = setup.estimate
     nominal = np.array([setup.nominal[n] for n in names])
@@ -301,12 +332,22 @@ def identify(setup: TissueFilterSetup, times: np.ndarray, data: np.ndarray, *,
             return U
 
         bounds_extra = np.tile([-1e3, 1e3], (n, 1))  # rates: no physical bound
-    noise_var = np.broadcast_to(np.asarray(setup.sensor_noise_var, float),
-                                (setup.sensor_positions.shape[0],))
+    localization = None
+    if setup.localization_radius is not None:
+        from .analysis import gaspari_cohn
+
+        # Houtekamer & Mitchell (2001): taper the temperature-observation and the
+        # observation-observation covariances; the parameters stay global (rows of ones)
+        c = 0.5 * float(setup.localization_radius)  # the taper reaches zero at 2c
+        d_xy = np.linalg.norm(model.mesh.p.T[:, None, :] - obs_xyz[None, :, :], axis=2)
+        d_yy = np.linalg.norm(obs_xyz[:, None, :] - obs_xyz[None, :, :], axis=2)
+        n_theta = len(names) * (2 if setup.parameter_model == "trend" else 1)
+        rho_xy = np.vstack([gaspari_cohn(d_xy / c), np.ones((n_theta, obs_xyz.shape[0]))])
+        localization = (rho_xy, gaspari_cohn(d_yy / c))
     problem = FilterProblem(
         forecast=model, observation=P_obs, obs_times=times, obs_data=data, obs_cov=noise_var,
         prior=prior, model_noise=setup.model_noise_std ** 2, param_noise=rw,
-        transforms=transforms, t0=0.0, param_dynamics=dynamics,
+        transforms=transforms, t0=0.0, param_dynamics=dynamics, localization=localization,
         param_noise_scale=None if setup.random_walk_when_off == 1.0 else walk_scale)
     config = FilterConfig(n_members=setup.n_members, method=setup.method,
                           inflation=setup.inflation, seed=setup.seed, mda=setup.mda)
