@@ -27,7 +27,7 @@ from pathlib import Path
 
 import numpy as np
 
-SCENARIOS = ("constant", "time-varying", "all-params")
+SCENARIOS = ("constant", "time-varying", "all-params", "pulse-train")
 TABLE = {"mua": 1.0, "mus": 100.0, "VHC": 3.76, "TC": 0.0037}  # Table 1 of the paper
 TRACKED_DEPTHS = (0.0, 0.1, 0.2)  # cm, below the sensor
 
@@ -42,12 +42,37 @@ def mus_ramp(t):
     return 80.0 * t + 100.0 if t <= 5.0 else 500.0
 
 
+#: laser of each scenario: (P W, duration_on s, duration_off s, n_pulses). Beyond the paper,
+#: "pulse-train" fires three 2 s pulses of 0.75 W, 3 s apart, and the tissue changes
+#: while it is heated: mua and mus rise during each pulse and hold between pulses, so
+#: each pulse meets different optics (see train_optics)
+PULSES = {"constant": (0.5, 5.0, 10.0, 1), "time-varying": (0.5, 5.0, 10.0, 1),
+          "all-params": (0.5, 5.0, 10.0, 1), "pulse-train": (0.75, 2.0, 3.0, 3)}
+
+
+def heating_time(t: float, scenario: str = "pulse-train") -> float:
+    """s of laser-on time before ``t``."""
+    _, on, off, n = PULSES[scenario]
+    period = on + off
+    k = min(int(t // period), n)
+    return float(k * on + (min(t - k * period, on) if k < n else 0.0))
+
+
+def train_optics(t: float) -> tuple[float, float]:
+    """(mua, mus) cm^-1 of the pulse-train scenario: +0.3 and +40 per second of heating."""
+    h = heating_time(t)
+    return 1.0 + 0.3 * h, 100.0 + 40.0 * h
+
+
 def true_parameters(scenario: str, times: np.ndarray) -> dict[str, np.ndarray]:
     """Truth of every parameter at ``times`` (s)."""
     times = np.asarray(times, float)
     if scenario == "constant":
         mua = np.full(times.shape, TABLE["mua"])
         mus = np.full(times.shape, TABLE["mus"])
+    elif scenario == "pulse-train":
+        mua, mus = (np.array(v) for v in zip(*(train_optics(t) for t in times), strict=True)) \
+            if times.size else (np.zeros(0), np.zeros(0))
     else:
         mua = np.array([mua_ramp(t) for t in times])
         mus = np.array([mus_ramp(t) for t in times])
@@ -55,8 +80,10 @@ def true_parameters(scenario: str, times: np.ndarray) -> dict[str, np.ndarray]:
             "TC": np.full(times.shape, TABLE["TC"])}
 
 
-def paper_model(grid=(100, 100, 50), n_photons: int = 10**7, seed: int = 1, progress=True):
-    """The paper's model (MCmatlab style) on a voxel grid ``(nx, ny, nz)``."""
+def paper_model(grid=(100, 100, 50), n_photons: int = 10**7, seed: int = 1, progress=True,
+                scenario: str = "constant"):
+    """The paper's model (MCmatlab style) on a voxel grid ``(nx, ny, nz)``; the laser of
+    ``scenario`` (:data:`PULSES`)."""
     from mcmatlab_py import Medium, Model
 
     model = Model()
@@ -73,10 +100,7 @@ def paper_model(grid=(100, 100, 50), n_photons: int = 10**7, seed: int = 1, prog
     MC.light_source.source_type = "tophat"
     MC.light_source.radius = 0.1
     HS = model.HS
-    HS.P = 0.5
-    HS.duration_on = 5.0
-    HS.duration_off = 10.0
-    HS.n_pulses = 1
+    HS.P, HS.duration_on, HS.duration_off, HS.n_pulses = PULSES[scenario]
     HS.dt = 0.1
     HS.T_initial = 0.0
     HS.heat_boundary_type = 0
@@ -94,22 +118,41 @@ class TruthConfig:
     n_photons_constant: int = 10**7  #: photons of a constant-property map
     n_photons_per_step: int = 500_000  #: photons per step while the properties change
     mc_seed: int = 1
+    #: also record a camera's images: (x0, x1, y0, y1, ny, nx, subsamples), see CAMERA
+    camera: tuple | None = None
 
     def key(self) -> str:
         d = asdict(self)
-        d["scenario"] = "constant" if self.scenario == "constant" else "time-varying"
+        d["scenario"] = self.scenario if self.scenario in ("constant", "pulse-train") \
+            else "time-varying"
         d["version"] = 1
+        if self.camera is None:
+            del d["camera"]  # keys of truths without images stay as they were
         return hashlib.sha256(json.dumps(d, sort_keys=True).encode()).hexdigest()[:20]
+
+
+#: the camera of the image experiments: 16 x 16 pixels of 250 um over the beam
+CAMERA = (-0.2, 0.2, -0.2, 0.2, 16, 16, 4)
+
+
+def camera_image(camera: tuple):
+    """The :class:`enkf.image.ThermalImage` of a ``TruthConfig.camera`` tuple."""
+    from .image import ThermalImage
+
+    x0, x1, y0, y1, ny, nx, sub = camera
+    return ThermalImage((x0, x1), (y0, y1), (int(ny), int(nx)), subsamples=int(sub))
 
 
 @dataclass
 class Truth:
-    """Noise-free truth at 10 Hz: times (n,) s from 0; temps (n, 3) deg C at the depths."""
+    """Noise-free truth at 10 Hz: times (n,) s from 0; temps (n, 3) deg C at the depths;
+    images (n, n_pixels) deg C when the truth was run with a camera."""
 
     times: np.ndarray
     temps: np.ndarray
     params: dict
     wall_seconds: float
+    images: np.ndarray | None = None
 
 
 def generate_truth(cfg: TruthConfig, *, cache_dir: str | Path | None = None,
@@ -125,26 +168,41 @@ def generate_truth(cfg: TruthConfig, *, cache_dir: str | Path | None = None,
         try:
             with np.load(path) as f:
                 times, temps, wall = f["times"], f["temps"], float(f["wall_seconds"])
-            return Truth(times, temps, true_parameters(cfg.scenario, times), wall)
+                images = f["images"] if "images" in f.files else None
+            return Truth(times, temps, true_parameters(cfg.scenario, times), wall, images)
         except Exception:  # noqa: BLE001 - unreadable cache: recompute
             path.unlink(missing_ok=True)
     t0 = time.perf_counter()
     varying = cfg.scenario != "constant"
     model = paper_model(cfg.grid, cfg.n_photons_per_step if varying else cfg.n_photons_constant,
-                        cfg.mc_seed, progress)
-    if varying:
+                        cfg.mc_seed, progress, scenario=cfg.scenario)
+    if cfg.scenario == "pulse-train":
+        model.HS.mua_t = lambda t: train_optics(t)[0]
+        model.HS.mus_t = lambda t: train_optics(t)[1]
+    elif varying:
         model.HS.mua_t = mua_ramp
         model.HS.mus_t = mus_ramp
     else:
         model.run_monte_carlo()
+    n_tracked = len(model.HS.temp_sensor_positions)
+    if cfg.camera is not None:
+        pts = camera_image(cfg.camera).sample_points()
+        model.HS.temp_sensor_positions = list(model.HS.temp_sensor_positions) + [
+            tuple(p) for p in pts]
     model.simulate_heat_distribution()
     wall = time.perf_counter() - t0
-    times, temps = model.HS.sensor_times, model.HS.sensor_temps
+    times = model.HS.sensor_times
+    temps = model.HS.sensor_temps[:, :n_tracked]
+    extra = {}
+    images = None
+    if cfg.camera is not None:
+        images = camera_image(cfg.camera).average(model.HS.sensor_temps[:, n_tracked:])
+        extra["images"] = images
     cache.mkdir(parents=True, exist_ok=True)
     tmp = path.with_suffix(".tmp.npz")
-    np.savez(tmp, times=times, temps=temps, wall_seconds=wall)
+    np.savez(tmp, times=times, temps=temps, wall_seconds=wall, **extra)
     tmp.replace(path)
-    return Truth(times, temps, true_parameters(cfg.scenario, times), wall)
+    return Truth(times, temps, true_parameters(cfg.scenario, times), wall, images)
 
 
 def twin_truth(scenario: str, emulator, like: Truth, coarse=(20, 20, 10)) -> Truth:
@@ -186,7 +244,8 @@ def filter_setup(scenario: str, absorption, *, seed: int = 0, n_members: int = 5
 
     from .tissue import TissueFilterSetup
 
-    HS = HeatSimulation(P=0.5, duration_on=5.0, duration_off=10.0, dt=0.1)
+    P, on, off, n = PULSES[scenario]
+    HS = HeatSimulation(P=P, duration_on=on, duration_off=off, n_pulses=n, dt=0.1)
     estimate = ("mua", "mus", "VHC", "TC") if scenario == "all-params" else ("mua", "mus")
     # constant: parameters believed fixed (small walk). time-varying: they may drift; the
     # paper's ramp moves log mua by up to 0.06 and log mus by up to 0.08 per step, faster
@@ -196,7 +255,7 @@ def filter_setup(scenario: str, absorption, *, seed: int = 0, n_members: int = 5
     # [0.03, 0.06] (which let mus lag during the pulse and overshoot after it) and 3 of 5
     # for [0.04, 0.12] (validation/reports/paper_runs.md).
     rw = 0.002 if scenario == "constant" else (
-        [0.03, 0.10] if scenario == "time-varying" else [0.03, 0.10, 0.005, 0.005])
+        [0.03, 0.10, 0.005, 0.005] if scenario == "all-params" else [0.03, 0.10])
     overrides.setdefault("random_walk_std", rw)
     # optical properties change by heating: when they may drift, hold them still while the
     # laser is off (they no longer act on the forecast then, and a walk only lets them wander)
@@ -379,7 +438,7 @@ def plot_results(path, scenario: str, est, truth: Truth, data: np.ndarray) -> No
     for j, z in enumerate(TRACKED_DEPTHS):
         ax = axes[0, j]
         m, s = est.tracked_mean[:, j], est.tracked_std[:, j]
-        ax.axvspan(0, 5, color="0.88", lw=0)
+        _shade_pulses(ax, scenario)
         if j == 0:
             ax.plot(truth.times[1:len(data) + 1], data, "k.", ms=2.5, label="sensor data")
         ax.plot(truth.times[: len(t)], truth.temps[: len(t), j], "k--", lw=1.2, label="truth")
@@ -395,7 +454,7 @@ def plot_results(path, scenario: str, est, truth: Truth, data: np.ndarray) -> No
     for i, name in enumerate(est.names):
         ax = axes[1, i]
         m, s = est.param_mean[:, i], est.param_std[:, i]
-        ax.axvspan(0, 5, color="0.88", lw=0)
+        _shade_pulses(ax, scenario)
         ax.plot(t, tp[name], "k--", lw=1.2)
         ax.plot(t, m, "r-", lw=1.4)
         ax.plot(t, m + 2 * s, "r--", lw=0.8)
@@ -408,6 +467,13 @@ def plot_results(path, scenario: str, est, truth: Truth, data: np.ndarray) -> No
     plt.close(fig)
 
 
+def _shade_pulses(ax, scenario: str) -> None:
+    """Grey bands where the laser of ``scenario`` is on."""
+    _, on, off, n = PULSES.get(scenario, PULSES["constant"])
+    for i in range(n):
+        ax.axvspan(i * (on + off), i * (on + off) + on, color="0.88", lw=0)
+
+
 def plot_data(path, scenario: str, truth: Truth, data: np.ndarray) -> None:
     """The paper's data figure: the sensor series (left) and the true parameters (right)."""
     import matplotlib
@@ -417,7 +483,7 @@ def plot_data(path, scenario: str, truth: Truth, data: np.ndarray) -> None:
 
     fig, (a, b) = plt.subplots(1, 2, figsize=(10, 3.8), constrained_layout=True)
     for ax in (a, b):
-        ax.axvspan(0, 5, color="0.88", lw=0)
+        _shade_pulses(ax, scenario)
     a.plot(truth.times[1:], data, "k.", ms=3)
     a.set(xlabel="time [s]", ylabel="T [$^\\circ$C]", title="sensor data at (0, 0, 0)")
     tp = true_parameters(scenario, truth.times)
