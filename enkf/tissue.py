@@ -28,7 +28,7 @@ from __future__ import annotations
 import time
 import warnings
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 import scipy.sparse as sp
@@ -279,27 +279,40 @@ def observation_operator(setup: TissueFilterSetup, mesh):
     return (sp.vstack(blocks).tocsr(), np.concatenate(var), np.vstack(xyz))
 
 
-def identify(setup: TissueFilterSetup, times: np.ndarray, data: np.ndarray, *,
-             callback: Callable[[StepReport], None] | None = None,
-             param_bounds: np.ndarray | None = None) -> TissueEstimates:
-    """Run the filter on sensor data.
+@dataclass
+class _Pieces:
+    """What identify and OnlineIdentifier build from a setup (internal)."""
 
-    Parameters
-    ----------
-    times : (M,) s, strictly increasing, after 0 (the prior is at t = 0)
-    data : (M, p) deg C at ``setup.sensor_positions``; NaN = missing (no analysis)
-    param_bounds : (n_par, 2), physical range of each parameter's ensemble mean;
-        leaving it stops the run (default: 1/20 and 20 times the nominal values)
+    model: TissueForwardModel
+    P_obs: sp.csr_matrix
+    noise_var: np.ndarray
+    P_track: sp.csr_matrix
+    prior: Callable
+    rw: np.ndarray
+    transforms: object
+    dynamics: Callable | None
+    localization: tuple | None
+    walk_scale: Callable | None
+    config: FilterConfig
+    health: HealthCheck
+    n: int
 
-    Returns
-    -------
-    TissueEstimates; if the filter diverges, the estimates up to that point with
-    ``diverged`` set to the message.
-    """
+    def problem(self, times, data, prior=None, t0: float = 0.0) -> FilterProblem:
+        s = self.model.setup
+        return FilterProblem(
+            forecast=self.model, observation=self.P_obs, obs_times=times, obs_data=data,
+            obs_cov=self.noise_var, prior=prior or self.prior,
+            model_noise=s.model_noise_std ** 2, param_noise=self.rw,
+            transforms=self.transforms, t0=t0, param_dynamics=self.dynamics,
+            localization=self.localization, param_noise_scale=self.walk_scale)
+
+
+def _assemble(setup: TissueFilterSetup, param_bounds=None, warm_dt: float | None = None
+              ) -> _Pieces:
     model = TissueForwardModel(setup)
     npts = model.mesh.p.shape[1]
-    if len(times):
-        model.warm_up(float(times[0]))
+    if warm_dt is not None:
+        model.warm_up(warm_dt)
     P_obs, noise_var, obs_xyz = observation_operator(setup, model.mesh)
     P_track = fem.probe_matrix(model.mesh, setup.tracked_positions.T)
     names = setup.estimate
@@ -344,17 +357,37 @@ def identify(setup: TissueFilterSetup, times: np.ndarray, data: np.ndarray, *,
         n_theta = len(names) * (2 if setup.parameter_model == "trend" else 1)
         rho_xy = np.vstack([gaspari_cohn(d_xy / c), np.ones((n_theta, obs_xyz.shape[0]))])
         localization = (rho_xy, gaspari_cohn(d_yy / c))
-    problem = FilterProblem(
-        forecast=model, observation=P_obs, obs_times=times, obs_data=data, obs_cov=noise_var,
-        prior=prior, model_noise=setup.model_noise_std ** 2, param_noise=rw,
-        transforms=transforms, t0=0.0, param_dynamics=dynamics, localization=localization,
-        param_noise_scale=None if setup.random_walk_when_off == 1.0 else walk_scale)
     config = FilterConfig(n_members=setup.n_members, method=setup.method,
                           inflation=setup.inflation, seed=setup.seed, mda=setup.mda)
     if param_bounds is None:
         param_bounds = np.column_stack([nominal / 20, nominal * 20])
-    param_bounds = np.vstack([param_bounds, bounds_extra])
-    health = HealthCheck(param_bounds=param_bounds)
+    health = HealthCheck(param_bounds=np.vstack([param_bounds, bounds_extra]))
+    return _Pieces(model, P_obs, noise_var, P_track, prior, rw, transforms, dynamics,
+                   localization, None if setup.random_walk_when_off == 1.0 else walk_scale,
+                   config, health, n)
+
+
+def identify(setup: TissueFilterSetup, times: np.ndarray, data: np.ndarray, *,
+             callback: Callable[[StepReport], None] | None = None,
+             param_bounds: np.ndarray | None = None) -> TissueEstimates:
+    """Run the filter on sensor data.
+
+    Parameters
+    ----------
+    times : (M,) s, strictly increasing, after 0 (the prior is at t = 0)
+    data : (M, p) deg C at ``setup.sensor_positions`` (then the image's pixels);
+        NaN = missing (no analysis)
+    param_bounds : (n_par, 2), physical range of each parameter's ensemble mean;
+        leaving it stops the run (default: 1/20 and 20 times the nominal values)
+
+    Returns
+    -------
+    TissueEstimates; if the filter diverges, the estimates up to that point with
+    ``diverged`` set to the message.
+    """
+    pieces = _assemble(setup, param_bounds, float(times[0]) if len(times) else None)
+    problem = pieces.problem(times, data)
+    P_track, n = pieces.P_track, pieces.n
     M = len(times)
     tr_mean = np.full((M + 1, P_track.shape[0]), np.nan)
     tr_std = np.full_like(tr_mean, np.nan)
@@ -372,15 +405,80 @@ def identify(setup: TissueFilterSetup, times: np.ndarray, data: np.ndarray, *,
         # the filter's dense products are small (50 x 5000): threaded BLAS only spins, and
         # on a busy machine it is 20-30 times slower (measured); numba kernels keep the cores
         with blas_threads(1):
-            res = run_filter(problem, config, health=health, callback=record)
+            res = run_filter(problem, pieces.config, health=pieces.health, callback=record)
     except FilterDivergence as err:
         res = err.result
         diverged = str(err)
     wall = time.perf_counter() - t0
     k = len(res.times)
     return TissueEstimates(
-        times=res.times, names=names, param_mean=res.param_mean[:, :n],
+        times=res.times, names=setup.estimate, param_mean=res.param_mean[:, :n],
         param_std=res.param_std[:, :n],
         tracked_positions=setup.tracked_positions, tracked_mean=tr_mean[:k],
         tracked_std=tr_std[:k], analysed=res.analysed, step_latency_s=res.step_latency_s,
         filter_wall_s=wall, result=res, diverged=diverged)
+
+
+@dataclass
+class OnlineEstimate:
+    """The filter's state after one reading (physical units; see TissueEstimates)."""
+
+    time: float
+    param_mean: np.ndarray  #: (n_par,)
+    param_std: np.ndarray  #: (n_par,)
+    tracked_mean: np.ndarray  #: (n_tracked,) deg C
+    tracked_std: np.ndarray  #: (n_tracked,) deg C
+    analysed: bool
+    latency_s: float  #: wall time of this update
+
+
+class OnlineIdentifier:
+    """The filter one reading at a time, for a live sensor (``identify --follow``).
+
+    Each :meth:`update` forecasts the ensemble from the previous reading's time to the
+    new one and assimilates the new reading (NaN entries are skipped), so the estimate
+    is ready before the next frame arrives. The random numbers of reading ``k`` come
+    from ``(setup.seed, k)``: a replay of the same readings gives the same estimates
+    (they differ from :func:`identify`'s, which draws from one stream).
+
+    Raises :class:`~enkf.driver.FilterDivergence` when the health check stops the
+    filter (the estimates so far stay in :attr:`history`).
+    """
+
+    def __init__(self, setup: TissueFilterSetup, *, param_bounds=None, dt_hint: float = 0.1):
+        self.setup = setup
+        self._pieces = _assemble(setup, param_bounds, dt_hint)
+        rng = np.random.default_rng([setup.seed, 0])
+        self._X, self._theta = self._pieces.prior(rng, setup.n_members)
+        self.time = 0.0
+        self.history: list[OnlineEstimate] = []
+        self.names = setup.estimate
+        self.n_obs = self._pieces.P_obs.shape[0]
+
+    def update(self, t: float, y) -> OnlineEstimate:
+        """Assimilate the reading ``y`` ((p,) deg C, NaN = missing) taken at ``t`` (s)."""
+        t = float(t)
+        if not np.isfinite(t) or t <= self.time:
+            raise ValueError(f"reading time must be finite and after {self.time} s, got {t!r}")
+        y = np.asarray(y, float).reshape(-1)
+        if y.shape != (self.n_obs,):
+            raise ValueError(f"a reading must hold {self.n_obs} values (sensors then pixels), "
+                             f"got {y.size}")
+        X, theta = self._X, self._theta
+        problem = self._pieces.problem(np.array([t]), y[None, :],
+                                       prior=lambda rng, N: (X, theta), t0=self.time)
+        seed = int(np.random.SeedSequence([self.setup.seed, len(self.history) + 1])
+                   .generate_state(1)[0])
+        config = replace(self._pieces.config, seed=seed)
+        tic = time.perf_counter()
+        with blas_threads(1):
+            res = run_filter(problem, config, health=self._pieces.health)
+        self._X, self._theta = res.state_ensemble, res.param_ensemble
+        Y = (self._pieces.P_track @ self._X.T).T
+        n = self._pieces.n
+        est = OnlineEstimate(t, res.param_mean[-1, :n], res.param_std[-1, :n], Y.mean(axis=0),
+                             Y.std(axis=0, ddof=1), bool(res.analysed[-1]),
+                             time.perf_counter() - tic)
+        self.time = t
+        self.history.append(est)
+        return est
