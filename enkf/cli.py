@@ -44,8 +44,10 @@ def build_parser() -> argparse.ArgumentParser:
                     "EnKF on the coarse model with the absorption emulator; writes "
                     "estimates.csv, truth.csv, summary.json and figures/.")
     p_paper.add_argument("scenario", choices=("constant", "time-varying", "all-params",
-                                              "sensitivity"),
-                         help="an experiment, or 'sensitivity' for the paper's sensitivity study")
+                                              "pulse-train", "sensitivity"),
+                         help="an experiment ('pulse-train': three pulses, optics that change "
+                              "while heated, beyond the paper), or 'sensitivity' for the "
+                              "paper's sensitivity study")
     p_paper.add_argument("--members", type=int, default=50, help="ensemble size N (default 50)")
     p_paper.add_argument("--method", choices=("enkf", "etkf"), default="etkf",
                          help="analysis: deterministic ETKF (default) or the paper's EnKF "
