@@ -22,6 +22,37 @@ def _common(p: argparse.ArgumentParser) -> None:
     p.add_argument("--quiet", action="store_true", help="no progress bar")
 
 
+def _dask_options(p: argparse.ArgumentParser) -> None:
+    g = p.add_argument_group("Dask (pip install \"tissue-enkf[dist]\")")
+    g.add_argument("--scheduler", default=None, metavar="ADDRESS",
+                   help="run the Monte Carlo tasks on an existing Dask cluster "
+                        "(e.g. tcp://10.0.0.5:8786)")
+    g.add_argument("--workers", type=int, default=None, metavar="N",
+                   help="run them on a new local Dask cluster of N single-threaded workers")
+
+
+def _client(args):
+    """The Dask client of --scheduler / --workers, or None (this machine's threads)."""
+    scheduler, workers = getattr(args, "scheduler", None), getattr(args, "workers", None)
+    if scheduler is None and workers is None:
+        return None
+    if scheduler is not None and workers is not None:
+        raise ValueError("give --scheduler or --workers, not both")
+    if workers is not None and workers < 1:
+        raise ValueError(f"--workers must be >= 1, got {workers}")
+    from mcmatlab_py.distributed import connect
+
+    return connect(scheduler, n_workers=workers)
+
+
+def _close(client) -> None:
+    if client is not None:
+        cluster = getattr(client, "cluster", None)
+        client.close()
+        if cluster is not None:
+            cluster.close()
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
         prog="tissue-enkf",
@@ -36,6 +67,7 @@ def build_parser() -> argparse.ArgumentParser:
     p_mc.add_argument("--photons", type=int, default=None,
                       help="number of photon packets (overrides MC.n_photons_requested)")
     _common(p_mc)
+    _dask_options(p_mc)
     p_mc.set_defaults(func=cmd_mc)
 
     p_paper = sub.add_parser(
@@ -68,6 +100,7 @@ def build_parser() -> argparse.ArgumentParser:
                          help="where emulator tables and truths are cached "
                               "(default $TISSUE_ENKF_CACHE or ~/.cache/tissue-enkf)")
     _common(p_paper)
+    _dask_options(p_paper)
     p_paper.set_defaults(func=cmd_paper)
     return parser
 
@@ -99,7 +132,11 @@ def cmd_mc(args) -> int:
     model.MC.n_threads = args.threads
     model.MC.validate(model.G)
     t0 = time.perf_counter()
-    model.run_monte_carlo()
+    client = _client(args)
+    try:
+        model.run_monte_carlo(client=client)
+    finally:
+        _close(client)
     G, MC = model.G, model.MC
     import numpy as np
 
@@ -133,16 +170,26 @@ def cmd_mc(args) -> int:
 
 def cmd_paper(args) -> int:
     from . import paper
-    from .rundir import atomic_dir, check_out_dir
+    from .rundir import check_out_dir
 
     check_out_dir(args.out, args.force)
     _apply_threads(args.threads)
     if args.members < 2:
         raise ValueError(f"--members must be >= 2, got {args.members}")
     verbose = not args.quiet
+    client = _client(args)
+    try:
+        return _paper(args, paper, client, verbose)
+    finally:
+        _close(client)
+
+
+def _paper(args, paper, client, verbose) -> int:
+    from .rundir import atomic_dir
+
     if args.scenario == "sensitivity":
         res = paper.sensitivity_study(tuple(args.fine), args.truth_photons or 10**6,
-                                      progress=verbose)
+                                      progress=verbose, client=client)
         with atomic_dir(args.out, args.force) as tmp:
             (tmp / "figures").mkdir()
             paper.plot_sensitivity(tmp / "figures" / "sensitivity.png", res)
@@ -165,7 +212,7 @@ def cmd_paper(args) -> int:
                                n_members=args.members, method=args.method, truth_config=tcfg,
                                emulator_photons=args.emulator_photons,
                                emulator_table=args.emulator_table, exact=args.exact,
-                               cache_dir=args.cache_dir, progress=verbose)
+                               cache_dir=args.cache_dir, progress=verbose, client=client)
     with atomic_dir(args.out, args.force) as tmp:
         paper.write_run(run, tmp)
     if verbose:

@@ -156,8 +156,12 @@ class Truth:
 
 
 def generate_truth(cfg: TruthConfig, *, cache_dir: str | Path | None = None,
-                   progress: bool = True) -> Truth:
-    """Run (or load from the cache) the fine-grid truth of a scenario."""
+                   progress: bool = True, client=None) -> Truth:
+    """Run (or load from the cache) the fine-grid truth of a scenario.
+
+    ``client``: a ``dask.distributed`` client for the Monte Carlo of a constant-property
+    truth (photon batches as tasks; the same map as here).
+    """
     import time
 
     from mcmatlab_py.emulator import default_cache_dir
@@ -183,7 +187,7 @@ def generate_truth(cfg: TruthConfig, *, cache_dir: str | Path | None = None,
         model.HS.mua_t = mua_ramp
         model.HS.mus_t = mus_ramp
     else:
-        model.run_monte_carlo()
+        model.run_monte_carlo(client=client)
     n_tracked = len(model.HS.temp_sensor_positions)
     if cfg.camera is not None:
         pts = camera_image(cfg.camera).sample_points()
@@ -269,7 +273,7 @@ def filter_setup(scenario: str, absorption, *, seed: int = 0, n_members: int = 5
 
 
 def emulator_for(coarse=(20, 20, 10), n_photons: int = 250_000, *, progress=True,
-                 cache_dir=None, mc_grid=(100, 100, 50), **kw):
+                 cache_dir=None, mc_grid=(100, 100, 50), client=None, **kw):
     """The filter's absorption emulator for the paper's block (cached).
 
     The Monte Carlo of each table point runs on ``mc_grid`` (the truth's voxels) and
@@ -283,7 +287,7 @@ def emulator_for(coarse=(20, 20, 10), n_photons: int = 250_000, *, progress=True
     spec = EmulatorSpec.from_model(paper_model(mc_grid, progress=False), n_photons=n_photons,
                                    mesh_divisions=tuple(coarse), **kw)
     return AbsorptionEmulator.build(spec, cache_dir=cache_dir, progress=progress,
-                                    out_of_range="clamp")
+                                    out_of_range="clamp", client=client)
 
 
 @dataclass
@@ -300,13 +304,15 @@ class PaperRun:
 def run_experiment(scenario: str, seed: int = 0, *, n_members: int = 50, method: str = "etkf",
                    truth_config: TruthConfig | None = None, emulator_photons: int = 250_000,
                    emulator_table: int = 12, exact: bool = False, cache_dir=None,
-                   progress: bool = True, twin: bool = False, **overrides) -> PaperRun:
+                   progress: bool = True, twin: bool = False, client=None,
+                   **overrides) -> PaperRun:
     """Truth (cached), noisy data (``seed``), and the filter (``seed``) for one scenario.
 
     ``twin=True`` replaces the fine-grid truth by the filter's own coarse model at the
     true parameters (:func:`twin_truth`): the identical-twin experiment, free of model
-    error. ``overrides`` go to :class:`~enkf.tissue.TissueFilterSetup` (e.g.
-    ``model_noise_std``).
+    error. ``client`` (a ``dask.distributed`` client) spreads the emulator table, the
+    constant truth's Monte Carlo and the exact mode's members over a cluster.
+    ``overrides`` go to :class:`~enkf.tissue.TissueFilterSetup` (e.g. ``model_noise_std``).
     """
     import time
 
@@ -319,9 +325,10 @@ def run_experiment(scenario: str, seed: int = 0, *, n_members: int = 50, method:
     t0 = time.perf_counter()
     tcfg = truth_config or TruthConfig(scenario=scenario)
     tcfg.scenario = scenario
-    truth = generate_truth(tcfg, cache_dir=cache_dir, progress=progress)
+    truth = generate_truth(tcfg, cache_dir=cache_dir, progress=progress, client=client)
     emu = emulator_for(n_photons=emulator_photons, progress=progress, cache_dir=cache_dir,
-                       mc_grid=tcfg.grid, n_mua=emulator_table, n_mus=emulator_table)
+                       mc_grid=tcfg.grid, n_mua=emulator_table, n_mus=emulator_table,
+                       client=client)
     if twin:
         truth = twin_truth(scenario, emu, truth)
     data = noisy_sensor(truth, seed)
@@ -329,7 +336,7 @@ def run_experiment(scenario: str, seed: int = 0, *, n_members: int = 50, method:
     if exact:
         from mcmatlab_py.emulator import DirectMonteCarloAbsorption
 
-        absorption = DirectMonteCarloAbsorption(emu.spec)
+        absorption = DirectMonteCarloAbsorption(emu.spec, client=client)
     setup = filter_setup(scenario, absorption, seed=seed, n_members=n_members, method=method,
                          **overrides)
     bar = Progress(len(truth.times) - 1, "filter", enabled=progress)

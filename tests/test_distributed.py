@@ -120,3 +120,16 @@ def test_split_range_covers_every_batch_once():
         assert ranges[0][0] == 0 and ranges[-1][1] == n
         assert all(a < b for a, b in ranges)
         assert all(r[1] == s[0] for r, s in zip(ranges[:-1], ranges[1:], strict=True))
+
+
+def test_mc_command_on_a_local_cluster_writes_the_same_maps(tmp_path):
+    from enkf.cli import main
+
+    cfg = Path(__file__).parents[1] / "examples" / "standard_tissue.toml"
+    common = [str(cfg), "--photons", "20000", "--quiet", "--seed", "4"]
+    assert main(["mc", *common, "--out", str(tmp_path / "here")]) == 0
+    assert main(["mc", *common, "--out", str(tmp_path / "there"), "--workers", "2"]) == 0
+    with np.load(tmp_path / "here" / "NA.npz") as a, np.load(tmp_path / "there" / "NA.npz") as b:
+        np.testing.assert_array_equal(a["NA"], b["NA"])
+    assert main(["mc", *common, "--out", str(tmp_path / "x"), "--workers", "0"]) == 2
+    assert not (tmp_path / "x").exists()
