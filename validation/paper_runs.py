@@ -28,7 +28,7 @@ def checks(s: dict) -> dict[str, bool]:
     if sc == "constant":
         out["mua within 5%"] = p["mua"]["relative_error_final"] <= 0.05
         out["mus within 25/cm"] = abs(p["mus"]["estimate_final"] - p["mus"]["truth_final"]) <= 25
-    elif sc == "time-varying":
+    elif sc in ("time-varying", "pulse-train"):
         out["mua rmse <= 0.3"] = p["mua"]["rmse"] <= 0.3
         out["mus within 10%"] = p["mus"]["relative_error_final"] <= 0.10
     else:
