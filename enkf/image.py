@@ -93,10 +93,21 @@ class ThermalImage:
         s2 = int(self.subsamples) ** 2
         return v.reshape(*v.shape[:-1], self.n_pixels, s2).mean(axis=-1)
 
-    def matrix(self, mesh) -> sp.csr_matrix:
-        """(n_pixels, n_nodes): the footprint average of the P1 field of ``mesh``."""
+    def matrix(self, mesh, interpolation: str = "cubic") -> sp.csr_matrix:
+        """(n_pixels, n_nodes): the footprint average of the model's surface field.
+
+        ``interpolation="cubic"`` (default, structured box meshes): the surface field
+        between nodes is the tensor-product cubic Lagrange interpolant of the nodal
+        values (4 x 4 nodes around each probe). ``"p1"``: the finite-element field
+        itself, piecewise linear, which flattens a peaked surface field between nodes:
+        with pixels the size of an element it averaged the paper's hot spot 0.7% low,
+        against 0.1% at the nodes, and over 256 pixels that bias is what the filter
+        then fits (validation/reports/image_vs_point.md).
+        """
         import fem
 
+        if interpolation not in ("cubic", "p1"):
+            raise ValueError(f"interpolation must be 'cubic' or 'p1', got {interpolation!r}")
         pts = self.sample_points()
         lo, hi = mesh.p.min(axis=1), mesh.p.max(axis=1)
         tol = 1e-9 * float(np.max(hi - lo))
@@ -105,12 +116,43 @@ class ThermalImage:
             bad = pts[np.flatnonzero(outside)[0]]
             raise ValueError(f"ThermalImage: pixel footprint point {tuple(bad.round(6))} cm is "
                              f"outside the tissue [{lo.round(6)}, {hi.round(6)}]")
-        P = fem.probe_matrix(mesh, pts.T)
+        grid = fem.structured_grid(mesh) if interpolation == "cubic" else None
+        P = _cubic_surface_probes(grid, pts) if grid is not None else fem.probe_matrix(mesh, pts.T)
         s2 = int(self.subsamples) ** 2
         A = sp.csr_matrix((np.full(pts.shape[0], 1.0 / s2),
                            (np.repeat(np.arange(self.n_pixels), s2), np.arange(pts.shape[0]))),
                           shape=(self.n_pixels, pts.shape[0]))
         return (A @ P).tocsr()
+
+
+def _lagrange_stencil(u: np.ndarray, n: int) -> tuple[np.ndarray, np.ndarray]:
+    """4-point Lagrange stencil at node coordinates ``u`` (in units of the spacing) on
+    nodes 0..n: first node index (m,) and weights (m, 4); shifted inward at the ends."""
+    i0 = np.clip(np.floor(u).astype(int) - 1, 0, max(n - 3, 0))
+    t = u - i0
+    nodes = np.arange(4.0)
+    w = np.ones((u.size, 4))
+    for a in range(4):
+        for b in range(4):
+            if a != b:
+                w[:, a] *= (t - nodes[b]) / (nodes[a] - nodes[b])
+    return i0, w
+
+
+def _cubic_surface_probes(grid, pts: np.ndarray) -> sp.csr_matrix:
+    """(n_points, n_nodes): tensor-product cubic interpolation of the top-face nodes."""
+    lo = grid.lower
+    ix, wx = _lagrange_stencil((pts[:, 0] - lo[0]) / grid.dx, grid.nx)
+    iy, wy = _lagrange_stencil((pts[:, 1] - lo[1]) / grid.dy, grid.ny)
+    rows, cols, vals = [], [], []
+    r = np.arange(pts.shape[0])
+    for a in range(4):
+        for b in range(4):
+            rows.append(r)
+            cols.append(grid.node_index(ix + a, iy + b, 0))
+            vals.append(wx[:, a] * wy[:, b])
+    return sp.csr_matrix((np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))),
+                         shape=(pts.shape[0], grid.npoints))
 
 
 def load_frames(path: str | Path, image: ThermalImage | None = None

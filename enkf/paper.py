@@ -264,10 +264,10 @@ def filter_setup(scenario: str, absorption, *, seed: int = 0, n_members: int = 5
     # optical properties change by heating: when they may drift, hold them still while the
     # laser is off (they no longer act on the forecast then, and a walk only lets them wander)
     overrides.setdefault("random_walk_when_off", 1.0 if scenario == "constant" else 0.0)
+    overrides.setdefault("sensor_positions", np.zeros((1, 3)))
     return TissueFilterSetup(
         grid=fem.BoxGrid(*coarse, 0.5, 0.5, 0.25), absorption=absorption,
-        power=HS.laser_power, nominal=dict(TABLE), estimate=estimate,
-        sensor_positions=np.zeros((1, 3)), sensor_noise_var=0.01,
+        power=HS.laser_power, nominal=dict(TABLE), estimate=estimate, sensor_noise_var=0.01,
         tracked_positions=np.array([[0.0, 0.0, z] for z in TRACKED_DEPTHS]),
         T_initial=0.0, n_members=n_members, seed=seed, method=method, **overrides)
 

@@ -19,7 +19,21 @@ def test_pixel_average_of_a_linear_field_is_its_value_at_the_centre():
     pix = CAMERA.matrix(mesh) @ T
     c = CAMERA.pixel_centers()
     np.testing.assert_allclose(pix, 20.0 + 3.0 * c[:, 0] - 5.0 * c[:, 1], atol=1e-12)
+    np.testing.assert_allclose(CAMERA.matrix(mesh, "p1") @ T, pix, atol=1e-12)
     assert pix.shape == (24,) and c[0, 0] < c[1, 0]  # C order: x runs fastest along a row
+
+
+def test_cubic_surface_interpolation_is_exact_for_cubics():
+    mesh = GRID.mesh()
+    x, y, z = mesh.p
+    T = 1 + x**3 - 2 * x * y**2 + y**3 + 5 * z
+    cam = ThermalImage(CAMERA.x_range, CAMERA.y_range, CAMERA.shape, subsamples=1)
+    c = cam.pixel_centers()
+    exact = 1 + c[:, 0] ** 3 - 2 * c[:, 0] * c[:, 1] ** 2 + c[:, 1] ** 3
+    np.testing.assert_allclose(cam.matrix(mesh) @ T, exact, atol=1e-12)
+    assert np.abs(cam.matrix(mesh, "p1") @ T - exact).max() > 1e-4  # P1 is not
+    with pytest.raises(ValueError, match="interpolation"):
+        cam.matrix(mesh, "spline")
 
 
 def test_pixel_average_of_a_curved_field_converges_with_subsamples():
