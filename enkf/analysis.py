@@ -263,11 +263,14 @@ def etkf(E: np.ndarray, Y: np.ndarray, y: np.ndarray, R: np.ndarray) -> np.ndarr
     U, s, Vt = _thin_svd(S)
     d = s**2 + (N - 1)  # eigenvalues of S S^T + (N-1) I on span(U)
     x_mean = E.mean(axis=0)
-    A = E - x_mean  # anomalies
+    A = E - x_mean  # anomalies (a new array, updated in place below)
     UA = U.T @ A
     w_coef = (s / d) * (Vt @ whiten(y - y_mean))  # mean weights: w = U @ w_coef
     t_coef = np.sqrt((N - 1) / d) - 1.0  # T - I = U diag(t_coef) U^T
-    return x_mean + (w_coef @ UA) + A + U @ (t_coef[:, None] * UA)
+    # x_mean + w^T A + T A, in two passes over the (N, n) array (it is memory-bound)
+    A += U @ (t_coef[:, None] * UA)
+    A += x_mean + w_coef @ UA
+    return A
 
 
 def inflate(E: np.ndarray, factor: float | np.ndarray) -> np.ndarray:
