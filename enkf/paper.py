@@ -220,7 +220,7 @@ def twin_truth(scenario: str, emulator, like: Truth, coarse=(20, 20, 10)) -> Tru
 
     from .tissue import TissueForwardModel
 
-    setup = filter_setup("all-params", emulator, n_members=1, coarse=coarse)
+    setup = filter_setup(scenario, emulator, n_members=1, coarse=coarse)  # its laser
     model = TissueForwardModel(setup)
     probes = fem.probe_matrix(model.mesh, setup.tracked_positions.T)
     T = np.full((1, model.mesh.p.shape[1]), setup.T_initial)
