@@ -594,6 +594,14 @@ def run_filter(
             raise FilterDivergence(k, float(times[k]), "non-finite forecast", result(k))
         return Y
 
+    def spread_out(Z):
+        """Inflation and rotation of an analysed augmented ensemble; (X, U) back."""
+        if config.inflation != 1.0:
+            Z = inflate(Z, config.inflation)
+        if config.rotate:
+            Z = random_rotation(Z, rng)
+        return Z[:, :n_state], Z[:, n_state:]
+
     record(0, 0.0)
     for k in range(1, M + 1):
         tic = time.perf_counter()
@@ -635,12 +643,7 @@ def run_filter(
             dU = D if dU is not None else None
             with np.errstate(over="ignore"):
                 X, U = advance(X0, U0, to_physical(transforms, U0), t_a, t_b, v, dU)
-            Z = np.concatenate([X, U], axis=1)
-            if config.inflation != 1.0:
-                Z = inflate(Z, config.inflation)
-            if config.rotate:
-                Z = random_rotation(Z, rng)
-            X, U = Z[:, :n_state], Z[:, n_state:]
+            X, U = spread_out(np.concatenate([X, U], axis=1))
             analysed[k - 1] = True
             ana_latency[k - 1] = time.perf_counter() - tic_a
         else:
@@ -655,11 +658,7 @@ def run_filter(
                 else:
                     Z = analysis(Z, Y, y, P.obs_cov, config.method, rng,
                                  center=config.center_perturbations)
-                if config.inflation != 1.0:
-                    Z = inflate(Z, config.inflation)
-                if config.rotate:
-                    Z = random_rotation(Z, rng)
-                X, U = Z[:, :n_state], Z[:, n_state:]
+                X, U = spread_out(Z)
                 analysed[k - 1] = True
                 ana_latency[k - 1] = time.perf_counter() - tic_a
         with np.errstate(over="ignore"):
