@@ -265,9 +265,10 @@ def filter_setup(scenario: str, absorption, *, seed: int = 0, n_members: int = 5
         # higher VHC (heat kept near the surface): a faster walk on mua (0.05) removes
         # most of the lag. The first reading after the pulse then moves mus by a lot in
         # one linear step (all five seeds stopped there, mean mus beyond 20 x nominal);
-        # four smaller steps (one-step ES-MDA, FilterConfig.mda) let every seed through.
+        # three smaller steps (one-step ES-MDA, FilterConfig.mda) let every seed through
+        # (four did as well, three keeps every step below 100 ms on 2 busy cores).
         # Chosen over seeds 0-4 (validation/reports/paper_runs.md, fine truth and twin).
-        overrides.setdefault("mda", 4)
+        overrides.setdefault("mda", 3)
     overrides.setdefault("random_walk_std", rw)
     # optical properties change by heating: when they may drift, hold them still while the
     # laser is off (they no longer act on the forecast then, and a walk only lets them wander)
