@@ -102,6 +102,51 @@ def build_parser() -> argparse.ArgumentParser:
     _common(p_paper)
     _dask_options(p_paper)
     p_paper.set_defaults(func=cmd_paper)
+    p_heat = sub.add_parser(
+        "heat", help="Monte Carlo plus heat: sensor series and volume fields",
+        description="Run the Monte Carlo of the model in CONFIG, then the heat simulation of "
+                    "its [HS] table (laser pulses, boundaries, sensors); write sensors.csv "
+                    "(temperature at HS.temp_sensor_positions), summary.json, figures/ and "
+                    "fields/*.vtu (temperature, damage on the mesh; NA, NFR on the voxels).")
+    p_heat.add_argument("config", help="TOML model file with [G], [MC] and [HS] (see examples/)")
+    p_heat.add_argument("--photons", type=int, default=None,
+                        help="number of photon packets (overrides MC.n_photons_requested)")
+    _common(p_heat)
+    _dask_options(p_heat)
+    p_heat.set_defaults(func=cmd_heat)
+
+    p_id = sub.add_parser(
+        "identify", help="the filter on measured data",
+        description="Estimate the optical properties (and the temperatures below the "
+                    "surface) from measured temperatures: the model, sensors and filter come "
+                    "from CONFIG, the data from a CSV (time in s, then one column per sensor "
+                    "in deg C; gaps empty or nan). Writes estimates.csv, summary.json, "
+                    "figures/, fields/final.vtu and run.json. Several --data files run as a "
+                    "batch (one Dask task each with --workers/--scheduler) and add batch.csv. "
+                    "Exit status 0 (also when the filter's health check stopped a run: "
+                    "summary.json says when and why, the estimates up to then are written), "
+                    "2 for bad input.")
+    p_id.add_argument("config", help="TOML file: [G], [MC], [HS], [sensors], [filter]")
+    p_id.add_argument("--data", nargs="+", default=None, metavar="FILE",
+                      help="measured data CSV file(s)")
+    p_id.add_argument("--follow", default=None, metavar="FILE",
+                      help="online: read FILE as the acquisition appends to it, write each "
+                           "estimate before the next frame (stops at '# end' or when idle)")
+    p_id.add_argument("--idle-timeout", type=float, default=10.0,
+                      help="--follow: stop after this many seconds without a new line")
+    p_id.add_argument("--cache-dir", default=None, help="emulator cache directory")
+    _common(p_id)
+    _dask_options(p_id)
+    p_id.set_defaults(func=cmd_identify)
+
+    p_val = sub.add_parser(
+        "validate", help="run the validation suite and write a Markdown report",
+        description="Run the validation scripts of the source tree (validation/*.py) and "
+                    "collect their reports into --out/report.md. --quick (default) runs "
+                    "small versions in a few minutes; --full the published-size ones.")
+    p_val.add_argument("--full", action="store_true", help="full sizes (can take hours)")
+    _common(p_val)
+    p_val.set_defaults(func=cmd_validate)
     return parser
 
 
@@ -228,6 +273,313 @@ def _paper(args, paper, client, verbose) -> int:
               f"{1e3 * tm['step_latency_max_s']:.1f} ms -> {args.out}")
         if summary["diverged"]:
             print(f"warning: {summary['diverged']}", file=sys.stderr)
+    return 0
+
+
+def cmd_heat(args) -> int:
+    import numpy as np
+
+    import fem
+    from mcmatlab_py.config import load_model, read_toml
+    from mcmatlab_py.export import write_voxel_vtu
+    from mcmatlab_py.plotting import plot_na_slices
+
+    from .report import manifest
+    from .rundir import atomic_dir, check_out_dir, write_json
+
+    check_out_dir(args.out, args.force)
+    _apply_threads(args.threads)
+    model = load_model(args.config)
+    if args.seed is not None:
+        model.MC.seed = args.seed
+    if args.photons is not None:
+        model.MC.n_photons_requested = args.photons
+    model.MC.progress = model.HS.progress = not args.quiet
+    model.MC.n_threads = args.threads
+    model.HS.validate(model.G)
+    if not model.HS.temp_sensor_positions:
+        model.HS.temp_sensor_positions = [(0.0, 0.0, 0.0)]
+    t0 = time.perf_counter()
+    client = _client(args)
+    try:
+        model.run_monte_carlo(client=client)
+    finally:
+        _close(client)
+    t_mc = time.perf_counter() - t0
+    model.simulate_heat_distribution()
+    t_heat = time.perf_counter() - t0 - t_mc
+    HS, G, MC = model.HS, model.G, model.MC
+    with atomic_dir(args.out, args.force) as tmp:
+        (tmp / "figures").mkdir()
+        (tmp / "fields").mkdir()
+        pos = np.asarray(HS.temp_sensor_positions, float).reshape(-1, 3)
+        cols = ["time_s"] + [f"T_{x:g}_{y:g}_{z:g}" for x, y, z in pos]
+        np.savetxt(tmp / "sensors.csv", np.column_stack([HS.sensor_times, HS.sensor_temps]),
+                   delimiter=",", header=",".join(cols), comments="", fmt="%.8g")
+        fem.write_vtu(tmp / "fields" / "temperature.vtu", HS.mesh,
+                      point_data={"T": HS.T_nodes, "damage_Omega": HS.Omega.ravel()})
+        write_voxel_vtu(tmp / "fields" / "absorbed_power.vtu", G, {"NA": MC.NA, "NFR": MC.NFR})
+        plot_na_slices(model, tmp / "figures" / "NA_slices.png")
+        _plot_sensors(tmp / "figures" / "sensors.png", HS, cols[1:])
+        summary = {"absorbed_fraction": MC.absorbed_fraction, "escaped": MC.escaped,
+                   "n_photons": MC.n_photons, "T_max": float(HS.T_nodes.max()),
+                   "sensor_T_max": {c: float(HS.sensor_temps[:, i].max())
+                                    for i, c in enumerate(cols[1:])},
+                   "damage_max": float(HS.Omega.max()),
+                   "timing_s": {"monte_carlo": t_mc, "heat": t_heat}}
+        write_json(tmp / "summary.json", summary)
+        manifest(tmp / "run.json", command="heat", config=read_toml(args.config),
+                 seed=MC.seed_used, timings={"monte_carlo": t_mc, "heat": t_heat})
+    if not args.quiet:
+        print(f"max temperature {summary['T_max']:.2f} deg C, max damage "
+              f"{summary['damage_max']:.3g} -> {args.out}")
+    return 0
+
+
+def _plot_sensors(path, HS, labels) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, ax = plt.subplots(figsize=(6, 4), constrained_layout=True)
+    for i, lab in enumerate(labels):
+        ax.plot(HS.sensor_times, HS.sensor_temps[:, i], label=lab)
+    ax.set(xlabel="time [s]", ylabel="T [$^\\circ$C]", title="temperature at the sensors")
+    ax.legend(fontsize=7)
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+
+
+def _identify_one(cfg, absorption, seed, data_path, out_dir, quiet=True) -> dict:
+    """Run the filter on one data file and write its outputs into ``out_dir`` (a task)."""
+    from .config import read_sensor_csv
+    from .report import write_identify_outputs
+    from .tissue import identify
+
+    setup = cfg.setup(absorption, seed=seed)
+    n_obs = setup.sensor_positions.shape[0] + (setup.image.n_pixels if setup.image else 0)
+    times, data, _ = read_sensor_csv(data_path, n_obs)
+    t0 = time.perf_counter()
+    est = identify(setup, times, data)
+    summary = write_identify_outputs(Path(out_dir), setup, est, times, data,
+                                     absorption=absorption)
+    summary["data"] = str(data_path)
+    summary["wall_s"] = time.perf_counter() - t0
+    return summary
+
+
+def cmd_identify(args) -> int:
+    from .config import load_identify, read_sensor_csv
+    from .report import manifest
+    from .rundir import atomic_dir, check_out_dir, write_json
+
+    check_out_dir(args.out, args.force)
+    _apply_threads(args.threads)
+    if (args.data is None) == (args.follow is None):
+        raise ValueError("give --data FILE [FILE ...] or --follow FILE")
+    cfg = load_identify(args.config)
+    seed = args.seed if args.seed is not None else cfg.setup_kw.get("seed", 0)
+    files = [Path(f) for f in (args.data or [])]
+    if len(files) == 1:  # one dataset: bad data is bad input (exit 2, nothing written);
+        # in a batch a bad file is reported in batch.csv and the others go on
+        probe = cfg.setup(lambda a, b: None)
+        read_sensor_csv(files[0], probe.sensor_positions.shape[0]
+                        + (probe.image.n_pixels if probe.image else 0))
+    t0 = time.perf_counter()
+    client = _client(args)
+    try:
+        absorption = cfg.emulator(cache_dir=args.cache_dir, progress=not args.quiet,
+                                  client=client)
+        t_emu = time.perf_counter() - t0
+        if args.follow is not None:
+            return _follow(args, cfg, absorption, seed, t_emu)
+        with atomic_dir(args.out, args.force) as tmp:
+            if len(files) == 1:
+                summary = _identify_one(cfg, absorption, seed, files[0], tmp)
+                rows = [summary]
+            else:
+                rows = _identify_batch(cfg, absorption, seed, files, tmp, client, args.quiet)
+            manifest(tmp / "run.json", command="identify", config=cfg.raw, seed=seed,
+                     timings={"emulator": t_emu, "total": time.perf_counter() - t0},
+                     extra={"data": [str(f) for f in files]})
+            if len(files) > 1:
+                write_json(tmp / "summary.json", {"runs": rows})
+    finally:
+        _close(client)
+    if not args.quiet:
+        for r in rows:
+            if "error" in r:
+                print(f"{r['data']}: failed: {r['error']}", file=sys.stderr)
+                continue
+            par = ", ".join(f"{k} {v['estimate_final']:.4g} +- {v['std_final']:.2g}"
+                            for k, v in r["parameters"].items())
+            stop = f" (stopped: {r['stopped']})" if r["stopped"] else ""
+            print(f"{r['data']}: {par}{stop}")
+        print(f"-> {args.out}")
+    return 0
+
+
+def _identify_batch(cfg, absorption, seed, files, tmp, client, quiet) -> list:
+    import functools
+    import shutil
+
+    from mcmatlab_py.distributed import TaskError, run_tasks
+
+    names = []
+    for f in files:  # one sub-directory per file, unique names
+        base, k = f.stem, 1
+        while base in names:
+            k += 1
+            base = f"{f.stem}-{k}"
+        names.append(base)
+    for n in names:
+        (tmp / n).mkdir()
+    # the emulator travels once per task (tens of MB at most); results are small dicts
+    task = functools.partial(_batch_task, cfg, absorption, seed)
+    results = run_tasks(task, [(str(f), str(tmp / n)) for f, n in zip(files, names, strict=True)],
+                        client=client, errors="return", retries=1, progress=not quiet,
+                        label="identify")
+    rows = []
+    for f, n, r in zip(files, names, results, strict=True):
+        if isinstance(r, TaskError):
+            rows.append({"data": str(f), "dir": "", "error": str(r.error)})
+            shutil.rmtree(tmp / n, ignore_errors=True)
+        else:
+            rows.append({**r, "dir": n})
+    keys = list(next((r["parameters"] for r in rows if "parameters" in r), {}))
+    lines = ["data,dir,status," + ",".join(f"{k}_mean,{k}_std" for k in keys) + ",message"]
+    for r in rows:
+        if "error" in r:
+            vals = ",".join("," for _ in keys)
+            lines.append(f"{r['data']},{r['dir']},error,{vals},\"{r['error']}\"")
+        else:
+            vals = ",".join(f"{r['parameters'][k]['estimate_final']:.6g},"
+                            f"{r['parameters'][k]['std_final']:.6g}" for k in keys)
+            status = "stopped" if r["stopped"] else "ok"
+            lines.append(f"{r['data']},{r['dir']},{status},{vals},\"{r['stopped'] or ''}\"")
+    (tmp / "batch.csv").write_text("\n".join(lines) + "\n")
+    return rows
+
+
+def _batch_task(cfg, absorption, seed, item):
+    data_path, out_dir = item
+    return _identify_one(cfg, absorption, seed, data_path, out_dir)
+
+
+def _follow(args, cfg, absorption, seed, t_emu) -> int:
+    """Online mode: --out is written as the data come (not atomically: it is live)."""
+    from .report import manifest
+    from .stream import follow_csv
+    from .tissue import OnlineIdentifier
+
+    out = Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
+    setup = cfg.setup(absorption, seed=seed)
+    ident = OnlineIdentifier(setup)
+    names = list(setup.estimate)
+    cols = ["time_s"] + [f"{n}_{s}" for n in names for s in ("mean", "std")] + [
+        f"T{j}_{s}" for j in range(len(setup.tracked_positions)) for s in ("mean", "std")]
+    fh = open(out / "estimates.csv", "w", encoding="utf-8")
+    fh.write(",".join(cols) + "\n")
+    fh.flush()
+    last_fig = [0.0]
+
+    def on_update(est, line):
+        vals = [est.time] + [v for i in range(len(names))
+                             for v in (est.param_mean[i], est.param_std[i])]
+        vals += [v for j in range(len(est.tracked_mean))
+                 for v in (est.tracked_mean[j], est.tracked_std[j])]
+        fh.write(",".join(f"{v:.8g}" for v in vals) + "\n")
+        fh.flush()  # the estimate is on disk before the next frame is read
+        now = time.perf_counter()
+        if now - last_fig[0] > 2.0:  # the figure, at most every 2 s (it takes ~0.3 s)
+            _live_figure(out, ident, setup)
+            last_fig[0] = time.perf_counter()
+
+    t0 = time.perf_counter()
+    try:
+        n = follow_csv(args.follow, ident, on_update, idle_timeout_s=args.idle_timeout)
+    finally:
+        fh.close()
+    _live_figure(out, ident, setup)
+    manifest(out / "run.json", command="identify --follow", config=cfg.raw, seed=seed,
+             timings={"emulator": t_emu, "stream": time.perf_counter() - t0},
+             extra={"follow": str(args.follow), "readings": n})
+    if not args.quiet:
+        print(f"{n} readings assimilated -> {out}")
+    return 0
+
+
+def _live_figure(out, ident, setup) -> None:
+    import numpy as np
+
+    from .report import plot_identification
+    from .tissue import TissueEstimates
+
+    h = ident.history
+    if not h:
+        return
+    est = TissueEstimates(
+        times=np.array([e.time for e in h]), names=setup.estimate,
+        param_mean=np.array([e.param_mean for e in h]), param_std=np.array([e.param_std for e in h]),
+        tracked_positions=setup.tracked_positions,
+        tracked_mean=np.array([e.tracked_mean for e in h]),
+        tracked_std=np.array([e.tracked_std for e in h]),
+        analysed=np.array([e.analysed for e in h]),
+        step_latency_s=np.array([e.latency_s for e in h]), filter_wall_s=0.0)
+    (Path(out) / "figures").mkdir(exist_ok=True)
+    tmp = Path(out) / "figures" / ".estimates.png.tmp.png"
+    plot_identification(tmp, est, None, None, setup.power)
+    tmp.replace(Path(out) / "figures" / "estimates.png")  # a viewer never sees half a file
+
+
+def cmd_validate(args) -> int:
+    import subprocess
+
+    from .rundir import atomic_dir, check_out_dir
+
+    check_out_dir(args.out, args.force)
+    root = Path(__file__).resolve().parents[1] / "validation"
+    if not root.is_dir():
+        raise ValueError(f"the validation suite is not here ({root}): run from a source checkout")
+    quick = not args.full
+    suite = [
+        ("mc_published", ["--photons", "300000" if quick else "10000000"]),
+        ("enkf_kalman_consistency", ["--reps", "40", "--N", "500"] if quick else []),
+        ("enkf_lorenz96", ["--steps", "2000", "--burn-in", "300", "--seeds", "0"] if quick else []),
+        ("fem_convergence", []),
+        ("fem_fd_reference", []),
+        ("coarse_model_error", ["--photons", "1000000" if quick else "10000000"]),
+    ]
+    if not quick:
+        suite += [("emulator_accuracy", []), ("enkf_posterior", []), ("paper_runs", ["--twin"]),
+                  ("image_vs_point", [])]
+    with atomic_dir(args.out, args.force) as tmp:
+        lines = ["# tissue-enkf validation report", "",
+                 f"{'Quick' if quick else 'Full'} suite, run by `tissue-enkf validate"
+                 f"{' --full' if not quick else ''}`. Each section is the report of one "
+                 "script of validation/ (its command is in its first lines).", ""]
+        for name, extra in suite:
+            script = root / f"{name}.py"
+            report = tmp / f"{name}.md"
+            cmd = [sys.executable, str(script), *extra]
+            if name not in ("fem_convergence", "fem_fd_reference"):
+                cmd += ["--out", str(report)]
+            if not args.quiet:
+                print(f"validate: {name} ...", file=sys.stderr)
+            t0 = time.perf_counter()
+            res = subprocess.run(cmd, capture_output=True, text=True, cwd=str(root.parent))
+            dt = time.perf_counter() - t0
+            status = "ok" if res.returncode == 0 else f"exit status {res.returncode}"
+            lines += [f"## {name} ({status}, {dt:.0f} s)", ""]
+            if report.exists():
+                lines += [report.read_text().replace("# ", "### ", 1), ""]
+            else:
+                lines += ["```", (res.stdout + res.stderr).strip()[-3000:], "```", ""]
+        (tmp / "report.md").write_text("\n".join(lines) + "\n")
+    if not args.quiet:
+        print(f"report -> {Path(args.out) / 'report.md'}")
     return 0
 
 

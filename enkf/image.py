@@ -182,11 +182,11 @@ def load_frames(path: str | Path, image: ThermalImage | None = None
         raise ValueError(f"{path}: frames are {frames.shape[1:]} pixels, the camera "
                          f"(ThermalImage.shape) {tuple(image.shape)}")
     if not np.all(np.isfinite(times)):
-        raise ValueError(f"{path}: 'times' must be finite, got {times[~np.isfinite(times)][0]!r}")
+        raise ValueError(f"{path}: 'times' must be finite, got {float(times[~np.isfinite(times)][0])!r}")
     if np.any(np.diff(times) <= 0):
         k = int(np.flatnonzero(np.diff(times) <= 0)[0])
-        raise ValueError(f"{path}: 'times' must be strictly increasing, got {times[k]!r} then "
-                         f"{times[k + 1]!r}")
+        raise ValueError(f"{path}: 'times' must be strictly increasing, got {float(times[k])!r} then "
+                         f"{float(times[k + 1])!r}")
     if np.any(np.isinf(frames)):
         raise ValueError(f"{path}: 'frames' hold Inf (use NaN for a dead pixel)")
     return times, frames.reshape(times.size, -1)

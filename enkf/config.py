@@ -1,0 +1,311 @@
+"""TOML -> identification run: the model, the sensors, the filter (an edge module).
+
+One file describes everything ``tissue-enkf identify`` needs; the names follow the
+Python API (``model.G``, ``model.MC``, ``model.HS`` as in MCmatlab, then
+:class:`~enkf.tissue.TissueFilterSetup`)::
+
+    [G] ... [[G.media]] ... [MC] ... [MC.light_source] ...   # as for `tissue-enkf mc`
+    [HS]                      # laser and heat: P, duration_on, duration_off, n_pulses,
+                              # T_initial, heat_boundary_type, ...
+    [sensors]
+    positions = [[0.0, 0.0, 0.0]]   # cm, one row per data column after `time`
+    noise_var = 0.01                # deg C^2 (D)
+    tracked = [[0, 0, 0], [0, 0, 0.1], [0, 0, 0.2]]   # reported temperatures
+    [sensors.camera]                # optional: a thermal image (pixels after the sensors)
+    x_range = [-0.2, 0.2]
+    y_range = [-0.2, 0.2]
+    shape = [16, 16]
+    [filter]
+    n_members = 50
+    method = "etkf"                 # or "enkf" (perturbed observations)
+    estimate = ["mua", "mus"]       # or all four with "VHC", "TC"
+    grid = [20, 20, 10]             # the filter's coarse voxels
+    prior_range = [0.5, 2.0]        # uniform prior, times the values of G.media[0]
+    ...
+    [filter.emulator]
+    n_photons = 250000
+    n_mua = 12
+    n_mus = 12
+
+Every key is checked on load: an unknown key, a wrong type or a bad value raises
+:class:`~mcmatlab_py.config.ConfigError` naming the key, the value and what is allowed.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from mcmatlab_py.config import ConfigError, check_keys, model_from_config, read_toml
+
+__all__ = ["IdentifyConfig", "load_identify", "read_sensor_csv"]
+
+_SENSOR_KEYS = {"positions", "noise_var", "tracked", "camera"}
+_CAMERA_KEYS = {"x_range", "y_range", "shape", "noise_var", "subsamples"}
+_FILTER_KEYS = {
+    "n_members", "method", "estimate", "grid", "prior_range", "model_noise_std",
+    "random_walk_std", "random_walk_when_off", "inflation", "mda", "seed", "parameter_model",
+    "localization_radius", "heat_mass", "transforms", "emulator",
+}
+_EMULATOR_KEYS = {"n_photons", "n_mua", "n_mus", "mua_range", "mus_range", "seed", "exact"}
+
+
+@dataclass
+class IdentifyConfig:
+    """A parsed identification config: the model (G, MC, HS) and the filter's settings."""
+
+    model: object
+    setup_kw: dict  #: TissueFilterSetup arguments, without grid/absorption/power/nominal
+    grid: tuple  #: the filter's coarse voxels
+    emulator_kw: dict
+    exact: bool
+    raw: dict  #: the parsed TOML (for run.json)
+
+    def emulator(self, *, cache_dir=None, progress=True, client=None):
+        """The absorption emulator of this model on the filter's mesh (cached)."""
+        from mcmatlab_py.emulator import AbsorptionEmulator, DirectMonteCarloAbsorption, EmulatorSpec
+
+        spec = EmulatorSpec.from_model(self.model, mesh_divisions=tuple(self.grid),
+                                       **self.emulator_kw)
+        if self.exact:
+            return DirectMonteCarloAbsorption(spec, client=client)
+        return AbsorptionEmulator.build(spec, cache_dir=cache_dir, progress=progress,
+                                        out_of_range="clamp", client=client)
+
+    def setup(self, absorption, seed: int | None = None):
+        """The :class:`~enkf.tissue.TissueFilterSetup` with ``absorption``."""
+        import fem
+
+        from .tissue import TissueFilterSetup
+
+        G, HS = self.model.G, self.model.HS
+        m = G.media[0]
+        nominal = {"mua": m.mua, "mus": m.mus, "VHC": m.VHC, "TC": m.TC}
+        kw = dict(self.setup_kw)
+        if seed is not None:
+            kw["seed"] = seed
+        boundary = fem.HeatBoundary.from_mcmatlab(
+            HS.heat_boundary_type,
+            temperature=None if HS.heat_boundary_type != 2 else HS.T_ambient,
+            h=HS.heat_transfer_coefficient if HS.heat_boundary_type == 2 else 0.0)
+        return TissueFilterSetup(
+            grid=fem.BoxGrid(*self.grid, G.Lx, G.Ly, G.Lz), absorption=absorption,
+            power=HS.laser_power, nominal=nominal, T_initial=float(HS.T_initial),
+            heat_boundary=boundary, **kw)
+
+
+def _num(key, v, *, positive=False, integer=False, lo=None, hi=None):
+    if isinstance(v, bool) or not isinstance(v, (int, float)):
+        raise ConfigError(f"{key} must be a number, got {v!r}")
+    if integer and (not isinstance(v, int) and not float(v).is_integer()):
+        raise ConfigError(f"{key} must be an integer, got {v!r}")
+    if not math.isfinite(v):
+        raise ConfigError(f"{key} must be finite, got {v!r}")
+    if positive and v <= 0:
+        raise ConfigError(f"{key} must be > 0, got {v!r}")
+    if lo is not None and v < lo:
+        raise ConfigError(f"{key} must be >= {lo}, got {v!r}")
+    if hi is not None and v > hi:
+        raise ConfigError(f"{key} must be <= {hi}, got {v!r}")
+    return int(v) if integer else float(v)
+
+
+def _points(key, v, G) -> np.ndarray:
+    if not isinstance(v, list) or not all(isinstance(r, list) and len(r) == 3 for r in v):
+        raise ConfigError(f"{key} must be a list of [x, y, z] points in cm, got {v!r}")
+    pts = np.array([[_num(f"{key}[{i}][{j}]", c) for j, c in enumerate(r)]
+                    for i, r in enumerate(v)], dtype=float).reshape(-1, 3)
+    tol = 1e-9
+    for i, (x, y, z) in enumerate(pts):
+        if not (abs(x) <= G.Lx / 2 + tol and abs(y) <= G.Ly / 2 + tol and -tol <= z <= G.Lz + tol):
+            raise ConfigError(f"{key}[{i}] = {[x, y, z]} cm is outside the tissue "
+                              f"(x, y in [-{G.Lx / 2}, {G.Lx / 2}], z in [0, {G.Lz}])")
+    return pts
+
+
+def _pair(key, v, positive=False):
+    if not isinstance(v, list) or len(v) != 2:
+        raise ConfigError(f"{key} must be [lo, hi], got {v!r}")
+    lo, hi = (_num(f"{key}[{i}]", x, positive=positive) for i, x in enumerate(v))
+    if not lo < hi:
+        raise ConfigError(f"{key} must have lo < hi, got {v!r}")
+    return (lo, hi)
+
+
+def identify_config_from_dict(cfg: dict) -> IdentifyConfig:
+    """Validate a parsed config for ``tissue-enkf identify``."""
+    model = model_from_config(cfg)
+    G = model.G
+    try:
+        model.HS.validate(G)
+    except ValueError as err:
+        raise ConfigError(str(err)) from None
+    if len(G.media) != 1:
+        raise ConfigError(f"G.media must hold exactly one medium for identification (the "
+                          f"emulator varies its mua and mus), got {len(G.media)}")
+    m = G.media[0]
+    for k in ("VHC", "TC"):
+        if getattr(m, k) is None:
+            raise ConfigError(f"G.media[0].{k} is missing (needed by the heat model)")
+    sens = check_keys("sensors", cfg.get("sensors", {}), _SENSOR_KEYS)
+    setup_kw: dict = {}
+    positions = _points("sensors.positions", sens.get("positions", [[0.0, 0.0, 0.0]]), G)
+    setup_kw["sensor_positions"] = positions
+    setup_kw["sensor_noise_var"] = _num("sensors.noise_var", sens.get("noise_var", 0.01),
+                                        positive=True)
+    default_tracked = [[0.0, 0.0, z] for z in (0.0, 0.1, 0.2) if z <= G.Lz]
+    setup_kw["tracked_positions"] = _points("sensors.tracked",
+                                            sens.get("tracked", default_tracked), G)
+    if "camera" in sens:
+        cam = check_keys("sensors.camera", sens["camera"], _CAMERA_KEYS)
+        from .image import ThermalImage
+
+        for k in ("x_range", "y_range", "shape"):
+            if k not in cam:
+                raise ConfigError(f"sensors.camera.{k} is missing")
+        shape = cam["shape"]
+        if not (isinstance(shape, list) and len(shape) == 2):
+            raise ConfigError(f"sensors.camera.shape must be [ny, nx], got {shape!r}")
+        shape = tuple(_num(f"sensors.camera.shape[{i}]", v, integer=True, lo=1)
+                      for i, v in enumerate(shape))
+        xr, yr = _pair("sensors.camera.x_range", cam["x_range"]), \
+            _pair("sensors.camera.y_range", cam["y_range"])
+        if xr[0] < -G.Lx / 2 or xr[1] > G.Lx / 2 or yr[0] < -G.Ly / 2 or yr[1] > G.Ly / 2:
+            raise ConfigError(f"sensors.camera x_range {list(xr)}, y_range {list(yr)} reach "
+                              f"outside the top face ([-{G.Lx / 2}, {G.Lx / 2}] x "
+                              f"[-{G.Ly / 2}, {G.Ly / 2}] cm)")
+        setup_kw["image"] = ThermalImage(
+            xr, yr, shape, noise_var=_num("sensors.camera.noise_var",
+                                          cam.get("noise_var", 0.01), positive=True),
+            subsamples=_num("sensors.camera.subsamples", cam.get("subsamples", 4),
+                            integer=True, lo=1))
+    flt = check_keys("filter", cfg.get("filter", {}), _FILTER_KEYS)
+    if "n_members" in flt:
+        setup_kw["n_members"] = _num("filter.n_members", flt["n_members"], integer=True, lo=2)
+    if "method" in flt:
+        if flt["method"] not in ("enkf", "etkf"):
+            raise ConfigError(f"filter.method must be 'enkf' or 'etkf', got {flt['method']!r}")
+        setup_kw["method"] = flt["method"]
+    else:
+        setup_kw["method"] = "etkf"
+    if "estimate" in flt:
+        est = flt["estimate"]
+        if est not in (["mua", "mus"], ["mua", "mus", "VHC", "TC"]):
+            raise ConfigError(f"filter.estimate must be [\"mua\", \"mus\"] or [\"mua\", \"mus\", "
+                              f"\"VHC\", \"TC\"], got {est!r}")
+        setup_kw["estimate"] = tuple(est)
+    if "transforms" in flt and flt["transforms"] != "log":
+        raise ConfigError(f"filter.transforms must be \"log\" (positive parameters), got "
+                          f"{flt['transforms']!r}")
+    grid = flt.get("grid", [20, 20, 10])
+    if not (isinstance(grid, list) and len(grid) == 3):
+        raise ConfigError(f"filter.grid must be [nx, ny, nz], got {grid!r}")
+    grid = tuple(_num(f"filter.grid[{i}]", v, integer=True, lo=1) for i, v in enumerate(grid))
+    if "prior_range" in flt:
+        setup_kw["prior_range"] = _pair("filter.prior_range", flt["prior_range"], positive=True)
+    for k, kw in (("model_noise_std", dict(lo=0)), ("random_walk_when_off", dict(lo=0)),
+                  ("inflation", dict(positive=True)), ("localization_radius", dict(positive=True))):
+        if k in flt:
+            setup_kw[k] = _num(f"filter.{k}", flt[k], **kw)
+    if "mda" in flt:
+        setup_kw["mda"] = _num("filter.mda", flt["mda"], integer=True, lo=1)
+    if "seed" in flt:
+        setup_kw["seed"] = _num("filter.seed", flt["seed"], integer=True, lo=0)
+    if "random_walk_std" in flt:
+        rw = flt["random_walk_std"]
+        n = len(setup_kw.get("estimate", ("mua", "mus")))
+        if isinstance(rw, list):
+            if len(rw) != n:
+                raise ConfigError(f"filter.random_walk_std must be a number or {n} numbers "
+                                  f"(one per estimated parameter), got {rw!r}")
+            setup_kw["random_walk_std"] = [_num(f"filter.random_walk_std[{i}]", v, lo=0)
+                                           for i, v in enumerate(rw)]
+        else:
+            setup_kw["random_walk_std"] = _num("filter.random_walk_std", rw, lo=0)
+    for k, allowed in (("parameter_model", ("random_walk", "trend")),
+                       ("heat_mass", ("averaged", "lumped"))):
+        if k in flt:
+            if flt[k] not in allowed:
+                raise ConfigError(f"filter.{k} must be one of {allowed}, got {flt[k]!r}")
+            setup_kw[k] = flt[k]
+    emu = check_keys("filter.emulator", flt.get("emulator", {}), _EMULATOR_KEYS)
+    emulator_kw = {}
+    for k in ("n_photons", "n_mua", "n_mus", "seed"):
+        if k in emu:
+            emulator_kw[k] = _num(f"filter.emulator.{k}", emu[k], integer=True,
+                                  lo=4 if k in ("n_mua", "n_mus") else (0 if k == "seed" else 1))
+    for k in ("mua_range", "mus_range"):
+        if k in emu:
+            emulator_kw[k] = _pair(f"filter.emulator.{k}", emu[k], positive=True)
+    exact = emu.get("exact", False)
+    if not isinstance(exact, bool):
+        raise ConfigError(f"filter.emulator.exact must be true or false, got {exact!r}")
+    try:
+        out = IdentifyConfig(model, setup_kw, grid, emulator_kw, exact, cfg)
+        out.setup(absorption=lambda mua, mus: None)  # validates the filter settings
+    except ConfigError:
+        raise
+    except ValueError as err:
+        raise ConfigError(str(err)) from None
+    return out
+
+
+def load_identify(path: str | Path) -> IdentifyConfig:
+    """Read and validate an identification config file."""
+    return identify_config_from_dict(read_toml(path))
+
+
+def read_sensor_csv(path: str | Path, n_columns: int | None = None
+                    ) -> tuple[np.ndarray, np.ndarray, list[str]]:
+    """``(times (M,) s, data (M, p) deg C, column names)`` of a measured-data CSV.
+
+    A header names the columns: ``time`` (s) first, then one column per sensor (and
+    pixel); empty fields or ``nan`` are gaps. Raises ValueError naming the file, the
+    line and the problem for: a missing or unreadable file, no header, no rows, a
+    field that is not a number, a wrong number of fields or columns, Inf, a missing,
+    negative or zero time, unsorted or duplicate times.
+    """
+    from .stream import parse_line
+
+    path = Path(path)
+    try:
+        text = path.read_text(encoding="utf-8")
+    except FileNotFoundError:
+        raise ValueError(f"data file {str(path)!r} does not exist") from None
+    except (OSError, UnicodeDecodeError) as err:
+        raise ValueError(f"data file {str(path)!r} cannot be read as text: {err}") from None
+    lines = [(i + 1, ln) for i, ln in enumerate(text.splitlines())
+             if ln.strip() and not ln.lstrip().startswith("#")]
+    if not lines:
+        raise ValueError(f"data file {str(path)!r} is empty (need a header: time, sensors...)")
+    _, head = lines[0]
+    names = [h.strip() for h in head.split(",")]
+    if names[0].lower() not in ("time", "t", "time_s"):
+        raise ValueError(f"{path}:{lines[0][0]}: the first column must be 'time' (s), got "
+                         f"{names[0]!r} (is this a CSV with a header?)")
+    if len(names) < 2:
+        raise ValueError(f"{path}:{lines[0][0]}: no sensor columns after 'time'")
+    if n_columns is not None and len(names) - 1 != n_columns:
+        raise ValueError(f"{path}:{lines[0][0]}: {len(names) - 1} data columns, the config "
+                         f"observes {n_columns} (sensors.positions, then camera pixels)")
+    if len(lines) == 1:
+        raise ValueError(f"data file {str(path)!r} has a header but no rows")
+    times, rows = [], []
+    for no, ln in lines[1:]:
+        t, y = parse_line(ln, len(names), f"{path}:{no}")
+        times.append(t)
+        rows.append(y)
+    times = np.array(times)
+    if times[0] <= 0:
+        raise ValueError(f"{path}: times must be > 0 s (the prior is at t = 0), got "
+                         f"{float(times[0])!r}")
+    d = np.diff(times)
+    if np.any(d <= 0):
+        k = int(np.flatnonzero(d <= 0)[0])
+        what = "duplicate" if d[k] == 0 else "unsorted"
+        raise ValueError(f"{path}: {what} times: {float(times[k])!r} then "
+                         f"{float(times[k + 1])!r} s")
+    return times, np.array(rows), names

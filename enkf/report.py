@@ -1,0 +1,132 @@
+"""What a run writes: estimates, figures, volume fields and the run.json manifest (an edge module)."""
+
+from __future__ import annotations
+
+import platform
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+from .rundir import write_json
+
+__all__ = ["manifest", "plot_identification", "write_identify_outputs"]
+
+
+def _versions() -> dict:
+    import importlib.metadata as md
+
+    out = {"python": platform.python_version()}
+    for pkg in ("tissue-enkf", "numpy", "scipy", "numba", "scikit-fem", "meshio", "matplotlib",
+                "dask"):
+        try:
+            out[pkg] = md.version(pkg)
+        except md.PackageNotFoundError:
+            out[pkg] = None
+    return out
+
+
+def manifest(path: Path, *, command: str, config: dict | None, seed, timings: dict,
+             extra: dict | None = None) -> None:
+    """``run.json``: the full resolved config, versions, seed, timings, command line."""
+    write_json(path, {"command": command, "argv": sys.argv, "config": config, "seed": seed,
+                      "versions": _versions(), "timings_s": timings,
+                      "finished": time.strftime("%Y-%m-%dT%H:%M:%S%z"), **(extra or {})})
+
+
+def plot_identification(path, est, times, data, power, names_obs=None) -> None:
+    """Temperature tracks (top, with the data of the first sensor) and parameters (bottom)."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    t = est.times
+    n_tr, n_par = est.tracked_mean.shape[1], len(est.names)
+    cols = max(n_tr, n_par)
+    fig, axes = plt.subplots(2, cols, figsize=(4.2 * cols, 7.5), constrained_layout=True,
+                             squeeze=False)
+    on = np.array([power(x) > 0 for x in t])
+    for ax in axes.ravel():
+        for a, b in _runs(t, on):
+            ax.axvspan(a, b, color="0.88", lw=0)
+    for j in range(n_tr):
+        ax = axes[0, j]
+        m, s = est.tracked_mean[:, j], est.tracked_std[:, j]
+        if j == 0 and data is not None and data.shape[1]:
+            ax.plot(times, data[:, 0], "k.", ms=2.5, label="data (first column)")
+        ax.plot(t, m, "r-", lw=1.4, label="EnKF mean")
+        ax.fill_between(t, m - 2 * s, m + 2 * s, color="r", alpha=0.15, lw=0, label="$\\pm 2$ sd")
+        x, y, z = est.tracked_positions[j]
+        ax.set(title=f"T at ({x:g}, {y:g}, {z:g}) cm", xlabel="time [s]", ylabel="T [$^\\circ$C]")
+        if j == 0:
+            ax.legend(fontsize=8)
+    for i, name in enumerate(est.names):
+        ax = axes[1, i]
+        m, s = est.param_mean[:, i], est.param_std[:, i]
+        ax.plot(t, m, "r-", lw=1.4)
+        ax.fill_between(t, m - 2 * s, m + 2 * s, color="r", alpha=0.15, lw=0)
+        ax.set(title=name, xlabel="time [s]")
+    for ax in list(axes[0, n_tr:]) + list(axes[1, n_par:]):
+        ax.axis("off")
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+
+
+def _runs(t, on):
+    out, start = [], None
+    for x, o in zip(t, on, strict=True):
+        if o and start is None:
+            start = x
+        if not o and start is not None:
+            out.append((start, x))
+            start = None
+    if start is not None:
+        out.append((start, t[-1]))
+    return out
+
+
+def write_identify_outputs(out: Path, setup, est, times, data, *, absorption=None) -> dict:
+    """estimates.csv, summary.json, figures/estimates.png, fields/final.vtu into ``out``."""
+    import fem
+
+    from .paper import write_estimates_csv
+
+    out = Path(out)
+    (out / "figures").mkdir(exist_ok=True)
+    (out / "fields").mkdir(exist_ok=True)
+    write_estimates_csv(out / "estimates.csv", est)
+    plot_identification(out / "figures" / "estimates.png", est, times, data, setup.power)
+    summary = {
+        "parameters": {n: {"estimate_final": float(est.param_mean[-1, i]),
+                           "std_final": float(est.param_std[-1, i])}
+                       for i, n in enumerate(est.names)},
+        "tracked": [{"position_cm": [float(v) for v in est.tracked_positions[j]],
+                     "T_final": float(est.tracked_mean[-1, j]),
+                     "std_final": float(est.tracked_std[-1, j])}
+                    for j in range(est.tracked_mean.shape[1])],
+        "steps": int(len(est.times) - 1), "analysed": int(np.sum(est.analysed)),
+        "stopped": est.diverged,
+        "timing": {"filter_wall_s": float(est.filter_wall_s),
+                   "step_latency_median_s": float(np.median(est.step_latency_s))
+                   if len(est.step_latency_s) else 0.0,
+                   "step_latency_max_s": float(np.max(est.step_latency_s))
+                   if len(est.step_latency_s) else 0.0},
+    }
+    write_json(out / "summary.json", summary)
+    # volume fields: the final ensemble mean and spread of the temperature, and the
+    # absorbed power (nodal load per W) of the final mean parameters
+    res = est.result
+    mesh = setup.grid.mesh()
+    point_data = {}
+    if res is not None and res.state_ensemble is not None:
+        point_data["T_mean"] = res.state_ensemble.mean(axis=0)
+        point_data["T_std"] = res.state_ensemble.std(axis=0, ddof=1)
+    if absorption is not None and getattr(absorption, "kind", "") == "load":
+        mua, mus = est.param_mean[-1, 0], est.param_mean[-1, 1]
+        vals = absorption.unique(np.array([mua]), np.array([mus]))[0][absorption.inverse]
+        point_data["absorbed_power_per_W"] = vals
+    if point_data:
+        fem.write_vtu(out / "fields" / "final.vtu", mesh, point_data=point_data)
+    return summary
