@@ -87,18 +87,26 @@ class HeatSimulation:
                 or self.n_pulses < 1:
             raise ValueError(f"HS.n_pulses must be an integer >= 1, got {self.n_pulses!r}")
         self.dt = check_positive("HS", "dt", self.dt)
-        T0 = float(self.T_initial)
-        if not math.isfinite(T0):
-            raise ValueError(f"HS.T_initial must be finite, got {self.T_initial!r}")
+        if isinstance(self.T_initial, bool) or not isinstance(self.T_initial, (int, float)) \
+                or not math.isfinite(self.T_initial):
+            raise ValueError(f"HS.T_initial must be a finite number (deg C), got "
+                             f"{self.T_initial!r}")
         if self.heat_boundary_type not in (0, 1, 2):
             raise ValueError(f"HS.heat_boundary_type must be 0, 1 or 2, got "
                              f"{self.heat_boundary_type!r}")
         if self.heat_boundary_type == 2:
             check_positive("HS", "heat_transfer_coefficient", self.heat_transfer_coefficient)
-        if not (0.5 <= float(self.theta) <= 1.0):
+        if isinstance(self.theta, bool) or not isinstance(self.theta, (int, float)) \
+                or not (0.5 <= float(self.theta) <= 1.0):
             raise ValueError(f"HS.theta must be in [0.5, 1] (implicit), got {self.theta!r}")
+        if not isinstance(self.temp_sensor_positions, (list, tuple, np.ndarray)):
+            raise ValueError(f"HS.temp_sensor_positions must be a list of (x, y, z), got "
+                             f"{self.temp_sensor_positions!r}")
         for i, pos in enumerate(self.temp_sensor_positions):
-            p = np.asarray(pos, dtype=float)
+            try:
+                p = np.asarray(pos, dtype=float)
+            except (TypeError, ValueError):
+                p = np.full(0, np.nan)
             if p.shape != (3,) or not np.all(np.isfinite(p)):
                 raise ValueError(f"HS.temp_sensor_positions[{i}] must be (x, y, z), got {pos!r}")
             tol = 1e-9 * max(G.Lx, G.Ly, G.Lz)

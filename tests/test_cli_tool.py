@@ -1,0 +1,174 @@
+"""The command-line tool on a tiny block: heat, identify (single, batch, follow), bad input."""
+
+import json
+import threading
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from enkf.cli import main
+
+EX = Path(__file__).parents[1] / "examples"
+TINY = (EX / "tiny.toml").read_text()
+
+
+@pytest.fixture(scope="module")
+def cache(tmp_path_factory):
+    return str(tmp_path_factory.mktemp("emulator-cache"))
+
+
+def run(*argv):
+    return main([str(a) for a in argv])
+
+
+def test_heat_writes_sensors_fields_and_manifest(tmp_path):
+    out = tmp_path / "heat"
+    assert run("heat", EX / "tiny.toml", "--out", out, "--quiet") == 0
+    for f in ("sensors.csv", "summary.json", "run.json", "fields/temperature.vtu",
+              "fields/absorbed_power.vtu", "figures/sensors.png", "figures/NA_slices.png"):
+        assert (out / f).exists(), f
+    man = json.loads((out / "run.json").read_text())
+    assert man["command"] == "heat" and man["config"]["G"]["nx"] == 10
+    assert man["versions"]["numpy"] and man["seed"] == 1
+    table = np.loadtxt(out / "sensors.csv", delimiter=",", skiprows=1)
+    assert table.shape == (21, 3) and table[10, 1] > table[10, 2] > 0  # hotter at the surface
+
+
+def test_identify_on_the_example_data(tmp_path, cache):
+    out = tmp_path / "id"
+    assert run("identify", EX / "tiny.toml", "--data", EX / "tiny_data.csv", "--out", out,
+               "--quiet", "--cache-dir", cache) == 0
+    for f in ("estimates.csv", "summary.json", "run.json", "fields/final.vtu",
+              "figures/estimates.png"):
+        assert (out / f).exists(), f
+    s = json.loads((out / "summary.json").read_text())
+    assert set(s["parameters"]) == {"mua", "mus"} and s["stopped"] is None
+    assert s["analysed"] == 19  # 20 readings, one gap
+    import meshio
+
+    mesh = meshio.read(out / "fields" / "final.vtu")
+    assert {"T_mean", "T_std", "absorbed_power_per_W"} <= set(mesh.point_data)
+
+
+def test_examples_run(tmp_path, cache):
+    import importlib.util
+
+    def load(name):
+        spec = importlib.util.spec_from_file_location(name, EX / f"{name}.py")
+        mod = importlib.util.module_from_spec(spec)
+        spec.loader.exec_module(mod)
+        return mod
+
+    res = load("forward_run").main(out=tmp_path / "fw", photons=5000)
+    assert res["vtu"].exists() and 0 < res["absorbed_fraction"] < 1
+    est = load("identify_own_data").main(cache_dir=cache)
+    assert est.param_mean.shape == (21, 2)
+
+
+def test_batch_reports_a_bad_file_and_goes_on(tmp_path, cache):
+    bad = tmp_path / "bad.csv"
+    bad.write_text("time,sensor_0\n0.1,1\n0.1,2\n")
+    out = tmp_path / "batch"
+    assert run("identify", EX / "tiny.toml", "--data", EX / "tiny_data.csv", bad,
+               tmp_path / "missing.csv", "--out", out, "--quiet", "--cache-dir", cache) == 0
+    lines = (out / "batch.csv").read_text().splitlines()
+    assert lines[1].split(",")[2] == "ok" and (out / "tiny_data" / "estimates.csv").exists()
+    assert "error" in lines[2] and "duplicate times" in lines[2]
+    assert "error" in lines[3] and "does not exist" in lines[3]
+
+
+def test_follow_writes_each_estimate_as_the_data_come(tmp_path, cache):
+    live = tmp_path / "live.csv"
+    data = (EX / "tiny_data.csv").read_text().splitlines()
+
+    def writer():
+        time.sleep(0.5)
+        with open(live, "w") as f:
+            for line in data[:12]:
+                f.write(line + "\n")
+                f.flush()
+                time.sleep(0.02)
+            f.write("# end\n")
+
+    th = threading.Thread(target=writer)
+    th.start()
+    out = tmp_path / "follow"
+    assert run("identify", EX / "tiny.toml", "--follow", live, "--out", out, "--quiet",
+               "--cache-dir", cache, "--idle-timeout", "5") == 0
+    th.join()
+    rows = (out / "estimates.csv").read_text().splitlines()
+    assert len(rows) == 12 and rows[0].startswith("time_s,mua_mean")
+    assert (out / "figures" / "estimates.png").exists() and (out / "run.json").exists()
+
+
+def bad_config(tmp_path, old, new):
+    text = TINY.replace(old, new)
+    assert text != TINY, old
+    p = tmp_path / "bad.toml"
+    p.write_text(text)
+    return p
+
+
+@pytest.mark.parametrize("old, new, message", [
+    ("mua = 1.0 ", "mua = -1.0 ", "mua"),
+    ("mus = 100.0 ", "mus = nan ", "mus"),
+    ("g = 0.9", "g = 1.2", "g"),
+    ("n = 1.3", "n = 0.8", "n"),
+    ("nx = 10", "nx = 0", "nx"),
+    ("positions = [[0.0, 0.0, 0.0]]", "positions = [[0.0, 0.0, 0.5]]", "outside the tissue"),
+    ("n_members = 20", "n_member = 20", "unknown key filter.n_member"),
+    ("n_members = 20", "n_members = 20\nmethd = \"etkf\"", "unknown key filter.methd"),
+    ("noise_var = 0.01 ", "noise_var = -0.1 ", "sensors.noise_var must be > 0"),
+    ("n_mua = 4", "n_mua = 2", "n_mua"),
+    ("grid = [5, 5, 5]", "grid = [5, 5]", "filter.grid"),
+])
+def test_bad_config_exits_2_and_writes_nothing(tmp_path, capsys, old, new, message):
+    cfg = bad_config(tmp_path, old, new)
+    out = tmp_path / "out"
+    assert run("identify", cfg, "--data", EX / "tiny_data.csv", "--out", out) == 2
+    err = capsys.readouterr().err
+    assert err.startswith("error: ") and message in err and err.count("\n") == 1
+    assert not out.exists()
+
+
+@pytest.mark.parametrize("content, message", [
+    ("time,sensor_0\n0.1,1.0\n0.2,inf\n", "infinite"),
+    ("time,sensor_0\n0.2,1.0\n0.1,2.0\n", "unsorted times"),
+    ("time,sensor_0\n0.1,1.0\n0.1,2.0\n", "duplicate times"),
+    ("time,a,b\n0.1,1.0,2.0\n", "2 data columns, the config observes 1"),
+    ("time,sensor_0\n", "no rows"),
+    ("", "empty"),
+    ("\x00\x01binary", "first column must be 'time'"),
+    ("time,sensor_0\n0.1,abc\n", "not a number"),
+])
+def test_bad_data_exits_2_and_writes_nothing(tmp_path, capsys, content, message):
+    data = tmp_path / "data.csv"
+    data.write_text(content)
+    out = tmp_path / "out"
+    assert run("identify", EX / "tiny.toml", "--data", data, "--out", out) == 2
+    err = capsys.readouterr().err
+    assert message in err and not out.exists()
+
+
+def test_missing_and_unreadable_files_exit_2(tmp_path, capsys):
+    assert run("identify", tmp_path / "nope.toml", "--data", EX / "tiny_data.csv",
+               "--out", tmp_path / "o") == 2
+    assert "does not exist" in capsys.readouterr().err
+    notoml = tmp_path / "x.toml"
+    notoml.write_text("this is [not toml")
+    assert run("heat", notoml, "--out", tmp_path / "o") == 2
+    assert "not valid TOML" in capsys.readouterr().err
+    assert run("identify", EX / "tiny.toml", "--data", tmp_path / "none.csv",
+               "--out", tmp_path / "o") == 2
+    assert "does not exist" in capsys.readouterr().err
+    assert not (tmp_path / "o").exists()
+
+
+def test_every_command_has_help(capsys):
+    for cmd in ("mc", "heat", "identify", "paper", "validate"):
+        with pytest.raises(SystemExit) as exc:
+            main([cmd, "--help"])
+        assert exc.value.code == 0
+        assert "--out" in capsys.readouterr().out
