@@ -351,15 +351,29 @@ def _plot_sensors(path, HS, labels) -> None:
     plt.close(fig)
 
 
+def read_data(setup, path):
+    """(times, data) of a CSV, or of an NPZ thermal image series (camera only)."""
+    from .config import read_sensor_csv
+
+    n_obs = setup.sensor_positions.shape[0] + (setup.image.n_pixels if setup.image else 0)
+    if Path(path).suffix.lower() == ".npz":
+        from .image import load_frames
+
+        if setup.image is None or setup.sensor_positions.shape[0]:
+            raise ValueError(f"{path}: an NPZ image series needs [sensors.camera] and no "
+                             "point sensors (sensors.positions = [])")
+        return load_frames(path, setup.image)
+    times, data, _ = read_sensor_csv(path, n_obs)
+    return times, data
+
+
 def _identify_one(cfg, absorption, seed, data_path, out_dir, quiet=True) -> dict:
     """Run the filter on one data file and write its outputs into ``out_dir`` (a task)."""
-    from .config import read_sensor_csv
     from .report import write_identify_outputs
     from .tissue import identify
 
     setup = cfg.setup(absorption, seed=seed)
-    n_obs = setup.sensor_positions.shape[0] + (setup.image.n_pixels if setup.image else 0)
-    times, data, _ = read_sensor_csv(data_path, n_obs)
+    times, data = read_data(setup, data_path)
     t0 = time.perf_counter()
     est = identify(setup, times, data)
     summary = write_identify_outputs(Path(out_dir), setup, est, times, data,
@@ -370,7 +384,7 @@ def _identify_one(cfg, absorption, seed, data_path, out_dir, quiet=True) -> dict
 
 
 def cmd_identify(args) -> int:
-    from .config import load_identify, read_sensor_csv
+    from .config import load_identify
     from .report import manifest
     from .rundir import atomic_dir, check_out_dir, write_json
 
@@ -383,9 +397,7 @@ def cmd_identify(args) -> int:
     files = [Path(f) for f in (args.data or [])]
     if len(files) == 1:  # one dataset: bad data is bad input (exit 2, nothing written);
         # in a batch a bad file is reported in batch.csv and the others go on
-        probe = cfg.setup(lambda a, b: None)
-        read_sensor_csv(files[0], probe.sensor_positions.shape[0]
-                        + (probe.image.n_pixels if probe.image else 0))
+        read_data(cfg.setup(lambda a, b: None), files[0])
     t0 = time.perf_counter()
     client = _client(args)
     try:

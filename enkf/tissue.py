@@ -361,7 +361,11 @@ def _assemble(setup: TissueFilterSetup, param_bounds=None, warm_dt: float | None
                           inflation=setup.inflation, seed=setup.seed, mda=setup.mda)
     if param_bounds is None:
         param_bounds = np.column_stack([nominal / 20, nominal * 20])
-    health = HealthCheck(param_bounds=np.vstack([param_bounds, bounds_extra]))
+    # stop on non-finite values, a parameter mean beyond the bounds, or a collapsed
+    # spread (below 1e-6 of the nominal value: the data can no longer move it)
+    min_std = np.concatenate([1e-6 * nominal, np.zeros(len(bounds_extra))])
+    health = HealthCheck(param_bounds=np.vstack([param_bounds, bounds_extra]),
+                         min_param_std=min_std)
     return _Pieces(model, P_obs, noise_var, P_track, prior, rw, transforms, dynamics,
                    localization, None if setup.random_walk_when_off == 1.0 else walk_scale,
                    config, health, n)

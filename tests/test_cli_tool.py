@@ -172,3 +172,23 @@ def test_every_command_has_help(capsys):
             main([cmd, "--help"])
         assert exc.value.code == 0
         assert "--out" in capsys.readouterr().out
+
+
+def test_identify_from_an_npz_image_series(tmp_path, cache):
+    sensors = ("[sensors]\npositions = [[0.0, 0.0, 0.0]]   # one data column after `time`\n"
+               "noise_var = 0.01                # deg C^2\n")
+    assert sensors in TINY
+    cfg = tmp_path / "camera.toml"
+    cfg.write_text(TINY.replace(sensors, "[sensors]\npositions = []\n\n[sensors.camera]\n"
+                                "x_range = [-0.1, 0.1]\ny_range = [-0.1, 0.1]\nshape = [2, 3]\n"))
+    rng = np.random.default_rng(0)
+    times = 0.1 * np.arange(1, 21)
+    frames = 0.5 * times[:, None, None] + 0.1 * rng.standard_normal((20, 2, 3))
+    frames[4, 0, 1] = np.nan
+    np.savez(tmp_path / "frames.npz", times=times, frames=frames)
+    out = tmp_path / "img"
+    rc = run("identify", cfg, "--data", tmp_path / "frames.npz", "--out", out, "--quiet",
+             "--cache-dir", cache)
+    assert rc == 0 and (out / "estimates.csv").exists()
+    np.savez(tmp_path / "wrong.npz", times=times, frames=frames[:, :1])
+    assert run("identify", cfg, "--data", tmp_path / "wrong.npz", "--out", tmp_path / "w") == 2
