@@ -133,3 +133,18 @@ def test_mc_command_on_a_local_cluster_writes_the_same_maps(tmp_path):
         np.testing.assert_array_equal(a["NA"], b["NA"])
     assert main(["mc", *common, "--out", str(tmp_path / "x"), "--workers", "0"]) == 2
     assert not (tmp_path / "x").exists()
+
+
+def test_identify_batch_on_a_local_cluster_equals_this_machine(tmp_path):
+    from enkf.cli import main
+
+    ex = Path(__file__).parents[1] / "examples"
+    bad = tmp_path / "bad.csv"
+    bad.write_text("time,sensor_0\n0.2,1\n0.1,2\n")
+    common = ["identify", str(ex / "tiny.toml"), "--data", str(ex / "tiny_data.csv"), str(bad),
+              "--quiet", "--cache-dir", str(tmp_path / "cache")]
+    assert main([*common, "--out", str(tmp_path / "here")]) == 0
+    assert main([*common, "--out", str(tmp_path / "there"), "--workers", "2"]) == 0
+    here = (tmp_path / "here" / "batch.csv").read_text()
+    assert here == (tmp_path / "there" / "batch.csv").read_text()
+    assert "unsorted times" in here.splitlines()[2]
