@@ -31,9 +31,18 @@ def _dask_options(p: argparse.ArgumentParser) -> None:
                    help="run them on a new local Dask cluster of N single-threaded workers")
 
 
-def _client(args):
-    """The Dask client of --scheduler / --workers, or None (this machine's threads)."""
+def _client(args, config: dict | None = None):
+    """The Dask client of --scheduler / --workers (or the config's [run] table), or None."""
     scheduler, workers = getattr(args, "scheduler", None), getattr(args, "workers", None)
+    if scheduler is None and workers is None and config is not None:
+        from mcmatlab_py.config import ConfigError, check_keys
+
+        run = check_keys("run", config.get("run", {}), {"scheduler", "workers"})
+        scheduler, workers = run.get("scheduler"), run.get("workers")
+        if scheduler is not None and not isinstance(scheduler, str):
+            raise ConfigError(f"run.scheduler must be an address string, got {scheduler!r}")
+        if workers is not None and (isinstance(workers, bool) or not isinstance(workers, int)):
+            raise ConfigError(f"run.workers must be an integer, got {workers!r}")
     if scheduler is None and workers is None:
         return None
     if scheduler is not None and workers is not None:
@@ -160,7 +169,7 @@ def _apply_threads(threads):
 
 
 def cmd_mc(args) -> int:
-    from mcmatlab_py.config import load_model
+    from mcmatlab_py.config import load_model, read_toml
     from mcmatlab_py.export import write_voxel_vtu
     from mcmatlab_py.plotting import plot_na_slices
 
@@ -177,7 +186,7 @@ def cmd_mc(args) -> int:
     model.MC.n_threads = args.threads
     model.MC.validate(model.G)
     t0 = time.perf_counter()
-    client = _client(args)
+    client = _client(args, read_toml(args.config))
     try:
         model.run_monte_carlo(client=client)
     finally:
@@ -300,7 +309,7 @@ def cmd_heat(args) -> int:
     if not model.HS.temp_sensor_positions:
         model.HS.temp_sensor_positions = [(0.0, 0.0, 0.0)]
     t0 = time.perf_counter()
-    client = _client(args)
+    client = _client(args, read_toml(args.config))
     try:
         model.run_monte_carlo(client=client)
     finally:
@@ -351,6 +360,25 @@ def _plot_sensors(path, HS, labels) -> None:
     plt.close(fig)
 
 
+class _DamageOfMean:
+    """Arrhenius damage (MCmatlab's E, A) along the filter's mean temperature, per node."""
+
+    def __init__(self, E, A):
+        self.E, self.A = float(E), float(A)
+        self.omega = None
+        self._last = None
+
+    def __call__(self, rep):
+        import fem
+
+        T = rep.state_ensemble.mean(axis=0)
+        if self._last is not None:
+            t0, T0 = self._last
+            inc = fem.arrhenius_increment(T0, T, rep.time - t0, self.E, self.A)
+            self.omega = inc if self.omega is None else self.omega + inc
+        self._last = (rep.time, T)
+
+
 def read_data(setup, path):
     """(times, data) of a CSV, or of an NPZ thermal image series (camera only)."""
     from .config import read_sensor_csv
@@ -374,10 +402,13 @@ def _identify_one(cfg, absorption, seed, data_path, out_dir, quiet=True) -> dict
 
     setup = cfg.setup(absorption, seed=seed)
     times, data = read_data(setup, data_path)
+    medium = cfg.model.G.media[0]
+    damage = _DamageOfMean(medium.E, medium.A) if medium.E and medium.A else None
     t0 = time.perf_counter()
-    est = identify(setup, times, data)
+    est = identify(setup, times, data, callback=damage)
     summary = write_identify_outputs(Path(out_dir), setup, est, times, data,
-                                     absorption=absorption)
+                                     absorption=absorption,
+                                     damage=None if damage is None else damage.omega)
     summary["data"] = str(data_path)
     summary["wall_s"] = time.perf_counter() - t0
     return summary
@@ -399,7 +430,7 @@ def cmd_identify(args) -> int:
         # in a batch a bad file is reported in batch.csv and the others go on
         read_data(cfg.setup(lambda a, b: None), files[0])
     t0 = time.perf_counter()
-    client = _client(args)
+    client = _client(args, cfg.raw)
     try:
         absorption = cfg.emulator(cache_dir=args.cache_dir, progress=not args.quiet,
                                   client=client)

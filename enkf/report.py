@@ -87,8 +87,13 @@ def _runs(t, on):
     return out
 
 
-def write_identify_outputs(out: Path, setup, est, times, data, *, absorption=None) -> dict:
-    """estimates.csv, summary.json, figures/estimates.png, fields/final.vtu into ``out``."""
+def write_identify_outputs(out: Path, setup, est, times, data, *, absorption=None,
+                           damage=None) -> dict:
+    """estimates.csv, summary.json, figures/estimates.png, fields/final.vtu into ``out``.
+
+    ``damage``: (n_nodes,) Arrhenius Omega along the filter's mean temperature, if the
+    medium has E and A (written as ``damage_Omega``).
+    """
     import fem
 
     from .paper import write_estimates_csv
@@ -127,6 +132,8 @@ def write_identify_outputs(out: Path, setup, est, times, data, *, absorption=Non
         mua, mus = est.param_mean[-1, 0], est.param_mean[-1, 1]
         vals = absorption.unique(np.array([mua]), np.array([mus]))[0][absorption.inverse]
         point_data["absorbed_power_per_W"] = vals
+    if damage is not None:
+        point_data["damage_Omega"] = np.asarray(damage, float)
     if point_data:
         fem.write_vtu(out / "fields" / "final.vtu", mesh, point_data=point_data)
     return summary

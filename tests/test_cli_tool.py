@@ -192,3 +192,25 @@ def test_identify_from_an_npz_image_series(tmp_path, cache):
     assert rc == 0 and (out / "estimates.csv").exists()
     np.savez(tmp_path / "wrong.npz", times=times, frames=frames[:, :1])
     assert run("identify", cfg, "--data", tmp_path / "wrong.npz", "--out", tmp_path / "w") == 2
+
+
+def test_run_table_and_damage_field(tmp_path, cache, capsys):
+    cfg = tmp_path / "damage.toml"
+    cfg.write_text(TINY.replace("TC = 0.0037       # W cm^-1 K^-1",
+                                "TC = 0.0037\nE = 422.5e3\nA = 7.6e66")
+                   .replace("T_initial = 0.0         # deg C", "T_initial = 37.0"))
+    out = tmp_path / "dmg"
+    data = tmp_path / "d.csv"
+    rows = (EX / "tiny_data.csv").read_text().splitlines()
+    shifted = [rows[0]] + [f"{t},{float(v) + 37.0:.4f}" if v else f"{t},"
+                           for t, v in (r.split(",") for r in rows[1:])]
+    data.write_text("\n".join(shifted) + "\n")
+    assert run("identify", cfg, "--data", data, "--out", out, "--quiet", "--cache-dir", cache) == 0
+    import meshio
+
+    omega = meshio.read(out / "fields" / "final.vtu").point_data["damage_Omega"]
+    assert omega.max() > 0 and np.all(omega >= 0)
+    bad = tmp_path / "run.toml"
+    bad.write_text(TINY + "\n[run]\nschedular = \"tcp://x:1\"\n")
+    assert run("heat", bad, "--out", tmp_path / "h") == 2
+    assert "unknown key run.schedular" in capsys.readouterr().err
