@@ -580,6 +580,8 @@ def _live_figure(out, ident, setup) -> None:
 def cmd_validate(args) -> int:
     import subprocess
 
+    import numpy as np
+
     from .rundir import atomic_dir, check_out_dir
 
     check_out_dir(args.out, args.force)
@@ -620,6 +622,24 @@ def cmd_validate(args) -> int:
                 lines += [report.read_text().replace("# ", "### ", 1), ""]
             else:
                 lines += ["```", (res.stdout + res.stderr).strip()[-3000:], "```", ""]
+        # a figure to compare with the paper's: the sensor's sensitivity to mua and mus
+        from . import paper
+
+        t0 = time.perf_counter()
+        grid = (40, 40, 20) if quick else (100, 100, 50)
+        res = paper.sensitivity_study(grid, 200_000 if quick else 10**6, progress=False)
+        (tmp / "figures").mkdir(exist_ok=True)
+        paper.plot_sensitivity(tmp / "figures" / "sensitivity.png", res)
+        peak_mua = {v: float(np.max(T)) for v, T in res["mua"].items()}
+        peak_mus = {v: float(np.max(T)) for v, T in res["mus"].items()}
+        lines += [f"## sensitivity of the sensor to mua and mus ({time.perf_counter() - t0:.0f} s)",
+                  "", f"The paper's sensitivity study on {grid[0]} x {grid[1]} x {grid[2]} "
+                  "voxels: the surface temperature rises with mua strongly and with mus "
+                  "weakly, as in the paper's figure.", "",
+                  "| mua | peak T | | mus | peak T |", "|---|---|---|---|---|"]
+        for (a, ta), (b, tb) in zip(peak_mua.items(), peak_mus.items(), strict=True):
+            lines.append(f"| {a:g} | {ta:.2f} | | {b:g} | {tb:.2f} |")
+        lines += ["", "![sensitivity](figures/sensitivity.png)", ""]
         (tmp / "report.md").write_text("\n".join(lines) + "\n")
     if not args.quiet:
         print(f"report -> {Path(args.out) / 'report.md'}")
