@@ -360,25 +360,6 @@ def _plot_sensors(path, HS, labels) -> None:
     plt.close(fig)
 
 
-class _DamageOfMean:
-    """Arrhenius damage (MCmatlab's E, A) along the filter's mean temperature, per node."""
-
-    def __init__(self, E, A):
-        self.E, self.A = float(E), float(A)
-        self.omega = None
-        self._last = None
-
-    def __call__(self, rep):
-        import fem
-
-        T = rep.state_ensemble.mean(axis=0)
-        if self._last is not None:
-            t0, T0 = self._last
-            inc = fem.arrhenius_increment(T0, T, rep.time - t0, self.E, self.A)
-            self.omega = inc if self.omega is None else self.omega + inc
-        self._last = (rep.time, T)
-
-
 def read_data(setup, path):
     """(times, data) of a CSV, or of an NPZ thermal image series (camera only)."""
     from .config import read_sensor_csv
@@ -403,12 +384,15 @@ def _identify_one(cfg, absorption, seed, data_path, out_dir, quiet=True) -> dict
     setup = cfg.setup(absorption, seed=seed)
     times, data = read_data(setup, data_path)
     medium = cfg.model.G.media[0]
-    damage = _DamageOfMean(medium.E, medium.A) if medium.E and medium.A else None
+    risk = None
+    if medium.E and medium.A:  # MCmatlab's damage model: the risk of injury per node
+        from .risk import RiskTracker
+
+        risk = RiskTracker(E=medium.E, A=medium.A, record_every=10)
     t0 = time.perf_counter()
-    est = identify(setup, times, data, callback=damage)
+    est = identify(setup, times, data, callback=risk)
     summary = write_identify_outputs(Path(out_dir), setup, est, times, data,
-                                     absorption=absorption,
-                                     damage=None if damage is None else damage.omega)
+                                     absorption=absorption, risk=risk)
     summary["data"] = str(data_path)
     summary["wall_s"] = time.perf_counter() - t0
     return summary

@@ -88,11 +88,12 @@ def _runs(t, on):
 
 
 def write_identify_outputs(out: Path, setup, est, times, data, *, absorption=None,
-                           damage=None) -> dict:
+                           risk=None) -> dict:
     """estimates.csv, summary.json, figures/estimates.png, fields/final.vtu into ``out``.
 
-    ``damage``: (n_nodes,) Arrhenius Omega along the filter's mean temperature, if the
-    medium has E and A (written as ``damage_Omega``).
+    ``risk``: an :class:`enkf.risk.RiskTracker` that followed the run (media with E, A):
+    its last fields go into final.vtu (``p_damage``, ``p_T_above_60C_ever``,
+    ``damage_Omega_mean``), its series into fields/risk.pvd, a depth map into figures/.
     """
     import fem
 
@@ -132,8 +133,20 @@ def write_identify_outputs(out: Path, setup, est, times, data, *, absorption=Non
         mua, mus = est.param_mean[-1, 0], est.param_mean[-1, 1]
         vals = absorption.unique(np.array([mua]), np.array([mus]))[0][absorption.inverse]
         point_data["absorbed_power_per_W"] = vals
-    if damage is not None:
-        point_data["damage_Omega"] = np.asarray(damage, float)
+    if risk is not None and risk.omega is not None:
+        from .risk import plot_depth_maps
+
+        last = risk.snapshots[-1] if risk.snapshots else None
+        point_data["damage_Omega_mean"] = risk.omega.mean(axis=0)
+        point_data["p_damage"] = np.mean(risk.omega > 1.0, axis=0)
+        if last is not None:
+            point_data["p_T_above_60C_ever"] = last.p_T_ever
+            risk.write_vtu(out / "fields" / "risk.pvd", mesh)
+            plot_depth_maps(out / "figures" / "risk_depth_map.png", last, setup.grid,
+                            risk.T_threshold)
+        summary["risk"] = {"nodes_p_damage_over_0.5": int(np.sum(point_data["p_damage"] > 0.5)),
+                           "max_p_damage": float(point_data["p_damage"].max())}
+        write_json(out / "summary.json", summary)
     if point_data:
         fem.write_vtu(out / "fields" / "final.vtu", mesh, point_data=point_data)
     return summary

@@ -208,8 +208,10 @@ def test_run_table_and_damage_field(tmp_path, cache, capsys):
     assert run("identify", cfg, "--data", data, "--out", out, "--quiet", "--cache-dir", cache) == 0
     import meshio
 
-    omega = meshio.read(out / "fields" / "final.vtu").point_data["damage_Omega"]
-    assert omega.max() > 0 and np.all(omega >= 0)
+    pd = meshio.read(out / "fields" / "final.vtu").point_data
+    assert pd["damage_Omega_mean"].max() > 0 and np.all(pd["damage_Omega_mean"] >= 0)
+    assert np.all((pd["p_damage"] >= 0) & (pd["p_damage"] <= 1))
+    assert (out / "fields" / "risk.pvd").exists() and (out / "figures" / "risk_depth_map.png").exists()
     bad = tmp_path / "run.toml"
     bad.write_text(TINY + "\n[run]\nschedular = \"tcp://x:1\"\n")
     assert run("heat", bad, "--out", tmp_path / "h") == 2
