@@ -168,12 +168,11 @@ def _apply_threads(threads):
         numba.set_num_threads(min(threads, numba.config.NUMBA_NUM_THREADS))
 
 
-def cmd_mc(args) -> int:
+def _run_model_mc(args, heat: bool):
+    """Load CONFIG with the common overrides, validate, run its Monte Carlo; the model."""
     from mcmatlab_py.config import load_model, read_toml
-    from mcmatlab_py.export import write_voxel_vtu
-    from mcmatlab_py.plotting import plot_na_slices
 
-    from .rundir import atomic_dir, check_out_dir, write_json
+    from .rundir import check_out_dir
 
     check_out_dir(args.out, args.force)
     _apply_threads(args.threads)
@@ -182,15 +181,29 @@ def cmd_mc(args) -> int:
         model.MC.seed = args.seed
     if args.photons is not None:
         model.MC.n_photons_requested = args.photons
-    model.MC.progress = not args.quiet
+    model.MC.progress = model.HS.progress = not args.quiet
     model.MC.n_threads = args.threads
     model.MC.validate(model.G)
-    t0 = time.perf_counter()
+    if heat:
+        model.HS.validate(model.G)
+        if not model.HS.temp_sensor_positions:
+            model.HS.temp_sensor_positions = [(0.0, 0.0, 0.0)]
     client = _client(args, read_toml(args.config))
     try:
         model.run_monte_carlo(client=client)
     finally:
         _close(client)
+    return model
+
+
+def cmd_mc(args) -> int:
+    from mcmatlab_py.export import write_voxel_vtu
+    from mcmatlab_py.plotting import plot_na_slices
+
+    from .rundir import atomic_dir, write_json
+
+    t0 = time.perf_counter()
+    model = _run_model_mc(args, heat=False)
     G, MC = model.G, model.MC
     import numpy as np
 
@@ -198,6 +211,13 @@ def cmd_mc(args) -> int:
         np.savez_compressed(tmp / "NA.npz", NA=MC.NA, NFR=MC.NFR, x=G.x, y=G.y, z=G.z)
         write_voxel_vtu(tmp / "NA.vtu", G, {"NA": MC.NA, "NFR": MC.NFR})
         plot_na_slices(model, tmp / "NA_slices.png")
+        from mcmatlab_py.config import read_toml
+
+        from .report import manifest
+
+        manifest(tmp / "run.json", command="mc", config=read_toml(args.config),
+                 seed=MC.seed_used, timings={"kernel": MC.simulation_time,
+                                             "total": time.perf_counter() - t0})
         write_json(tmp / "summary.json", {
             "config": str(Path(args.config)),
             "absorbed_fraction": MC.absorbed_fraction,
@@ -269,6 +289,18 @@ def _paper(args, paper, client, verbose) -> int:
                                cache_dir=args.cache_dir, progress=verbose, client=client)
     with atomic_dir(args.out, args.force) as tmp:
         paper.write_run(run, tmp)
+        from .report import manifest
+
+        manifest(tmp / "run.json", command=f"paper {args.scenario}",
+                 config={"scenario": args.scenario, "members": args.members,
+                         "method": args.method, "fine": list(args.fine),
+                         "truth_photons": args.truth_photons,
+                         "emulator_photons": args.emulator_photons,
+                         "emulator_table": args.emulator_table, "exact": args.exact},
+                 seed=run.summary["seed"], timings={"total": run.summary["wall_seconds"],
+                                                    **{k: v for k, v in
+                                                       run.summary["timing"].items()
+                                                       if k.endswith("_s")}})
     if verbose:
         summary = run.summary
         for name, p in summary["parameters"].items():
@@ -289,31 +321,15 @@ def cmd_heat(args) -> int:
     import numpy as np
 
     import fem
-    from mcmatlab_py.config import load_model, read_toml
+    from mcmatlab_py.config import read_toml
     from mcmatlab_py.export import write_voxel_vtu
     from mcmatlab_py.plotting import plot_na_slices
 
     from .report import manifest
-    from .rundir import atomic_dir, check_out_dir, write_json
+    from .rundir import atomic_dir, write_json
 
-    check_out_dir(args.out, args.force)
-    _apply_threads(args.threads)
-    model = load_model(args.config)
-    if args.seed is not None:
-        model.MC.seed = args.seed
-    if args.photons is not None:
-        model.MC.n_photons_requested = args.photons
-    model.MC.progress = model.HS.progress = not args.quiet
-    model.MC.n_threads = args.threads
-    model.HS.validate(model.G)
-    if not model.HS.temp_sensor_positions:
-        model.HS.temp_sensor_positions = [(0.0, 0.0, 0.0)]
     t0 = time.perf_counter()
-    client = _client(args, read_toml(args.config))
-    try:
-        model.run_monte_carlo(client=client)
-    finally:
-        _close(client)
+    model = _run_model_mc(args, heat=True)
     t_mc = time.perf_counter() - t0
     model.simulate_heat_distribution()
     t_heat = time.perf_counter() - t0 - t_mc

@@ -216,3 +216,10 @@ def test_run_table_and_damage_field(tmp_path, cache, capsys):
     bad.write_text(TINY + "\n[run]\nschedular = \"tcp://x:1\"\n")
     assert run("heat", bad, "--out", tmp_path / "h") == 2
     assert "unknown key run.schedular" in capsys.readouterr().err
+
+
+def test_mc_run_has_a_manifest(tmp_path):
+    out = tmp_path / "mc"
+    assert run("mc", EX / "tiny.toml", "--out", out, "--quiet", "--photons", "5000") == 0
+    man = json.loads((out / "run.json").read_text())
+    assert man["command"] == "mc" and man["config"]["MC"]["seed"] == 1
