@@ -1,148 +1,390 @@
-"""Risk of thermal injury from the ensemble: where is tissue being damaged, and how surely?
+r"""Risk of thermal injury from the ensemble: where is tissue being damaged, and how surely?
 
-Each member of the filter carries its own temperature field; along its trajectory
-(the analysed states, step after step) the Arrhenius damage integral of MCmatlab,
+Every member of the filter carries its own temperature field :math:`T_n(x, t)` (deg C at
+the nodes of the filter's mesh). Along each member's analysed trajectory (the states the
+filter reports after the prior and after every step) the Arrhenius damage integral of
+MCmatlab (Henriques 1947; MCmatlab's heat simulation),
 
-    Omega(t) = integral of A exp(-E / (R T(t))) dt     (T in kelvin),
+.. math::
 
-is accumulated per member and node (:func:`fem.arrhenius_increment`, trapezoidal in
-the rate). The probability of injury at a node is the fraction of members with
-Omega > 1; the probability of overheating the fraction with T above a threshold
-(60 deg C by default) now, and ``p_T_ever`` the fraction that has exceeded it so far.
-These are the filter's beliefs, as honest as its ensemble (validation/risk_calibration.py).
+    \Omega_n(x, t) = \int_0^t A \exp\!\Big(-\frac{E}{R\,(T_n(x, s) + 273.15)}\Big)\,ds,
+    \qquad R = 8.3144598\ \mathrm{J\,mol^{-1}\,K^{-1}},
 
-    tracker = RiskTracker(E=422.5e3, A=7.6e66, record_times=[5.0, 15.0])
+is accumulated per member and node with the trapezoidal rule in the rate,
+
+.. math::
+
+    \Omega_n \mathrel{+}= \tfrac{\Delta t}{2}\,\big(k(T_n^{j}) + k(T_n^{j+1})\big),
+    \qquad k(T) = A\, e^{-E / (R (T + 273.15))}.
+
+From the ensemble, at every node and at the recorded times:
+
+* ``p_damage``: the fraction of members with :math:`\Omega > 1` (``omega_threshold``),
+  MCmatlab's (and Henriques') threshold of irreversible damage (63% of the molecules
+  denatured);
+* ``p_T``: the fraction of members with :math:`T > T_\mathrm{threshold}` now (60 deg C by
+  default), and ``p_T_ever``: the fraction that has been above it at some reported time;
+* ``omega_mean``, ``T_mean``, ``T_std``: ensemble mean damage and temperature mean and
+  spread.
+
+These are the filter's beliefs, as honest as its ensemble; how honest is measured in
+``validation/risk_calibration.py`` (``docs/risk.md``).
+
+Use it as the callback of :func:`enkf.tissue.identify` (or :func:`enkf.driver.run_filter`)::
+
+    tracker = RiskTracker(E=MCMATLAB_E, A=MCMATLAB_A, record_times=[5.0, 15.0])
     est = identify(setup, times, data, callback=tracker)
-    tracker.write_vtu("risk.pvd", setup.grid.mesh())
+    tracker.write_vtu("risk.pvd", setup.grid.mesh())        # ParaView / pyvista series
+    plot_depth_maps("risk.png", tracker.snapshots, setup.grid)
+
+Memory: four ``(N, n_nodes)`` arrays (damage, last rate and state, exceedance so far), plus
+``6 n_nodes`` numbers per recorded snapshot; ``N = 50`` members on 4,851 nodes is 6 MB.
 """
 
 from __future__ import annotations
 
+import math
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 
+import numba
 import numpy as np
 
-__all__ = ["RiskSnapshot", "RiskTracker", "plot_depth_maps"]
+__all__ = ["MCMATLAB_A", "MCMATLAB_E", "RiskSnapshot", "RiskTracker", "plot_depth_maps",
+           "xz_slice"]
+
+GAS_CONSTANT = 8.3144598  #: J mol^-1 K^-1, MCmatlab's value (as fem.damage)
+KELVIN = 273.15
+#: J/mol and 1/s: the Arrhenius parameters MCmatlab's media library gives its tissues
+#: (blood, vessel and example tissues, marked there "PLACEHOLDER DATA ONLY"). At 60 deg C
+#: they give a rate of 3.2 /s, so Omega = 1 is reached in 0.3 s; at 50 deg C in 35 s.
+MCMATLAB_E = 422.5e3
+MCMATLAB_A = 7.6e66
 
 
+# ------------------------------------------------------------------------------ kernel
+@numba.njit(cache=True)
+def _advance(omega, rate, ever, T, log_A, E_over_R, half_dt, T_threshold):  # pragma: no cover
+    """One trapezoid step of the damage integral, in place.
+
+    omega, rate : (N, n) damage so far and the Arrhenius rate (1/s) at the last state;
+    ever : (N, n) bool; T : (N, n) deg C, the new state; log_A, E_over_R : (n,) (K).
+    With ``half_dt = 0`` only the rates and ``ever`` are set (the first state).
+    """
+    N, n = T.shape
+    for m in range(N):
+        for i in range(n):
+            r = math.exp(log_A[i] - E_over_R[i] / (T[m, i] + KELVIN))  # log A = -inf: 0
+            omega[m, i] += half_dt * (rate[m, i] + r)
+            rate[m, i] = r
+            if T[m, i] > T_threshold:
+                ever[m, i] = True
+
+
+# ------------------------------------------------------------------------------ data
 @dataclass
 class RiskSnapshot:
-    """Risk fields at one time: each (n_nodes,), probabilities in [0, 1]."""
+    """The risk fields at one reported time; every field is ``(n_nodes,)``."""
 
     time: float  #: s
-    p_damage: np.ndarray  #: fraction of members with Omega > 1
-    p_T: np.ndarray  #: fraction of members above the temperature threshold now
-    p_T_ever: np.ndarray  #: fraction of members that have been above it so far
-    omega_mean: np.ndarray  #: ensemble mean of Omega
+    step: int  #: the filter step (0: the prior)
+    p_damage: np.ndarray  #: fraction of members with Omega > omega_threshold, in [0, 1]
+    p_T: np.ndarray  #: fraction of members with T > T_threshold at this time
+    p_T_ever: np.ndarray  #: fraction of members that have been above T_threshold so far
+    omega_mean: np.ndarray  #: ensemble mean of Omega (dimensionless)
     T_mean: np.ndarray  #: deg C, ensemble mean temperature
+    T_std: np.ndarray  #: deg C, ensemble standard deviation (ddof = 1; 0 for one member)
+
+
+def _threshold_tag(T_threshold: float) -> str:
+    return f"{T_threshold:g}".replace("-", "m").replace(".", "p") + "C"
 
 
 @dataclass
 class RiskTracker:
-    """A callback for :func:`enkf.tissue.identify` (or ``run_filter``) that tracks injury risk.
+    """A callback for :func:`enkf.tissue.identify` that tracks the risk of thermal injury.
 
     Parameters
     ----------
-    E : float or (n_nodes,) array
-        J/mol, Arrhenius activation energy (MCmatlab's ``E`` of the medium).
-    A : float or (n_nodes,) array
-        1/s, Arrhenius frequency factor (MCmatlab's ``A``); 0 means no damage.
+    E : float or array (n_nodes,)
+        J/mol, Arrhenius activation energy per node (the medium's ``E``; >= 0).
+    A : float or array (n_nodes,)
+        1/s, Arrhenius frequency factor per node (the medium's ``A``; >= 0, 0: no damage).
     T_threshold : float
-        deg C, the temperature whose exceedance is reported.
+        deg C, the temperature whose exceedance is reported (default 60).
+    omega_threshold : float
+        The damage counted as injury (default 1, MCmatlab's and Henriques').
     record_times : sequence of float, optional
-        s: keep a :class:`RiskSnapshot` at the first step at or after each of these
-        times; default every ``record_every`` steps.
+        s: keep a :class:`RiskSnapshot` at the first reported state at or after each of
+        these times (one snapshot if a step passes several). If not given, one every
+        ``record_every`` steps (the prior, step 0, included).
     record_every : int
+        Steps between snapshots when ``record_times`` is None (default 10).
+
+    Attributes
+    ----------
+    snapshots : list of RiskSnapshot
+    omega : array (N, n_nodes) or None
+        Each member's damage so far (None before the first report).
+    time : float or None
+        s, the time of the last report.
+
+    Notes
+    -----
+    A report with ``step == 0`` (the prior) starts a new run: damage and snapshots are
+    reset, so one tracker can follow several runs one after the other. The damage is
+    integrated between the reported (analysed) states; an analysis that moves a member
+    is taken as the member's temperature having gone there linearly in time.
     """
 
     E: float | np.ndarray
     A: float | np.ndarray
     T_threshold: float = 60.0
-    record_times: list | None = None
+    omega_threshold: float = 1.0
+    record_times: Sequence[float] | None = None
     record_every: int = 10
-    snapshots: list = field(default_factory=list)
-    omega: np.ndarray | None = None  #: (N, n_nodes) each member's damage so far
-    _last: tuple | None = field(default=None, repr=False)
-    _ever: np.ndarray | None = field(default=None, repr=False)
-    _pending: list = field(default_factory=list, repr=False)
+    snapshots: list = field(default_factory=list, init=False)
+    omega: np.ndarray | None = field(default=None, init=False)
+    time: float | None = field(default=None, init=False)
+    _rate: np.ndarray | None = field(default=None, init=False, repr=False)
+    _ever: np.ndarray | None = field(default=None, init=False, repr=False)
+    _X: np.ndarray | None = field(default=None, init=False, repr=False)  #: last ensemble
+    _pending: list = field(default_factory=list, init=False, repr=False)
+    _step: int = field(default=-1, init=False, repr=False)
 
     def __post_init__(self):
-        for name in ("E", "A"):
-            v = np.asarray(getattr(self, name), float)
-            if not np.all(np.isfinite(v)) or np.any(v < 0):
-                bad = v[~np.isfinite(v) | (v < 0)].ravel()[0]
-                raise ValueError(f"RiskTracker.{name} must be finite and >= 0, got {bad!r}")
+        for name, unit in (("E", "J/mol"), ("A", "1/s")):
+            v = np.asarray(getattr(self, name), dtype=float)
+            if v.ndim > 1:
+                raise ValueError(f"RiskTracker.{name} must be a scalar or (n_nodes,) ({unit}), "
+                                 f"got shape {v.shape}")
+            bad = ~np.isfinite(v) | (v < 0)
+            if np.any(bad):
+                raise ValueError(f"RiskTracker.{name} must be finite and >= 0 ({unit}), got "
+                                 f"{float(v[bad].ravel()[0])!r}")
             setattr(self, name, v)
-        if not np.isfinite(self.T_threshold):
-            raise ValueError(f"RiskTracker.T_threshold must be finite (deg C), got "
-                             f"{self.T_threshold!r}")
-        if int(self.record_every) < 1:
-            raise ValueError(f"RiskTracker.record_every must be >= 1, got {self.record_every!r}")
+        for name in ("T_threshold", "omega_threshold"):
+            v = getattr(self, name)
+            if not isinstance(v, int | float | np.floating | np.integer) or not np.isfinite(v):
+                raise ValueError(f"RiskTracker.{name} must be a finite number, got {v!r}")
+        if self.omega_threshold <= 0:
+            raise ValueError(f"RiskTracker.omega_threshold must be > 0, got "
+                             f"{self.omega_threshold!r}")
+        if isinstance(self.record_every, bool) or not isinstance(
+                self.record_every, int | np.integer) or self.record_every < 1:
+            raise ValueError(f"RiskTracker.record_every must be an integer >= 1, got "
+                             f"{self.record_every!r}")
         if self.record_times is not None:
-            self._pending = sorted(float(t) for t in self.record_times)
+            rt = np.asarray(self.record_times, dtype=float).ravel()
+            if not np.all(np.isfinite(rt)):
+                raise ValueError(f"RiskTracker.record_times must be finite (s), got "
+                                 f"{self.record_times!r}")
+            self.record_times = sorted(rt.tolist())
+        self._reset()
+
+    @classmethod
+    def from_medium(cls, medium, **kw) -> RiskTracker:
+        """A tracker with the ``E`` and ``A`` of a :class:`mcmatlab_py.Medium`."""
+        if medium.E is None or medium.A is None:
+            raise ValueError(f"medium {medium.name!r} has no Arrhenius parameters "
+                             f"(E={medium.E!r}, A={medium.A!r})")
+        return cls(E=medium.E, A=medium.A, **kw)
+
+    # -------------------------------------------------------------- following a run
+    def _reset(self) -> None:
+        self.snapshots = []
+        self.omega = self._rate = self._ever = self._X = None
+        self.time = None
+        self._step = -1
+        self._pending = list(self.record_times) if self.record_times is not None else []
 
     def __call__(self, rep) -> None:
-        import fem
+        """Take a :class:`enkf.driver.StepReport` (uses ``step``, ``time``, ``state_ensemble``)."""
+        self.update(rep.time, rep.state_ensemble, step=rep.step)
 
-        X = np.asarray(rep.state_ensemble, float)
-        if self.E.ndim and self.E.shape != (X.shape[1],):
-            raise ValueError(f"RiskTracker.E must be a scalar or have shape ({X.shape[1]},), "
-                             f"got {self.E.shape}")
+    def update(self, time: float, state_ensemble, step: int | None = None) -> None:
+        """Advance the damage to the ensemble ``state_ensemble`` (N, n_nodes), deg C, at ``time`` (s).
+
+        ``step``: the filter's step number (0 starts a new run); by default one more
+        than the last.
+        """
+        X = np.asarray(state_ensemble, dtype=float)
+        if X.ndim != 2 or X.shape[0] < 1 or X.shape[1] < 1:
+            raise ValueError(f"state_ensemble must be (N, n_nodes) deg C, got shape {X.shape}")
+        time = float(time)
+        if not np.isfinite(time):
+            raise ValueError(f"time must be finite (s), got {time!r}")
+        lo, hi = float(X.min()), float(X.max())
+        if not (lo > -KELVIN and np.isfinite(hi)):
+            raise ValueError(f"state_ensemble must be finite temperatures above -273.15 deg C, "
+                             f"got min {lo!r}, max {hi!r}")
+        step = self._step + 1 if step is None else int(step)
+        if step == 0 and self.omega is not None:
+            self._reset()
         if self.omega is None:
+            n = X.shape[1]
+            for name in ("E", "A"):
+                v = getattr(self, name)
+                if v.ndim == 1 and v.shape != (n,):
+                    raise ValueError(f"RiskTracker.{name} has shape {v.shape}, the ensemble "
+                                     f"has {n} nodes: give a scalar or ({n},)")
+            with np.errstate(divide="ignore"):
+                self._log_A = np.broadcast_to(np.log(self.A), (n,)).astype(float)
+            self._E_over_R = np.broadcast_to(self.E / GAS_CONSTANT, (n,)).astype(float)
             self.omega = np.zeros_like(X)
+            self._rate = np.zeros_like(X)
             self._ever = np.zeros(X.shape, dtype=bool)
-        if self._last is not None:
-            t0, X0 = self._last
-            dt = float(rep.time) - t0
-            if dt > 0:
-                self.omega += fem.arrhenius_increment(X0, X, dt, self.E, self.A)
-        self._ever |= X > self.T_threshold
-        self._last = (float(rep.time), X.copy())
-        if self._due(rep):
-            self.snapshots.append(RiskSnapshot(
-                float(rep.time), np.mean(self.omega > 1.0, axis=0),
-                np.mean(X > self.T_threshold, axis=0), np.mean(self._ever, axis=0),
-                self.omega.mean(axis=0), X.mean(axis=0)))
+            half_dt = 0.0
+        else:
+            if X.shape != self.omega.shape:
+                raise ValueError(f"state_ensemble has shape {X.shape}, the run so far "
+                                 f"{self.omega.shape}")
+            if time <= self.time:
+                raise ValueError(f"time must increase: got {time!r} s after {self.time!r} s")
+            half_dt = 0.5 * (time - self.time)
+        _advance(self.omega, self._rate, self._ever, np.ascontiguousarray(X), self._log_A,
+                 self._E_over_R, half_dt, float(self.T_threshold))
+        self.time, self._step = time, step
+        self._X = X.copy()  # the driver's arrays are views of its working ensemble
+        if self._due(step, time):
+            self.snapshots.append(self.snapshot())
 
-    def _due(self, rep) -> bool:
+    def _due(self, step: int, time: float) -> bool:
         if self.record_times is None:
-            return rep.step % int(self.record_every) == 0
+            return step % int(self.record_every) == 0
         due = False
-        while self._pending and rep.time >= self._pending[0] - 1e-9:
+        while self._pending and time >= self._pending[0] - 1e-9 * max(1.0, abs(time)):
             self._pending.pop(0)
             due = True
         return due
 
-    def write_vtu(self, path, mesh) -> Path:
-        """A ParaView/pyvista time series (``.pvd`` + one VTU per snapshot)."""
+    def snapshot(self, state_ensemble=None) -> RiskSnapshot:
+        """The risk fields at the last report (``state_ensemble``: the ensemble whose T
+        statistics to give instead of the last reported one)."""
+        if self.omega is None:
+            raise ValueError("RiskTracker.snapshot: nothing reported yet")
+        X = self._X if state_ensemble is None else np.asarray(state_ensemble, float)
+        N = X.shape[0]
+        return RiskSnapshot(
+            time=float(self.time), step=int(self._step),
+            p_damage=np.mean(self.omega > self.omega_threshold, axis=0),
+            p_T=np.mean(X > self.T_threshold, axis=0), p_T_ever=np.mean(self._ever, axis=0),
+            omega_mean=self.omega.mean(axis=0), T_mean=X.mean(axis=0),
+            T_std=X.std(axis=0, ddof=1) if N > 1 else np.zeros(X.shape[1]))
+
+    # -------------------------------------------------------------- output
+    def point_data(self, snapshot: RiskSnapshot) -> dict[str, np.ndarray]:
+        """The VTU point fields of a snapshot: ``p_damage``, ``p_T_above_60C``,
+        ``p_T_ever_above_60C`` (the threshold in the name), ``omega_mean``, ``T_mean``,
+        ``T_std``."""
+        tag = _threshold_tag(float(self.T_threshold))
+        return {"p_damage": snapshot.p_damage, f"p_T_above_{tag}": snapshot.p_T,
+                f"p_T_ever_above_{tag}": snapshot.p_T_ever, "omega_mean": snapshot.omega_mean,
+                "T_mean": snapshot.T_mean, "T_std": snapshot.T_std}
+
+    def write_vtu(self, path, mesh, which: int = -1) -> Path:
+        """Write the snapshots: a ``.pvd`` path gives the whole series (one VTU per
+        snapshot, for ParaView or pyvista), a ``.vtu`` path the snapshot ``which``."""
         import fem
 
-        with fem.TimeSeriesWriter(path, mesh) as w:
-            for s in self.snapshots:
-                w.write(s.time, p_damage=s.p_damage, p_T_above=s.p_T, p_T_ever=s.p_T_ever,
-                        omega_mean=s.omega_mean, T_mean=s.T_mean)
-        return Path(path)
+        if not self.snapshots:
+            raise ValueError("RiskTracker.write_vtu: no snapshots recorded")
+        path = Path(path)
+        if path.suffix == ".pvd":
+            with fem.TimeSeriesWriter(path, mesh) as w:
+                for s in self.snapshots:
+                    w.write(s.time, **self.point_data(s))
+            return path
+        if path.suffix == ".vtu":
+            return fem.write_vtu(path, mesh, point_data=self.point_data(self.snapshots[which]))
+        raise ValueError(f"path must end in .pvd (series) or .vtu (one snapshot), got "
+                         f"{str(path)!r}")
 
 
-def plot_depth_maps(path, snapshot: RiskSnapshot, grid, T_threshold: float = 60.0) -> None:
-    """xz maps through the beam axis (y = 0) of P(Omega > 1) and P(T > threshold so far)."""
+# ------------------------------------------------------------------------------ maps
+def xz_slice(values, grid, y: float = 0.0) -> np.ndarray:
+    """A nodal field on the plane ``y`` (cm): ``(nx + 1, nz + 1)`` on ``grid.x_nodes`` x
+    ``grid.z_nodes``.
+
+    ``values``: (n_nodes,) in the C order of the ``(nx+1, ny+1, nz+1)`` node grid. Between
+    two node planes the P1 field is linear along the y edges, so this is exact.
+    """
+    shape = grid.node_shape
+    v = np.asarray(values, dtype=float)
+    if v.shape != (int(np.prod(shape)),):
+        raise ValueError(f"values must be ({int(np.prod(shape))},) on the grid's nodes, got "
+                         f"shape {v.shape}")
+    yn = grid.y_nodes
+    if not yn[0] - 1e-12 <= y <= yn[-1] + 1e-12:
+        raise ValueError(f"y must lie in [{yn[0]:g}, {yn[-1]:g}] cm, got {y!r}")
+    F = v.reshape(shape)
+    j = int(np.clip(np.searchsorted(yn, y) - 1, 0, len(yn) - 2))
+    w = float(np.clip((y - yn[j]) / (yn[j + 1] - yn[j]), 0.0, 1.0))
+    return (1 - w) * F[:, j, :] + w * F[:, j + 1, :]
+
+
+_COLUMNS = {
+    "p_damage": ("P($\\Omega$ > 1)", "magma", (0, 1)),
+    "p_T": ("P(T > {thr} $^\\circ$C) now", "magma", (0, 1)),
+    "p_T_ever": ("P(T > {thr} $^\\circ$C) so far", "magma", (0, 1)),
+    "T_mean": ("mean T [$^\\circ$C]", "inferno", None),
+}
+
+
+def plot_depth_maps(path, snapshots, grid, T_threshold: float = 60.0, *,
+                    columns: Sequence[str] = ("p_damage", "p_T", "p_T_ever", "T_mean"),
+                    truth: dict | None = None, y: float = 0.0, zmax: float | None = None
+                    ) -> Path:
+    """Depth maps (the xz plane through the beam axis, ``y`` = 0) as a PNG.
+
+    Parameters
+    ----------
+    snapshots : RiskSnapshot or list of them
+        One row per snapshot.
+    grid : fem.BoxGrid
+        The filter's grid (its nodes carry the fields).
+    columns : names of RiskSnapshot fields, one column each.
+    truth : dict, optional
+        ``{column: [indicator (n_nodes,) per snapshot]}``: where the event happened in
+        the truth (1) or not (0), drawn as a dashed cyan contour at 0.5.
+    zmax : cm, depth shown (default the whole block).
+    """
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    shape = grid.node_shape
-    j = shape[1] // 2
+    if isinstance(snapshots, RiskSnapshot):
+        snapshots = [snapshots]
+    for c in columns:
+        if c not in _COLUMNS:
+            raise ValueError(f"columns: unknown field {c!r} (one of {sorted(_COLUMNS)})")
     x, z = grid.x_nodes, grid.z_nodes
-    fig, axes = plt.subplots(1, 2, figsize=(10, 3.6), constrained_layout=True)
-    for ax, field_, title in ((axes[0], snapshot.p_damage, "P($\\Omega$ > 1)"),
-                              (axes[1], snapshot.p_T_ever,
-                               f"P(T > {T_threshold:g} $^\\circ$C so far)")):
-        F = np.asarray(field_).reshape(shape)[:, j, :]
-        im = ax.pcolormesh(x, z, F.T, vmin=0, vmax=1, cmap="magma", shading="gouraud")
-        ax.invert_yaxis()
-        ax.set(title=f"{title} at t = {snapshot.time:g} s", xlabel="x [cm]", ylabel="z [cm]")
-        fig.colorbar(im, ax=ax)
+    nr, nc = len(snapshots), len(columns)
+    fig, axes = plt.subplots(nr, nc, figsize=(3.4 * nc, 2.2 * nr + 0.6), squeeze=False,
+                             constrained_layout=True)
+    for i, s in enumerate(snapshots):
+        for k, c in enumerate(columns):
+            ax = axes[i, k]
+            label, cmap, lim = _COLUMNS[c]
+            F = xz_slice(getattr(s, c), grid, y)
+            vmin, vmax = lim if lim is not None else (None, None)
+            im = ax.pcolormesh(x, z, F.T, cmap=cmap, vmin=vmin, vmax=vmax, shading="gouraud")
+            if c == "T_mean":
+                ax.contour(x, z, F.T, levels=[T_threshold], colors="w", linewidths=0.8)
+            if truth is not None and c in truth:
+                ax.contour(x, z, xz_slice(truth[c][i], grid, y).T, levels=[0.5],
+                           colors="c", linestyles="--", linewidths=1.0)
+            ax.set_ylim(zmax if zmax is not None else z[-1], z[0])
+            ax.set_title(f"{label.format(thr=f'{T_threshold:g}')}, t = {s.time:g} s",
+                         fontsize=9)
+            if i == nr - 1:
+                ax.set_xlabel("x [cm]")
+            if k == 0:
+                ax.set_ylabel("z [cm]")
+            fig.colorbar(im, ax=ax, shrink=0.9)
+    path = Path(path)
     fig.savefig(path, dpi=110)
     plt.close(fig)
+    return path
