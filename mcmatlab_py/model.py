@@ -56,9 +56,16 @@ class Geometry:
     #: ``None`` fills the cuboid with ``media[0]``.
     geom_func: Callable | None = None
 
+    #: more voxels than this cannot be held (a medium map, per-thread int64 tallies)
+    MAX_VOXELS = 200_000_000
+
     def validate(self) -> None:
         for name in ("nx", "ny", "nz"):
             setattr(self, name, _check_int("G", name, getattr(self, name)))
+        n = self.nx * self.ny * self.nz
+        if n > self.MAX_VOXELS:
+            raise ValueError(f"G.nx * G.ny * G.nz = {n} voxels is more than this machine can "
+                             f"hold (limit {self.MAX_VOXELS}: medium map and tallies)")
         for name in ("Lx", "Ly", "Lz"):
             setattr(self, name, check_positive("G", name, getattr(self, name)))
         if not self.media:

@@ -115,7 +115,8 @@ def test_cli_mc_writes_outputs(tmp_path):
     cfg.write_text(SMALL_TOML)
     out = tmp_path / "out"
     assert main(["mc", str(cfg), "--out", str(out), "--quiet", "--seed", "4"]) == 0
-    assert {p.name for p in out.iterdir()} == {"NA.npz", "NA.vtu", "NA_slices.png", "summary.json"}
+    assert {p.name for p in out.iterdir()} == {"NA.npz", "NA.vtu", "NA_slices.png", "summary.json",
+                                                "run.json"}
     summary = json.loads((out / "summary.json").read_text())
     assert summary["seed"] == 4 and summary["n_photons"] == 2000
     assert summary["energy_balance"] == pytest.approx(1.0)

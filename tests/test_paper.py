@@ -26,7 +26,7 @@ def test_paper_command_writes_the_contract(tmp_path, scenario):
                "--cache-dir", str(tmp_path / "cache"), *SMALL])
     assert rc == 0
     assert {p.name for p in out.iterdir()} == {"estimates.csv", "truth.csv", "summary.json",
-                                               "figures"}
+                                               "figures", "run.json"}
     assert {p.name for p in (out / "figures").iterdir()} == {"estimates.png", "data.png"}
     s = json.loads((out / "summary.json").read_text())
     names = ["mua", "mus"] + (["VHC", "TC"] if scenario == "all-params" else [])
