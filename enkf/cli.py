@@ -12,6 +12,7 @@ import time
 from pathlib import Path
 
 EXIT_BAD_INPUT = 2
+EXIT_CHECK_FAILED = 1  #: validate: a check failed (its report is still written)
 
 
 def _common(p: argparse.ArgumentParser) -> None:
@@ -35,14 +36,9 @@ def _client(args, config: dict | None = None):
     """The Dask client of --scheduler / --workers (or the config's [run] table), or None."""
     scheduler, workers = getattr(args, "scheduler", None), getattr(args, "workers", None)
     if scheduler is None and workers is None and config is not None:
-        from mcmatlab_py.config import ConfigError, check_keys
+        from .config import run_table
 
-        run = check_keys("run", config.get("run", {}), {"scheduler", "workers"})
-        scheduler, workers = run.get("scheduler"), run.get("workers")
-        if scheduler is not None and not isinstance(scheduler, str):
-            raise ConfigError(f"run.scheduler must be an address string, got {scheduler!r}")
-        if workers is not None and (isinstance(workers, bool) or not isinstance(workers, int)):
-            raise ConfigError(f"run.workers must be an integer, got {workers!r}")
+        scheduler, workers = run_table(config)
     if scheduler is None and workers is None:
         return None
     if scheduler is not None and workers is not None:
@@ -150,10 +146,20 @@ def build_parser() -> argparse.ArgumentParser:
 
     p_val = sub.add_parser(
         "validate", help="run the validation suite and write a Markdown report",
-        description="Run the validation scripts of the source tree (validation/*.py) and "
-                    "collect their reports into --out/report.md. --quick (default) runs "
-                    "small versions in a few minutes; --full the published-size ones.")
-    p_val.add_argument("--full", action="store_true", help="full sizes (can take hours)")
+        description="Run the validation scripts of the source tree (validation/*.py), each "
+                    "in its own process, and collect their reports and figures into "
+                    "--out/report.md. --quick (default) runs small versions in a few "
+                    "minutes; --full the published sizes (hours). Exit status 0 when every "
+                    "check ran, 1 when one failed (the report says which), 2 for bad input.")
+    size = p_val.add_mutually_exclusive_group()
+    size.add_argument("--quick", dest="full", action="store_false",
+                      help="small versions, a few minutes (default)")
+    size.add_argument("--full", dest="full", action="store_true",
+                      help="the published sizes (can take hours)")
+    p_val.add_argument("--only", nargs="+", default=None, metavar="CHECK",
+                       help="run only these checks (names of validation/*.py, or "
+                            "'sensitivity')")
+    p_val.set_defaults(full=False)
     _common(p_val)
     p_val.set_defaults(func=cmd_validate)
     return parser
@@ -170,13 +176,16 @@ def _apply_threads(threads):
 
 def _run_model_mc(args, heat: bool):
     """Load CONFIG with the common overrides, validate, run its Monte Carlo; the model."""
-    from mcmatlab_py.config import load_model, read_toml
+    from mcmatlab_py.config import model_from_config, read_toml
 
+    from .config import check_identify_keys
     from .rundir import check_out_dir
 
     check_out_dir(args.out, args.force)
     _apply_threads(args.threads)
-    model = load_model(args.config)
+    raw = read_toml(args.config)
+    model = model_from_config(raw)
+    check_identify_keys(raw)  # unused here, but a typo there is still an error
     if args.seed is not None:
         model.MC.seed = args.seed
     if args.photons is not None:
@@ -188,7 +197,7 @@ def _run_model_mc(args, heat: bool):
         model.HS.validate(model.G)
         if not model.HS.temp_sensor_positions:
             model.HS.temp_sensor_positions = [(0.0, 0.0, 0.0)]
-    client = _client(args, read_toml(args.config))
+    client = _client(args, raw)
     try:
         model.run_monte_carlo(client=client)
     finally:
@@ -376,37 +385,33 @@ def _plot_sensors(path, HS, labels) -> None:
     plt.close(fig)
 
 
-def read_data(setup, path):
-    """(times, data) of a CSV, or of an NPZ thermal image series (camera only)."""
-    from .config import read_sensor_csv
-
-    n_obs = setup.sensor_positions.shape[0] + (setup.image.n_pixels if setup.image else 0)
-    if Path(path).suffix.lower() == ".npz":
-        from .image import load_frames
-
-        if setup.image is None or setup.sensor_positions.shape[0]:
-            raise ValueError(f"{path}: an NPZ image series needs [sensors.camera] and no "
-                             "point sensors (sensors.positions = [])")
-        return load_frames(path, setup.image)
-    times, data, _ = read_sensor_csv(path, n_obs)
-    return times, data
-
-
 def _identify_one(cfg, absorption, seed, data_path, out_dir, quiet=True) -> dict:
     """Run the filter on one data file and write its outputs into ``out_dir`` (a task)."""
+    from mcmatlab_py._progress import Progress
+
     from .report import write_identify_outputs
     from .tissue import identify
 
     setup = cfg.setup(absorption, seed=seed)
-    times, data = read_data(setup, data_path)
+    times, data = cfg.read_data(data_path)
     medium = cfg.model.G.media[0]
     risk = None
     if medium.E and medium.A:  # MCmatlab's damage model: the risk of injury per node
         from .risk import RiskTracker
 
         risk = RiskTracker(E=medium.E, A=medium.A, record_every=10)
+    bar = Progress(len(times), "filter", enabled=not quiet)
+
+    def callback(rep):
+        if risk is not None:
+            risk(rep)
+        bar.update(rep.step)
+
     t0 = time.perf_counter()
-    est = identify(setup, times, data, callback=risk)
+    try:
+        est = identify(setup, times, data, callback=callback, param_bounds=cfg.param_bounds)
+    finally:
+        bar.close()
     summary = write_identify_outputs(Path(out_dir), setup, est, times, data,
                                      absorption=absorption, risk=risk)
     summary["data"] = str(data_path)
@@ -421,14 +426,20 @@ def cmd_identify(args) -> int:
 
     check_out_dir(args.out, args.force)
     _apply_threads(args.threads)
-    if (args.data is None) == (args.follow is None):
-        raise ValueError("give --data FILE [FILE ...] or --follow FILE")
     cfg = load_identify(args.config)
+    if args.data is None and args.follow is None and cfg.data.file is not None:
+        args.data = [str(cfg.data.file)]
+    if (args.data is None) == (args.follow is None):
+        raise ValueError("give --data FILE [FILE ...] or --follow FILE (or data.file in the "
+                         "config)")
+    if args.follow is not None and cfg.data.time_offset is not None:
+        raise ValueError("data.time_offset is not supported with --follow: write the times "
+                         "from the laser's start")
     seed = args.seed if args.seed is not None else cfg.setup_kw.get("seed", 0)
     files = [Path(f) for f in (args.data or [])]
     if len(files) == 1:  # one dataset: bad data is bad input (exit 2, nothing written);
         # in a batch a bad file is reported in batch.csv and the others go on
-        read_data(cfg.setup(lambda a, b: None), files[0])
+        cfg.read_data(files[0])
     t0 = time.perf_counter()
     client = _client(args, cfg.raw)
     try:
@@ -439,7 +450,7 @@ def cmd_identify(args) -> int:
             return _follow(args, cfg, absorption, seed, t_emu)
         with atomic_dir(args.out, args.force) as tmp:
             if len(files) == 1:
-                summary = _identify_one(cfg, absorption, seed, files[0], tmp)
+                summary = _identify_one(cfg, absorption, seed, files[0], tmp, args.quiet)
                 rows = [summary]
             else:
                 rows = _identify_batch(cfg, absorption, seed, files, tmp, client, args.quiet)
@@ -450,6 +461,10 @@ def cmd_identify(args) -> int:
                 write_json(tmp / "summary.json", {"runs": rows})
     finally:
         _close(client)
+    for r in rows:
+        if r.get("stopped"):
+            print(f"warning: {r['data']}: the filter stopped early: {r['stopped']} (estimates "
+                  "up to then are written)", file=sys.stderr)
     if not args.quiet:
         for r in rows:
             if "error" in r:
@@ -519,7 +534,8 @@ def _follow(args, cfg, absorption, seed, t_emu) -> int:
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     setup = cfg.setup(absorption, seed=seed)
-    ident = OnlineIdentifier(setup)
+    ident = OnlineIdentifier(setup, param_bounds=cfg.param_bounds,
+                             dt_hint=1.0 / cfg.rate if cfg.rate else 0.1)
     names = list(setup.estimate)
     cols = ["time_s"] + [f"{n}_{s}" for n in names for s in ("mean", "std")] + [
         f"T{j}_{s}" for j in range(len(setup.tracked_positions)) for s in ("mean", "std")]
@@ -542,7 +558,8 @@ def _follow(args, cfg, absorption, seed, t_emu) -> int:
 
     t0 = time.perf_counter()
     try:
-        n = follow_csv(args.follow, ident, on_update, idle_timeout_s=args.idle_timeout)
+        n = follow_csv(args.follow, ident, on_update, idle_timeout_s=args.idle_timeout,
+                       columns=None if cfg.data.columns is None else ["time", *cfg.data.columns])
     finally:
         fh.close()
     _live_figure(out, ident, setup)
@@ -578,77 +595,37 @@ def _live_figure(out, ident, setup) -> None:
 
 
 def cmd_validate(args) -> int:
-    import subprocess
-
-    import numpy as np
-
+    from .report import manifest
     from .rundir import atomic_dir, check_out_dir
+    from .suite import run_suite, select, validation_dir
 
     check_out_dir(args.out, args.force)
-    root = Path(__file__).resolve().parents[1] / "validation"
-    if not root.is_dir():
-        raise ValueError(f"the validation suite is not here ({root}): run from a source checkout")
-    quick = not args.full
-    suite = [
-        ("mc_published", ["--photons", "300000" if quick else "10000000"]),
-        ("enkf_kalman_consistency", ["--reps", "40", "--N", "500"] if quick else []),
-        ("enkf_lorenz96", ["--steps", "2000", "--burn-in", "300", "--seeds", "0"] if quick else []),
-        ("fem_convergence", []),
-        ("fem_fd_reference", []),
-        ("coarse_model_error", ["--photons", "1000000" if quick else "10000000"]),
-    ]
-    if not quick:
-        suite += [("emulator_accuracy", []), ("enkf_posterior", []), ("paper_runs", ["--twin"]),
-                  ("image_vs_point", [])]
+    _apply_threads(args.threads)
+    validation_dir()
+    names = select(args.full, args.only)
+    seed = 0 if args.seed is None else args.seed
+    t0 = time.perf_counter()
     with atomic_dir(args.out, args.force) as tmp:
-        lines = ["# tissue-enkf validation report", "",
-                 f"{'Quick' if quick else 'Full'} suite, run by `tissue-enkf validate"
-                 f"{' --full' if not quick else ''}`. Each section is the report of one "
-                 "script of validation/ (its command is in its first lines).", ""]
-        for name, extra in suite:
-            script = root / f"{name}.py"
-            report = tmp / f"{name}.md"
-            cmd = [sys.executable, str(script), *extra]
-            if name not in ("fem_convergence", "fem_fd_reference"):
-                cmd += ["--out", str(report)]
-            if not args.quiet:
-                print(f"validate: {name} ...", file=sys.stderr)
-            t0 = time.perf_counter()
-            res = subprocess.run(cmd, capture_output=True, text=True, cwd=str(root.parent))
-            dt = time.perf_counter() - t0
-            status = "ok" if res.returncode == 0 else f"exit status {res.returncode}"
-            lines += [f"## {name} ({status}, {dt:.0f} s)", ""]
-            if report.exists():
-                lines += [report.read_text().replace("# ", "### ", 1), ""]
-            else:
-                lines += ["```", (res.stdout + res.stderr).strip()[-3000:], "```", ""]
-        # a figure to compare with the paper's: the sensor's sensitivity to mua and mus
-        from . import paper
-
-        t0 = time.perf_counter()
-        grid = (40, 40, 20) if quick else (100, 100, 50)
-        res = paper.sensitivity_study(grid, 200_000 if quick else 10**6, progress=False)
-        (tmp / "figures").mkdir(exist_ok=True)
-        paper.plot_sensitivity(tmp / "figures" / "sensitivity.png", res)
-        peak_mua = {v: float(np.max(T)) for v, T in res["mua"].items()}
-        peak_mus = {v: float(np.max(T)) for v, T in res["mus"].items()}
-        lines += [f"## sensitivity of the sensor to mua and mus ({time.perf_counter() - t0:.0f} s)",
-                  "", f"The paper's sensitivity study on {grid[0]} x {grid[1]} x {grid[2]} "
-                  "voxels: the surface temperature rises with mua strongly and with mus "
-                  "weakly, as in the paper's figure.", "",
-                  "| mua | peak T | | mus | peak T |", "|---|---|---|---|---|"]
-        for (a, ta), (b, tb) in zip(peak_mua.items(), peak_mus.items(), strict=True):
-            lines.append(f"| {a:g} | {ta:.2f} | | {b:g} | {tb:.2f} |")
-        lines += ["", "![sensitivity](figures/sensitivity.png)", ""]
-        (tmp / "report.md").write_text("\n".join(lines) + "\n")
-    if not args.quiet:
-        print(f"report -> {Path(args.out) / 'report.md'}")
-    return 0
+        res = run_suite(tmp, full=args.full, only=names, seed=seed, threads=args.threads,
+                        progress=not args.quiet)
+        manifest(tmp / "run.json", command="validate",
+                 config={"full": args.full, "checks": names}, seed=seed,
+                 timings={"total": time.perf_counter() - t0,
+                          **{n: r["seconds"] for n, r in res.items()}},
+                 extra={"status": {n: r["status"] for n, r in res.items()}})
+    failed = [n for n, r in res.items() if r["status"] != "ok"]
+    if not args.quiet or failed:
+        print(f"report -> {Path(args.out) / 'report.md'}"
+              + (f"; failed: {', '.join(failed)}" if failed else ""), file=sys.stderr)
+    return EXIT_CHECK_FAILED if failed else 0
 
 
 def main(argv=None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
+    from . import report
+
+    report.command_line = ["tissue-enkf", *(sys.argv[1:] if argv is None else argv)]
     try:
         return args.func(args)
     except KeyboardInterrupt:

@@ -41,15 +41,27 @@ import numpy as np
 
 from mcmatlab_py.config import ConfigError, check_keys, model_from_config, read_toml
 
-__all__ = ["IdentifyConfig", "load_identify", "read_sensor_csv"]
+__all__ = ["DataSpec", "IdentifyConfig", "check_identify_keys", "identify_config_from_dict",
+           "load_identify", "read_sensor_csv"]
 
-_SENSOR_KEYS = {"positions", "noise_var", "tracked", "camera"}
+
+@dataclass
+class DataSpec:
+    """The ``[data]`` table: where the measurements are and how to read them."""
+
+    file: Path | None = None  #: default data file (``--data`` wins), relative to the config
+    columns: list | None = None  #: CSV header names, in the order of sensors.positions
+    time_offset: float | None = None  #: s, the laser's start on the data's clock
+
+_SENSOR_KEYS = {"positions", "noise_var", "tracked", "camera", "rate"}
 _CAMERA_KEYS = {"x_range", "y_range", "shape", "noise_var", "subsamples"}
 _FILTER_KEYS = {
     "n_members", "method", "estimate", "grid", "prior_range", "model_noise_std",
     "random_walk_std", "random_walk_when_off", "inflation", "mda", "seed", "parameter_model",
-    "localization_radius", "heat_mass", "transforms", "emulator",
+    "localization_radius", "heat_mass", "transforms", "emulator", "bounds",
 }
+_PARAMETERS = ("mua", "mus", "VHC", "TC")
+_DATA_KEYS = {"file", "columns", "time_offset"}
 _EMULATOR_KEYS = {"n_photons", "n_mua", "n_mus", "mua_range", "mus_range", "seed", "exact"}
 
 
@@ -63,6 +75,34 @@ class IdentifyConfig:
     emulator_kw: dict
     exact: bool
     raw: dict  #: the parsed TOML (for run.json)
+    param_bounds: np.ndarray | None = None  #: (n_par, 2) health-check range, None: default
+    data: DataSpec = None  #: the [data] table
+    rate: float | None = None  #: Hz, the sensor's nominal rate (sensors.rate)
+
+    @property
+    def n_obs(self) -> int:
+        """Data columns after ``time``: the point sensors, then the camera's pixels."""
+        kw = self.setup_kw
+        return len(kw["sensor_positions"]) + (kw["image"].n_pixels if "image" in kw else 0)
+
+    def read_data(self, path: str | Path) -> tuple[np.ndarray, np.ndarray]:
+        """``(times (M,) s, data (M, n_obs) deg C)`` of a CSV, or of an NPZ image series.
+
+        Raises ValueError naming the file and the problem (see :func:`read_sensor_csv`
+        and :func:`enkf.image.load_frames`).
+        """
+        data = self.data or DataSpec()
+        if Path(path).suffix.lower() == ".npz":
+            from .image import load_frames
+
+            if "image" not in self.setup_kw or len(self.setup_kw["sensor_positions"]):
+                raise ValueError(f"{path}: an NPZ image series needs [sensors.camera] and no "
+                                 "point sensors (sensors.positions = [])")
+            times, frames = load_frames(path, self.setup_kw["image"])
+            return _apply_offset(path, times, frames, data.time_offset)
+        times, values, _ = read_sensor_csv(path, self.n_obs, columns=data.columns,
+                                           time_offset=data.time_offset)
+        return times, values
 
     def emulator(self, *, cache_dir=None, progress=True, client=None):
         """The absorption emulator of this model on the filter's mesh (cached)."""
@@ -121,7 +161,7 @@ def _points(key, v, G) -> np.ndarray:
     tol = 1e-9
     for i, (x, y, z) in enumerate(pts):
         if not (abs(x) <= G.Lx / 2 + tol and abs(y) <= G.Ly / 2 + tol and -tol <= z <= G.Lz + tol):
-            raise ConfigError(f"{key}[{i}] = {[x, y, z]} cm is outside the tissue "
+            raise ConfigError(f"{key}[{i}] = {[float(x), float(y), float(z)]} cm is outside the tissue "
                               f"(x, y in [-{G.Lx / 2}, {G.Lx / 2}], z in [0, {G.Lz}])")
     return pts
 
@@ -182,6 +222,9 @@ def identify_config_from_dict(cfg: dict) -> IdentifyConfig:
                                           cam.get("noise_var", 0.01), positive=True),
             subsamples=_num("sensors.camera.subsamples", cam.get("subsamples", 4),
                             integer=True, lo=1))
+    rate = None
+    if "rate" in sens:
+        rate = _num("sensors.rate", sens["rate"], positive=True)
     flt = check_keys("filter", cfg.get("filter", {}), _FILTER_KEYS)
     if "n_members" in flt:
         setup_kw["n_members"] = _num("filter.n_members", flt["n_members"], integer=True, lo=2)
@@ -243,8 +286,12 @@ def identify_config_from_dict(cfg: dict) -> IdentifyConfig:
     exact = emu.get("exact", False)
     if not isinstance(exact, bool):
         raise ConfigError(f"filter.emulator.exact must be true or false, got {exact!r}")
+    run_table(cfg)
+    bounds = _bounds(flt.get("bounds", {}), setup_kw, m)
+    data = _data_spec(cfg.get("data", {}), len(positions) + (
+        setup_kw["image"].n_pixels if "image" in setup_kw else 0))
     try:
-        out = IdentifyConfig(model, setup_kw, grid, emulator_kw, exact, cfg)
+        out = IdentifyConfig(model, setup_kw, grid, emulator_kw, exact, cfg, bounds, data, rate)
         out.setup(absorption=lambda mua, mus: None)  # validates the filter settings
     except ConfigError:
         raise
@@ -253,12 +300,108 @@ def identify_config_from_dict(cfg: dict) -> IdentifyConfig:
     return out
 
 
+def _bounds(table, setup_kw: dict, medium) -> np.ndarray | None:
+    """``[filter.bounds]``: the physical range of each estimated parameter's mean."""
+    names = setup_kw.get("estimate", ("mua", "mus"))
+    table = check_keys("filter.bounds", table, set(_PARAMETERS))
+    if not table:
+        return None
+    extra = sorted(set(table) - set(names))
+    if extra:
+        raise ConfigError(f"filter.bounds.{extra[0]}: {extra[0]} is not estimated "
+                          f"(filter.estimate = {list(names)})")
+    lo_f, hi_f = setup_kw.get("prior_range", (0.5, 2.0))
+    out = []
+    for name in names:
+        nominal = getattr(medium, name)
+        lo, hi = nominal / 20, nominal * 20  # enkf.tissue.identify's default
+        if name in table:
+            lo, hi = _pair(f"filter.bounds.{name}", table[name], positive=True)
+            if not (lo <= lo_f * nominal and hi_f * nominal <= hi):
+                raise ConfigError(f"filter.bounds.{name} = {[lo, hi]} must contain the prior "
+                                  f"[{lo_f * nominal:g}, {hi_f * nominal:g}] (filter.prior_range "
+                                  f"times G.media[0].{name})")
+        out.append((lo, hi))
+    return np.array(out)
+
+
+def _data_spec(table, n_obs: int) -> DataSpec:
+    table = check_keys("data", table, _DATA_KEYS)
+    spec = DataSpec()
+    if "file" in table:
+        if not isinstance(table["file"], str) or not table["file"]:
+            raise ConfigError(f"data.file must be a path (a string), got {table['file']!r}")
+        spec.file = Path(table["file"])
+    if "columns" in table:
+        cols = table["columns"]
+        if not (isinstance(cols, list) and all(isinstance(c, str) and c for c in cols)):
+            raise ConfigError(f"data.columns must be a list of column names, got {cols!r}")
+        if len(cols) != n_obs:
+            raise ConfigError(f"data.columns names {len(cols)} columns, the config observes "
+                              f"{n_obs} (sensors.positions, then camera pixels)")
+        if len(set(cols)) != len(cols):
+            raise ConfigError(f"data.columns repeats a name: {cols!r}")
+        spec.columns = list(cols)
+    if "time_offset" in table:
+        spec.time_offset = _num("data.time_offset", table["time_offset"])
+    return spec
+
+
+def check_identify_keys(cfg: dict) -> None:
+    """Check the key names of [sensors], [filter], [data] and [run] (for ``mc``, ``heat``).
+
+    Those commands do not use the tables, but a typo in them is still an error.
+    """
+    sens = check_keys("sensors", cfg.get("sensors", {}), _SENSOR_KEYS)
+    if "camera" in sens:
+        check_keys("sensors.camera", sens["camera"], _CAMERA_KEYS)
+    flt = check_keys("filter", cfg.get("filter", {}), _FILTER_KEYS)
+    check_keys("filter.emulator", flt.get("emulator", {}), _EMULATOR_KEYS)
+    check_keys("filter.bounds", flt.get("bounds", {}), set(_PARAMETERS))
+    check_keys("data", cfg.get("data", {}), _DATA_KEYS)
+    run_table(cfg)
+
+
+def run_table(cfg: dict) -> tuple[str | None, int | None]:
+    """``(scheduler, workers)`` of the ``[run]`` table (Dask; None when not given)."""
+    run = check_keys("run", cfg.get("run", {}), {"scheduler", "workers"})
+    scheduler, workers = run.get("scheduler"), run.get("workers")
+    if scheduler is not None and not isinstance(scheduler, str):
+        raise ConfigError(f"run.scheduler must be an address string, got {scheduler!r}")
+    if workers is not None and (isinstance(workers, bool) or not isinstance(workers, int)
+                                or workers < 1):
+        raise ConfigError(f"run.workers must be an integer >= 1, got {workers!r}")
+    return scheduler, workers
+
+
 def load_identify(path: str | Path) -> IdentifyConfig:
-    """Read and validate an identification config file."""
-    return identify_config_from_dict(read_toml(path))
+    """Read and validate an identification config file.
+
+    A relative ``data.file`` is taken relative to the config file's folder.
+    """
+    cfg = identify_config_from_dict(read_toml(path))
+    if cfg.data.file is not None and not cfg.data.file.is_absolute():
+        cfg.data.file = Path(path).parent / cfg.data.file
+    return cfg
 
 
-def read_sensor_csv(path: str | Path, n_columns: int | None = None
+def _apply_offset(path, times: np.ndarray, values: np.ndarray, offset: float | None):
+    """Shift times by ``data.time_offset`` and drop the readings before the laser starts."""
+    if offset is None:
+        if times[0] <= 0:
+            raise ValueError(f"{path}: times must be > 0 s (the prior is at t = 0; set "
+                             f"data.time_offset to the laser's start), got {float(times[0])!r}")
+        return times, values
+    times = times - offset
+    keep = times > 0
+    if not np.any(keep):
+        raise ValueError(f"{path}: no reading after the laser's start (data.time_offset = "
+                         f"{offset!r} s, last time {float(times[-1] + offset)!r} s)")
+    return times[keep], values[keep]
+
+
+def read_sensor_csv(path: str | Path, n_columns: int | None = None, *,
+                    columns: list[str] | None = None, time_offset: float | None = None
                     ) -> tuple[np.ndarray, np.ndarray, list[str]]:
     """``(times (M,) s, data (M, p) deg C, column names)`` of a measured-data CSV.
 
@@ -267,6 +410,15 @@ def read_sensor_csv(path: str | Path, n_columns: int | None = None
     line and the problem for: a missing or unreadable file, no header, no rows, a
     field that is not a number, a wrong number of fields or columns, Inf, a missing,
     negative or zero time, unsorted or duplicate times.
+
+    Parameters
+    ----------
+    n_columns : the number of data columns the config observes (checked)
+    columns : header names of the data columns to use, in this order (other columns
+        are ignored; a missing name is an error); default: every column after ``time``
+    time_offset : s, subtracted from the times (the laser's start on the data's
+        clock); the readings at or before the start are then dropped. Default: none,
+        and every time must be > 0.
     """
     from .stream import parse_line
 
@@ -288,8 +440,19 @@ def read_sensor_csv(path: str | Path, n_columns: int | None = None
                          f"{names[0]!r} (is this a CSV with a header?)")
     if len(names) < 2:
         raise ValueError(f"{path}:{lines[0][0]}: no sensor columns after 'time'")
-    if n_columns is not None and len(names) - 1 != n_columns:
-        raise ValueError(f"{path}:{lines[0][0]}: {len(names) - 1} data columns, the config "
+    if len(set(names)) != len(names):
+        dup = next(n for n in names if names.count(n) > 1)
+        raise ValueError(f"{path}:{lines[0][0]}: the header names column {dup!r} twice")
+    if columns is not None:
+        missing = [c for c in columns if c not in names[1:]]
+        if missing:
+            raise ValueError(f"{path}:{lines[0][0]}: missing column {missing[0]!r} (data.columns);"
+                             f" the header has {names}")
+        pick = [names.index(c) - 1 for c in columns]
+    else:
+        pick = list(range(len(names) - 1))
+    if n_columns is not None and len(pick) != n_columns:
+        raise ValueError(f"{path}:{lines[0][0]}: {len(pick)} data columns, the config "
                          f"observes {n_columns} (sensors.positions, then camera pixels)")
     if len(lines) == 1:
         raise ValueError(f"data file {str(path)!r} has a header but no rows")
@@ -297,15 +460,14 @@ def read_sensor_csv(path: str | Path, n_columns: int | None = None
     for no, ln in lines[1:]:
         t, y = parse_line(ln, len(names), f"{path}:{no}")
         times.append(t)
-        rows.append(y)
+        rows.append(y[pick])
     times = np.array(times)
-    if times[0] <= 0:
-        raise ValueError(f"{path}: times must be > 0 s (the prior is at t = 0), got "
-                         f"{float(times[0])!r}")
     d = np.diff(times)
     if np.any(d <= 0):
         k = int(np.flatnonzero(d <= 0)[0])
         what = "duplicate" if d[k] == 0 else "unsorted"
         raise ValueError(f"{path}: {what} times: {float(times[k])!r} then "
                          f"{float(times[k + 1])!r} s")
-    return times, np.array(rows), names
+    times, values = _apply_offset(path, times, np.array(rows).reshape(len(times), len(pick)),
+                                  time_offset)
+    return times, values, ["time"] + [names[j + 1] for j in pick]

@@ -27,10 +27,26 @@ def _versions() -> dict:
     return out
 
 
+#: the command line of this run (set by enkf.cli.main; default sys.argv)
+command_line: list[str] | None = None
+
+
+def _readable_stop(message: str | None, names) -> str | None:
+    """The health check's message with parameter indices replaced by their names."""
+    if not message:
+        return message
+    import re
+
+    return re.sub(r"parameter (\d+)",
+                  lambda m: f"parameter {names[int(m.group(1))]}"
+                  if int(m.group(1)) < len(names) else m.group(0), message)
+
+
 def manifest(path: Path, *, command: str, config: dict | None, seed, timings: dict,
              extra: dict | None = None) -> None:
-    """``run.json``: the full resolved config, versions, seed, timings, command line."""
-    write_json(path, {"command": command, "argv": sys.argv, "config": config, "seed": seed,
+    """``run.json``: the full resolved config, versions, seed, timings (s), command line."""
+    argv = command_line if command_line is not None else sys.argv
+    write_json(path, {"command": command, "argv": argv, "config": config, "seed": seed,
                       "versions": _versions(), "timings_s": timings,
                       "finished": time.strftime("%Y-%m-%dT%H:%M:%S%z"), **(extra or {})})
 
@@ -103,23 +119,32 @@ def write_identify_outputs(out: Path, setup, est, times, data, *, absorption=Non
     (out / "figures").mkdir(exist_ok=True)
     (out / "fields").mkdir(exist_ok=True)
     write_estimates_csv(out / "estimates.csv", est)
+    # "final": the last step the health check accepted (when it stopped the run, the
+    # rejected step is the last row of estimates.csv and summary["rejected"])
+    k = len(est.times) - (2 if est.diverged and len(est.times) > 1 else 1)
     plot_identification(out / "figures" / "estimates.png", est, times, data, setup.power)
     summary = {
-        "parameters": {n: {"estimate_final": float(est.param_mean[-1, i]),
-                           "std_final": float(est.param_std[-1, i])}
+        "parameters": {n: {"estimate_final": float(est.param_mean[k, i]),
+                           "std_final": float(est.param_std[k, i])}
                        for i, n in enumerate(est.names)},
         "tracked": [{"position_cm": [float(v) for v in est.tracked_positions[j]],
-                     "T_final": float(est.tracked_mean[-1, j]),
-                     "std_final": float(est.tracked_std[-1, j])}
+                     "T_final": float(est.tracked_mean[k, j]),
+                     "std_final": float(est.tracked_std[k, j])}
                     for j in range(est.tracked_mean.shape[1])],
         "steps": int(len(est.times) - 1), "analysed": int(np.sum(est.analysed)),
-        "stopped": est.diverged,
+        "stopped": _readable_stop(est.diverged, est.names),
+        "stopped_at_s": float(est.times[-1]) if est.diverged else None,
+        "final_time_s": float(est.times[k]),
         "timing": {"filter_wall_s": float(est.filter_wall_s),
                    "step_latency_median_s": float(np.median(est.step_latency_s))
                    if len(est.step_latency_s) else 0.0,
                    "step_latency_max_s": float(np.max(est.step_latency_s))
                    if len(est.step_latency_s) else 0.0},
     }
+    if est.diverged:
+        summary["rejected"] = {n: {"mean": float(est.param_mean[-1, i]),
+                                   "std": float(est.param_std[-1, i])}
+                               for i, n in enumerate(est.names)}
     write_json(out / "summary.json", summary)
     # volume fields: the final ensemble mean and spread of the temperature, and the
     # absorbed power (nodal load per W) of the final mean parameters
@@ -130,7 +155,7 @@ def write_identify_outputs(out: Path, setup, est, times, data, *, absorption=Non
         point_data["T_mean"] = res.state_ensemble.mean(axis=0)
         point_data["T_std"] = res.state_ensemble.std(axis=0, ddof=1)
     if absorption is not None and getattr(absorption, "kind", "") == "load":
-        mua, mus = est.param_mean[-1, 0], est.param_mean[-1, 1]
+        mua, mus = est.param_mean[k, 0], est.param_mean[k, 1]
         vals = absorption.unique(np.array([mua]), np.array([mus]))[0][absorption.inverse]
         point_data["absorbed_power_per_W"] = vals
     if risk is not None and risk.omega is not None:

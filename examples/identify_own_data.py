@@ -16,14 +16,14 @@ HERE = Path(__file__).parent
 
 
 def main(config=HERE / "tiny.toml", data=HERE / "tiny_data.csv", cache_dir=None):
-    from enkf.config import load_identify, read_sensor_csv
+    from enkf.config import load_identify
     from enkf.tissue import identify
 
     cfg = load_identify(config)
     emulator = cfg.emulator(cache_dir=cache_dir, progress=False)  # built once, then cached
     setup = cfg.setup(emulator)
-    times, values, _ = read_sensor_csv(data, setup.sensor_positions.shape[0])
-    est = identify(setup, times, values)
+    times, values = cfg.read_data(data)  # checked: sorted times, no Inf, one column per sensor
+    est = identify(setup, times, values, param_bounds=cfg.param_bounds)
     for i, name in enumerate(est.names):
         print(f"{name}: {est.param_mean[-1, i]:.4g} +- {est.param_std[-1, i]:.2g}")
     for j, p in enumerate(est.tracked_positions):

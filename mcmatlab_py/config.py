@@ -62,6 +62,8 @@ _MC_KEYS = {
     "n_threads", "batch_size", "light_source",
 }
 _SOURCE_KEYS = {"source_type", "radius", "x_focus", "y_focus", "z_focus"}
+#: the tables of a config file: the model here, the rest for ``tissue-enkf identify``
+TOP_LEVEL_KEYS = {"G", "MC", "HS", "sensors", "filter", "data", "run"}
 _HS_KEYS = {
     "P", "duration_on", "duration_off", "n_pulses", "dt", "T_initial", "heat_boundary_type",
     "temp_sensor_positions", "heat_transfer_coefficient", "T_ambient", "theta",
@@ -138,9 +140,27 @@ def _set(obj, section: str, table: dict, skip=()) -> None:
         setattr(obj, k, v)
 
 
+def _check_hs(table: dict) -> None:
+    """Types of the [HS] keys that HeatSimulation.validate leaves to the config."""
+    for k in ("T_ambient", "heat_transfer_coefficient"):
+        if k in table:
+            v = _number(f"HS.{k}", table[k])
+            if not math.isfinite(v):
+                raise ConfigError(f"HS.{k} must be finite, got {table[k]!r}")
+    if "heat_transfer_coefficient" in table and table["heat_transfer_coefficient"] <= 0:
+        raise ConfigError(f"HS.heat_transfer_coefficient must be > 0 (W cm^-2 K^-1), got "
+                          f"{table['heat_transfer_coefficient']!r}")
+    if "mesh_divisions" in table:
+        md = table["mesh_divisions"]
+        if not (isinstance(md, list) and len(md) == 3 and all(
+                isinstance(v, int) and not isinstance(v, bool) and v >= 1 for v in md)):
+            raise ConfigError(f"HS.mesh_divisions must be [nx, ny, nz], integers >= 1, got {md!r}")
+
+
 def model_from_config(cfg: dict) -> Model:
     """Build a :class:`Model` from a parsed config; validates the model's G and MC parts."""
-    check_keys("config", cfg, {"G", "MC", "HS", "paper", "filter", "sensors", "data", "run"})
+    # [sensors], [filter], [data] (identify) and [run] (Dask) are checked by enkf.config
+    check_keys("config", cfg, TOP_LEVEL_KEYS)
     if "G" not in cfg:
         raise ConfigError("config has no [G] table (geometry)")
     G_cfg = check_keys("G", cfg["G"], _G_KEYS)
@@ -172,7 +192,10 @@ def model_from_config(cfg: dict) -> Model:
     _set(model.MC.light_source, "MC.light_source", src_cfg)
     if "HS" in cfg:
         HS_cfg = check_keys("HS", cfg["HS"], _HS_KEYS)
+        _check_hs(HS_cfg)
         _set(model.HS, "HS", HS_cfg)
+        if "mesh_divisions" in HS_cfg:
+            model.HS.mesh_divisions = tuple(HS_cfg["mesh_divisions"])
     try:
         model.G.medium_map()
         model.MC.validate(model.G)

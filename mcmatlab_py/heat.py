@@ -87,6 +87,9 @@ class HeatSimulation:
                 or self.n_pulses < 1:
             raise ValueError(f"HS.n_pulses must be an integer >= 1, got {self.n_pulses!r}")
         self.dt = check_positive("HS", "dt", self.dt)
+        if self.dt > self.total_duration:
+            raise ValueError(f"HS.dt = {self.dt!r} s is longer than the whole run "
+                             f"(n_pulses * (duration_on + duration_off) = {self.total_duration} s)")
         if isinstance(self.T_initial, bool) or not isinstance(self.T_initial, (int, float)) \
                 or not math.isfinite(self.T_initial):
             raise ValueError(f"HS.T_initial must be a finite number (deg C), got "

@@ -8,8 +8,8 @@ import numpy as np
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from enkf.config import identify_config_from_dict, read_sensor_csv
-from mcmatlab_py.config import ConfigError, read_toml
+from enkf.config import check_identify_keys, identify_config_from_dict, read_sensor_csv
+from mcmatlab_py.config import ConfigError, model_from_config, read_toml
 
 EX = Path(__file__).parents[1] / "examples"
 BASE = tomllib.loads((EX / "tiny.toml").read_text())
@@ -80,3 +80,70 @@ def test_random_csv_loads_or_fails_clearly(tmp_path_factory, rows, header):
         return
     assert np.all(np.diff(times) > 0) and times[0] > 0 and np.all(np.isfinite(times))
     assert data.shape == (len(times), 1) and not np.any(np.isinf(data))
+
+
+EXTRA_PATHS = [("data", "file"), ("data", "columns"), ("data", "time_offset"),
+               ("filter", "bounds", "mua"), ("filter", "bounds", "VHC"), ("filter", "bounds"),
+               ("HS", "mesh_divisions"), ("HS", "T_ambient"), ("HS", "heat_transfer_coefficient"),
+               ("HS", "heat_boundary_type"), ("sensors", "rate"), ("run", "workers"),
+               ("run", "scheduler"), ("data",), ("run",)]
+
+
+@settings(max_examples=150, deadline=None)
+@given(st.sampled_from(EXTRA_PATHS), values)
+def test_the_optional_tables_load_or_fail_clearly(path, value):
+    cfg = copy.deepcopy(BASE)
+    node = cfg
+    for k in path[:-1]:
+        node = node.setdefault(k, {})
+    node[path[-1]] = value
+    try:
+        identify_config_from_dict(cfg)
+    except ConfigError as err:
+        assert str(err) and "\n" not in str(err)
+    # the `heat` command's reading of the same file: the model, then the other tables' keys
+    try:
+        model = model_from_config(cfg)
+        check_identify_keys(cfg)
+        model.HS.validate(model.G)
+    except ValueError as err:
+        assert str(err)
+
+
+HEADERS = ["", "[G]", "[[G.media]]", "[MC]", "[MC.light_source]", "[HS]", "[sensors]",
+           "[filter]", "[filter.emulator]", "[filter.bounds]", "[data]", "[run]", "[G.x]"]
+KEYS = ["nx", "Lx", "mua", "mus", "g", "n", "VHC", "TC", "dt", "P", "positions", "n_members",
+        "grid", "method", "file", "columns", "mua_range", "seed", "radius", "unknown"]
+VALUES = ["1", "0", "-1", "0.5", "nan", "inf", "-inf", "1e400", "\"x\"", "[1, 2, 3]", "[]",
+          "[[0.0, 0.0, 0.0]]", "true", "{a = 1}", "\"etkf\"", "[0.5, 2.0]"]
+
+
+@settings(max_examples=200, deadline=None)
+@given(st.lists(st.tuples(st.sampled_from(HEADERS),
+                          st.lists(st.tuples(st.sampled_from(KEYS), st.sampled_from(VALUES)),
+                                   max_size=4)), max_size=8),
+       st.booleans())
+def test_random_toml_text_loads_or_fails_clearly(tmp_path_factory, tables, on_top_of_tiny):
+    text = "\n".join(f"{h}\n" + "\n".join(f"{k} = {v}" for k, v in kv) for h, kv in tables)
+    p = tmp_path_factory.mktemp("t") / "c.toml"
+    p.write_text(((EX / "tiny.toml").read_text() + "\n" if on_top_of_tiny else "") + text)
+    try:
+        identify_config_from_dict(read_toml(p))
+    except ConfigError as err:
+        assert str(err)
+
+
+@settings(max_examples=150, deadline=None)
+@given(st.lists(st.lists(cells, min_size=3, max_size=3), max_size=5),
+       st.lists(st.sampled_from(["a", "b", "c", "time", ""]), max_size=3),
+       st.one_of(st.none(), st.floats(-1, 1)))
+def test_csv_with_columns_and_offset_loads_or_fails_clearly(tmp_path_factory, rows, cols, offset):
+    p = tmp_path_factory.mktemp("d") / "d.csv"
+    p.write_text("\n".join(["time,a,b"] + [",".join(r) for r in rows]) + "\n")
+    try:
+        times, data, names = read_sensor_csv(p, len(cols), columns=cols, time_offset=offset)
+    except ValueError as err:
+        assert str(err)
+        return
+    assert np.all(np.diff(times) > 0) and times[0] > 0 and data.shape == (len(times), len(cols))
+    assert names == ["time", *cols]

@@ -129,7 +129,7 @@ def fem_vs_fd(levels, base=(4, 4, 2), lengths=(0.5, 0.5, 0.25), t_end=0.5, n_ste
     return out
 
 
-def main():
+def main(out: str | Path | None = None):
     levels = (1, 2, 4, 8)
     cases = [
         ("steady state (one backward-Euler step of 1e9 s)", dict(theta=1.0, n_steps=1, t_end=1e9)),
@@ -160,11 +160,15 @@ def main():
         local = np.log2(d[:-1] / d[1:])
         lines += ["", f"Fitted order (np.polyfit, all levels): **{slope:.2f}**; "
                   f"successive orders: {', '.join(f'{x:.2f}' for x in local)}", ""]
-    out = Path(__file__).parent / "reports" / "fem_fd_reference.md"
-    out.parent.mkdir(exist_ok=True)
+    out = Path(out) if out is not None else Path(__file__).parent / "reports" / "fem_fd_reference.md"
+    out.parent.mkdir(parents=True, exist_ok=True)
     out.write_text("\n".join(lines))
     print("\n".join(lines))
 
 
 if __name__ == "__main__":
-    main()
+    import argparse
+
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--out", default=str(Path(__file__).parent / "reports" / "fem_fd_reference.md"))
+    main(ap.parse_args().out)
