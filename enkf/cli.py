@@ -124,16 +124,20 @@ def build_parser() -> argparse.ArgumentParser:
         "identify", help="the filter on measured data",
         description="Estimate the optical properties (and the temperatures below the "
                     "surface) from measured temperatures: the model, sensors and filter come "
-                    "from CONFIG, the data from a CSV (time in s, then one column per sensor "
-                    "in deg C; gaps empty or nan). Writes estimates.csv, summary.json, "
+                    "from CONFIG, the data from a CSV (a header; time in s, then one column "
+                    "per sensor in deg C in the order of sensors.positions, or the columns "
+                    "named by data.columns; irregular times; gaps empty or nan) or an NPZ "
+                    "thermal image series (times, frames; with [sensors.camera]). Writes "
+                    "estimates.csv, summary.json, "
                     "figures/, fields/final.vtu and run.json. Several --data files run as a "
                     "batch (one Dask task each with --workers/--scheduler) and add batch.csv. "
                     "Exit status 0 (also when the filter's health check stopped a run: "
                     "summary.json says when and why, the estimates up to then are written), "
                     "2 for bad input.")
-    p_id.add_argument("config", help="TOML file: [G], [MC], [HS], [sensors], [filter]")
+    p_id.add_argument("config", help="TOML file: [G], [MC], [HS], [sensors], [filter], [data] "
+                                      "(see examples/own_data.toml, docs/cli.md)")
     p_id.add_argument("--data", nargs="+", default=None, metavar="FILE",
-                      help="measured data CSV file(s)")
+                      help="measured data: CSV or NPZ file(s) (default: data.file of the config)")
     p_id.add_argument("--follow", default=None, metavar="FILE",
                       help="online: read FILE as the acquisition appends to it, write each "
                            "estimate before the next frame (stops at '# end' or when idle)")

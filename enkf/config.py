@@ -283,6 +283,14 @@ def identify_config_from_dict(cfg: dict) -> IdentifyConfig:
     for k in ("mua_range", "mus_range"):
         if k in emu:
             emulator_kw[k] = _pair(f"filter.emulator.{k}", emu[k], positive=True)
+    lo_f, hi_f = setup_kw.get("prior_range", (0.5, 2.0))
+    for name, default in (("mua", (0.1, 20.0)), ("mus", (10.0, 2000.0))):  # EmulatorSpec's
+        t_lo, t_hi = emulator_kw.get(f"{name}_range", default)
+        v = getattr(m, name)
+        if not (t_lo <= lo_f * v and hi_f * v <= t_hi):
+            raise ConfigError(
+                f"filter.emulator.{name}_range = {[t_lo, t_hi]} must cover the prior of {name}, "
+                f"[{lo_f * v:g}, {hi_f * v:g}] cm^-1 (filter.prior_range times G.media[0].{name})")
     exact = emu.get("exact", False)
     if not isinstance(exact, bool):
         raise ConfigError(f"filter.emulator.exact must be true or false, got {exact!r}")

@@ -26,23 +26,33 @@ def write_csv(path: Path, times: np.ndarray, temps: np.ndarray, seed: int = 7) -
     path.write_text("\n".join(lines) + "\n")
 
 
-def main(argv=None) -> None:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--paper", action="store_true")
-    args = ap.parse_args(argv)
-    if args.paper:
+def main(paper: bool = False, out_dir: Path = HERE, photons: int | None = None) -> Path:
+    """Write ``tiny_data.csv`` (or with ``paper``, ``own_data.csv``) into ``out_dir``.
+
+    ``photons`` overrides the tiny model's ``MC.n_photons_requested``; the file path is
+    returned.
+    """
+    out_dir = Path(out_dir)
+    if paper:
         from enkf.paper import TruthConfig, generate_truth
 
         truth = generate_truth(TruthConfig(scenario="constant"))
-        write_csv(HERE / "own_data.csv", truth.times[1:], truth.temps[1:, 0])
-        return
+        write_csv(out_dir / "own_data.csv", truth.times[1:], truth.temps[1:, 0])
+        return out_dir / "own_data.csv"
     from mcmatlab_py.config import load_model
 
     model = load_model(HERE / "tiny.toml")
+    if photons is not None:
+        model.MC.n_photons_requested = photons
     model.MC.progress = model.HS.progress = False
     model.run_monte_carlo().simulate_heat_distribution()
-    write_csv(HERE / "tiny_data.csv", model.HS.sensor_times[1:], model.HS.sensor_temps[1:, 0])
+    write_csv(out_dir / "tiny_data.csv", model.HS.sensor_times[1:], model.HS.sensor_temps[1:, 0])
+    return out_dir / "tiny_data.csv"
 
 
 if __name__ == "__main__":
-    main()
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--paper", action="store_true", help="the paper's block (minutes)")
+    ap.add_argument("--out-dir", default=str(HERE))
+    a = ap.parse_args()
+    main(a.paper, a.out_dir)

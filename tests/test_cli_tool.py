@@ -65,6 +65,14 @@ def test_examples_run(tmp_path, cache):
     assert res["vtu"].exists() and 0 < res["absorbed_fraction"] < 1
     est = load("identify_own_data").main(cache_dir=cache)
     assert est.param_mean.shape == (21, 2)
+    # the committed example data come from make_example_data.py: same times and gaps, and
+    # values equal up to Monte Carlo noise (bit-equal while the kernel's streams stay)
+    from enkf.config import read_sensor_csv
+
+    t_new, y_new, _ = read_sensor_csv(load("make_example_data").main(out_dir=tmp_path), 1)
+    t_old, y_old, _ = read_sensor_csv(EX / "tiny_data.csv", 1)
+    assert np.array_equal(t_new, t_old) and np.array_equal(np.isnan(y_new), np.isnan(y_old))
+    assert np.nanmax(np.abs(y_new - y_old)) < 0.05 * np.nanmax(y_old)
 
 
 def test_batch_reports_a_bad_file_and_goes_on(tmp_path, cache):

@@ -85,6 +85,9 @@ def with_(path: str, value):
     ("filter.bounds.mua", [0.8, 2.0], "filter.bounds.mua = [0.8, 2.0] must contain the prior"),
     ("filter.bounds.VHC", [1.0, 10.0], "filter.bounds.VHC: VHC is not estimated"),
     ("filter.bounds.k", [1.0, 10.0], "unknown key filter.bounds.k"),
+    ("filter.emulator.mus_range", [60.0, 2000.0], "filter.emulator.mus_range = [60.0, 2000.0] "
+                                                  "must cover the prior of mus, [50, 200]"),
+    ("G.media.0.mua", 15.0, "filter.emulator.mua_range = [0.1, 20.0] must cover the prior"),
     ("data.columns", ["a", "b"], "data.columns names 2 columns, the config observes 1"),
     ("data.file", 3, "data.file must be a path"),
     ("data.time_offset", float("inf"), "data.time_offset must be finite"),
