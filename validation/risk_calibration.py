@@ -186,6 +186,14 @@ def scores(runs) -> dict:
             misses=int(np.sum((p == 0) & (o == 1))),
             false_alarms=int(np.sum((p == 1) & (o == 0))),
             table=reliability(p, o))
+        wrong = {}  # seed -> (misses, false alarms), where there were any
+        for r in runs:
+            pr = np.concatenate([getattr(s, attr) for s in r[2].snapshots])
+            orr = r[3][name].ravel()
+            m, f = int(np.sum((pr == 0) & orr)), int(np.sum((pr == 1) & ~orr))
+            if m or f:
+                wrong[r[0]] = (m, f)
+        res[name]["wrong_by_seed"] = wrong
     # the temperature behind the probabilities: error of the mean against the spread where
     # the tissue is heated (truth > 45 deg C)
     err, sd = [], []
@@ -237,11 +245,13 @@ def plot_reliability(path, results: dict) -> None:
             rows = [r for r in res[name]["table"] if r[1] > 0]
             ax.plot([r[2] for r in rows], [r[3] for r in rows], "o-", label=tag)
             for r in rows:
-                ax.annotate(str(r[1]), (r[2], r[3]), fontsize=6, xytext=(3, -8),
-                            textcoords="offset points")
+                if r[0] not in ("0", "1"):  # those two crowd the corners
+                    ax.annotate(str(r[1]), (r[2], r[3]), fontsize=6, xytext=(3, -8),
+                                textcoords="offset points")
         ax.plot([0, 1], [0, 1], "k:", lw=0.8)
         ax.set(xlim=(-0.02, 1.02), ylim=(-0.02, 1.02), xlabel="forecast probability",
-               ylabel="observed frequency in the truth", title=label)
+               ylabel="observed frequency in the truth",
+               title=f"{label}\n(numbers: node-times per bin)")
         ax.legend(fontsize=8)
     fig.savefig(path, dpi=110)
     plt.close(fig)
@@ -261,7 +271,10 @@ def score_section(title: str, res: dict) -> list[str]:
                   f"{r['bss']:.3f}); {r['events']} of {r['n']} node-times had the event. "
                   f"Forecasts strictly between 0 and 1: {r['contested']} (Brier "
                   f"{r['brier_contested']:.3f} on them). Misses (P = 0, event): "
-                  f"{r['misses']}; false alarms (P = 1, no event): {r['false_alarms']}.", "",
+                  f"{r['misses']}; false alarms (P = 1, no event): {r['false_alarms']}"
+                  + (" (by seed: " + ", ".join(f"{k}: {m}/{f}" for k, (m, f) in
+                                               r["wrong_by_seed"].items()) + ")"
+                     if r["wrong_by_seed"] else "") + ".", "",
                   "| forecast | node-times | mean forecast | observed frequency |",
                   "|---|---|---|---|"]
         for lab, n, pm, of in r["table"]:
@@ -336,8 +349,9 @@ def main(argv=None):
     drawn = ", ".join(f"{s}: ({a:.2f}, {b:.0f})" for s, (a, b) in draws.items())
     lines = [
         "# Risk of thermal injury: reliability against the truth", "",
-        f"Command: `{cmd}` (wall {wall:.0f} s on the shared 2-core machine, of which the "
-        f"fine truths {truth_wall:.0f} s when not cached in ~/.cache/tissue-enkf).", "",
+        f"Command: `{cmd}` (wall {wall:.0f} s on the shared 2-core machine; the fine truths, "
+        f"cached in ~/.cache/tissue-enkf after the first run, took {truth_wall:.0f} s to "
+        "compute).", "",
         f"Scenario: the paper's block at T_initial = {T0:g} deg C, {POWER:g} W top-hat "
         f"(1 mm radius) for {ON:g} s then {OFF:g} s off, constant optics, insulating "
         f"boundaries; damage E = {E:g} J/mol, A = {A:g} 1/s (MCmatlab's media library). "
