@@ -631,6 +631,8 @@ def main(argv=None) -> int:
 
     report.command_line = ["tissue-enkf", *(sys.argv[1:] if argv is None else argv)]
     try:
+        if getattr(args, "seed", None) is not None and args.seed < 0:
+            raise ValueError(f"--seed must be >= 0, got {args.seed}")
         return args.func(args)
     except KeyboardInterrupt:
         print("interrupted: nothing written", file=sys.stderr)

@@ -51,6 +51,10 @@ def manifest(path: Path, *, command: str, config: dict | None, seed, timings: di
                       "finished": time.strftime("%Y-%m-%dT%H:%M:%S%z"), **(extra or {})})
 
 
+_UNITS = {"mua": "cm$^{-1}$", "mus": "cm$^{-1}$", "VHC": "J cm$^{-3}$ K$^{-1}$",
+          "TC": "W cm$^{-1}$ K$^{-1}$"}
+
+
 def plot_identification(path, est, times, data, power, names_obs=None) -> None:
     """Temperature tracks (top, with the data of the first sensor) and parameters (bottom)."""
     import matplotlib
@@ -64,7 +68,7 @@ def plot_identification(path, est, times, data, power, names_obs=None) -> None:
     fig, axes = plt.subplots(2, cols, figsize=(4.2 * cols, 7.5), constrained_layout=True,
                              squeeze=False)
     on = np.array([power(x) > 0 for x in t])
-    for ax in axes.ravel():
+    for ax in list(axes[0, :n_tr]) + list(axes[1, :n_par]):  # laser on: shaded
         for a, b in _runs(t, on):
             ax.axvspan(a, b, color="0.88", lw=0)
     for j in range(n_tr):
@@ -83,7 +87,7 @@ def plot_identification(path, est, times, data, power, names_obs=None) -> None:
         m, s = est.param_mean[:, i], est.param_std[:, i]
         ax.plot(t, m, "r-", lw=1.4)
         ax.fill_between(t, m - 2 * s, m + 2 * s, color="r", alpha=0.15, lw=0)
-        ax.set(title=name, xlabel="time [s]")
+        ax.set(title=f"{name} [{_UNITS.get(name, '')}]", xlabel="time [s]")
     for ax in list(axes[0, n_tr:]) + list(axes[1, n_par:]):
         ax.axis("off")
     fig.savefig(path, dpi=110)

@@ -3,7 +3,7 @@
 Each script of ``validation/`` runs in its own process (as a user would run it) with
 its report written into the run directory, never into the source tree; the report
 ``report.md`` starts with a table of every check, its status and its time, then holds
-each script's report and the figures. ``--quick`` (the default) runs small versions in
+each script's report and the figures (``figures/``). ``--quick`` (the default) runs small versions in
 a few minutes; ``--full`` the published sizes (hours).
 """
 
@@ -68,6 +68,39 @@ def _demote(markdown: str) -> str:
     return "\n".join(out)
 
 
+def _load_script(root: Path, name: str):
+    import importlib.util
+
+    spec = importlib.util.spec_from_file_location(f"validation_{name}", root / f"{name}.py")
+    mod = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mod)
+    return mod
+
+
+def _convergence_figure(root: Path, out: Path) -> list[str]:
+    """The modal-decay errors of fem_convergence against h, log-log, with fitted slopes."""
+    import matplotlib
+    import matplotlib.ticker
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    rows = np.array(_load_script(root, "fem_convergence").modal(), float)
+    h = rows[:, 1]
+    fig, ax = plt.subplots(figsize=(5, 4), constrained_layout=True)
+    for col, label in ((2, "L2"), (3, "max"), (4, "interior max")):
+        slope = np.polyfit(np.log(h), np.log(rows[:, col]), 1)[0]
+        ax.loglog(h, rows[:, col], "o-", label=f"{label} (slope {slope:.2f})")
+    ax.loglog(h, rows[0, 2] * (h / h[0]) ** 2, "k--", lw=0.8, label="h$^2$")
+    ax.xaxis.set_minor_formatter(matplotlib.ticker.NullFormatter())  # no crowded labels
+    ax.set(xlabel="h [cm]", ylabel="error [K]", title="FEM: modal decay in a box")
+    ax.legend(fontsize=8)
+    (out / "figures").mkdir(exist_ok=True)
+    fig.savefig(out / "figures" / "fem_convergence.png", dpi=110)
+    plt.close(fig)
+    return ["", "![FEM convergence](figures/fem_convergence.png)"]
+
+
 def _sensitivity(out: Path, full: bool) -> list[str]:
     from . import paper
 
@@ -116,6 +149,8 @@ def run_suite(out: Path, *, full: bool = False, only: list[str] | None = None, s
             status = "ok" if res.returncode == 0 else f"exit status {res.returncode}"
             if report.exists() and res.returncode == 0:
                 body = [_demote(report.read_text())]
+                if name == "fem_convergence":
+                    body += _convergence_figure(root, out)
             else:
                 body = ["```", (res.stdout + res.stderr).strip()[-3000:], "```"]
         results[name] = {"status": status, "seconds": time.perf_counter() - t0}

@@ -286,7 +286,8 @@ def test_validate_quick_subset_writes_report_and_manifest(tmp_path):
                "--threads", "1") == 0
     report = (out / "report.md").read_text()
     assert "| fem_convergence | ok |" in report and "Fitted order" in report
-    assert (out / "fem_convergence.md").exists()
+    assert (out / "fem_convergence.md").exists() and (out / "figures" / "fem_convergence.png").exists()
+    assert "](figures/fem_convergence.png)" in report
     man = json.loads((out / "run.json").read_text())
     assert man["command"] == "validate" and man["config"]["checks"] == ["fem_convergence"]
     assert man["status"] == {"fem_convergence": "ok"}
@@ -297,6 +298,7 @@ def test_validate_quick_subset_writes_report_and_manifest(tmp_path):
     (["--only", "emulator_accuracy"], "runs only with --full"),
     (["--only", "nope"], "no such check"),
     (["--threads", "0"], "--threads must be >= 1"),
+    (["--seed", "-2"], "--seed must be >= 0, got -2"),
 ])
 def test_validate_bad_input_exits_2(tmp_path, capsys, argv, message):
     out = tmp_path / "val"
