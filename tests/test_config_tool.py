@@ -201,12 +201,7 @@ def test_npz_needs_a_camera(tmp_path):
 
 # ------------------------------------------------------------------ command line
 
-def bad_toml(tmp_path, old, new):
-    text = TINY.replace(old, new)
-    assert text != TINY, old
-    p = tmp_path / "bad.toml"
-    p.write_text(text)
-    return p
+from tests.test_cli_tool import bad_config as bad_toml  # noqa: E402 - one helper for both
 
 
 @pytest.mark.parametrize("old, new, message", [

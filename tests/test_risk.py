@@ -209,16 +209,7 @@ def test_vtu_series_single_file_and_depth_maps(tmp_path):
 
 
 # ------------------------------------------------------------------ with the filter
-GRID = fem.BoxGrid(6, 6, 4, 0.5, 0.5, 0.25)
-NOMINAL = {"mua": 1.0, "mus": 100.0, "VHC": 3.76, "TC": 0.0037}
-
-
-def absorption(mua, mus):
-    """A smooth stand-in for the emulator (as tests/test_tissue.py): NA ~ mua exp(-mu_eff z)."""
-    z = GRID.z[None, None, None, :]
-    mueff = np.sqrt(3 * mua * (mua + 0.1 * mus))[:, None, None, None]
-    return np.broadcast_to(40 * mua[:, None, None, None] * np.exp(-mueff * z),
-                           (len(mua), *GRID.shape)).copy()
+from tests.test_tissue import GRID, NOMINAL, absorption  # noqa: E402 - the same stand-in
 
 
 def test_end_to_end_with_identify():
