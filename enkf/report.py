@@ -112,7 +112,7 @@ def write_identify_outputs(out: Path, setup, est, times, data, *, absorption=Non
     """estimates.csv, summary.json, figures/estimates.png, fields/final.vtu into ``out``.
 
     ``risk``: an :class:`enkf.risk.RiskTracker` that followed the run (media with E, A):
-    its last fields go into final.vtu (``p_damage``, ``p_T_above_60C_ever``,
+    its last fields go into final.vtu (``p_damage``, ``p_T_above_60C``, ``p_T_ever_above_60C``,
     ``damage_Omega_mean``), its series into fields/risk.pvd, a depth map into figures/.
     """
     import fem
@@ -166,10 +166,12 @@ def write_identify_outputs(out: Path, setup, est, times, data, *, absorption=Non
         from .risk import plot_depth_maps
 
         last = risk.snapshots[-1] if risk.snapshots else None
-        point_data["damage_Omega_mean"] = risk.omega.mean(axis=0)
-        point_data["p_damage"] = np.mean(risk.omega > 1.0, axis=0)
+        final = risk.point_data(risk.snapshot())  # the tracker's own names and thresholds
+        point_data["damage_Omega_mean"] = final.pop("omega_mean")
+        final.pop("T_mean", None)  # the filter's T_mean/T_std are written above
+        final.pop("T_std", None)
+        point_data.update(final)
         if last is not None:
-            point_data["p_T_above_60C_ever"] = last.p_T_ever
             risk.write_vtu(out / "fields" / "risk.pvd", mesh)
             plot_depth_maps(out / "figures" / "risk_depth_map.png", last, setup.grid,
                             risk.T_threshold)
