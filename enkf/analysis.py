@@ -132,6 +132,14 @@ def _thin_svd(S: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         return sla.svd(S, full_matrices=False, check_finite=False, lapack_driver="gesvd")
 
 
+def _unit_perturbations(rng, N: int, p: int, center: bool) -> np.ndarray:
+    """(N, p) standard-normal observation perturbations, centred on their mean if asked."""
+    zeta = rng.standard_normal((N, p))
+    if center:
+        zeta -= zeta.mean(axis=0)
+    return zeta
+
+
 def enkf_perturbed_obs(
     E: np.ndarray,
     Y: np.ndarray,
@@ -201,9 +209,7 @@ def enkf_perturbed_obs(
         return np.array(E, dtype=float)
     E, Y, y, _, S, whiten = prep
     N, p = Y.shape
-    zeta = rng.standard_normal((N, p))
-    if center:
-        zeta -= zeta.mean(axis=0)
+    zeta = _unit_perturbations(rng, N, p, center)
     Delta = whiten(y - Y) + zeta  # whitened d_n - G(z_n)
     U, s, Vt = _thin_svd(S)
     A = E - E.mean(axis=0)  # anomalies
@@ -404,9 +410,7 @@ def enkf_localized(
     Cxy = rho_xy * (A.T @ B) / (N - 1)
     Cyy = rho_yy * (B.T @ B) / (N - 1) + Rm
     L = sla.cholesky(Cyy, lower=True)
-    zeta = rng.standard_normal((N, p))  # drawn as enkf_perturbed_obs draws them
-    if center:
-        zeta -= zeta.mean(axis=0)
+    zeta = _unit_perturbations(rng, N, p, center)  # the draws of enkf_perturbed_obs
     w = sla.cholesky(Rm, lower=True) @ zeta.T  # (p, N) ~ N(0, R)
     D = y[:, None] + w - Y.T  # innovations of each member, (p, N)
     G = sla.cho_solve((L, True), D)

@@ -58,6 +58,16 @@ def _close(client) -> None:
             cluster.close()
 
 
+def _model_command(p: argparse.ArgumentParser, config_help: str, func) -> None:
+    """The arguments of the commands that run a TOML model (mc, heat)."""
+    p.add_argument("config", help=config_help)
+    p.add_argument("--photons", type=int, default=None,
+                   help="number of photon packets (overrides MC.n_photons_requested)")
+    _common(p)
+    _dask_options(p)
+    p.set_defaults(func=func)
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
         prog="tissue-enkf",
@@ -68,12 +78,7 @@ def build_parser() -> argparse.ArgumentParser:
                           description="Run MCmatlab-style Monte Carlo light transport for the "
                                       "model in CONFIG and write NA/NFR (.npz, .vtu), "
                                       "summary.json and a PNG of NA slices.")
-    p_mc.add_argument("config", help="TOML model file (see examples/)")
-    p_mc.add_argument("--photons", type=int, default=None,
-                      help="number of photon packets (overrides MC.n_photons_requested)")
-    _common(p_mc)
-    _dask_options(p_mc)
-    p_mc.set_defaults(func=cmd_mc)
+    _model_command(p_mc, "TOML model file (see examples/)", cmd_mc)
 
     p_paper = sub.add_parser(
         "paper", help="run one of the paper's experiments end to end",
@@ -113,12 +118,7 @@ def build_parser() -> argparse.ArgumentParser:
                     "its [HS] table (laser pulses, boundaries, sensors); write sensors.csv "
                     "(temperature at HS.temp_sensor_positions), summary.json, figures/ and "
                     "fields/*.vtu (temperature, damage on the mesh; NA, NFR on the voxels).")
-    p_heat.add_argument("config", help="TOML model file with [G], [MC] and [HS] (see examples/)")
-    p_heat.add_argument("--photons", type=int, default=None,
-                        help="number of photon packets (overrides MC.n_photons_requested)")
-    _common(p_heat)
-    _dask_options(p_heat)
-    p_heat.set_defaults(func=cmd_heat)
+    _model_command(p_heat, "TOML model file with [G], [MC] and [HS] (see examples/)", cmd_heat)
 
     p_id = sub.add_parser(
         "identify", help="the filter on measured data",

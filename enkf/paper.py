@@ -71,8 +71,8 @@ def true_parameters(scenario: str, times: np.ndarray) -> dict[str, np.ndarray]:
         mua = np.full(times.shape, TABLE["mua"])
         mus = np.full(times.shape, TABLE["mus"])
     elif scenario == "pulse-train":
-        mua, mus = (np.array(v) for v in zip(*(train_optics(t) for t in times), strict=True)) \
-            if times.size else (np.zeros(0), np.zeros(0))
+        optics = np.array([train_optics(t) for t in times]).reshape(-1, 2)
+        mua, mus = optics[:, 0], optics[:, 1]
     else:
         mua = np.array([mua_ramp(t) for t in times])
         mus = np.array([mus_ramp(t) for t in times])

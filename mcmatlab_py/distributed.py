@@ -16,7 +16,7 @@ Dask is optional (``pip install "tissue-enkf[dist]"``)::
     emulator = AbsorptionEmulator.build(spec, client=client)
 
 Workers run their numba kernels on one thread each (``threads_per_worker=1`` and
-:func:`single_threaded`), so that a cluster of n single-threaded workers uses n cores
+:func:`numba_threads`), so that a cluster of n single-threaded workers uses n cores
 without oversubscription.
 """
 
@@ -29,7 +29,7 @@ from typing import Any
 
 from ._progress import Progress
 
-__all__ = ["TaskError", "connect", "run_tasks", "single_threaded"]
+__all__ = ["TaskError", "connect", "numba_threads", "run_tasks"]
 
 
 class TaskError(RuntimeError):
@@ -82,12 +82,12 @@ def connect(scheduler: str | Any | None = None, *, n_workers: int | None = None,
 
 
 @contextlib.contextmanager
-def single_threaded():
-    """Run numba's parallel kernels on one thread inside the block (restored after)."""
+def numba_threads(n: int):
+    """Run numba's parallel kernels on at most ``n`` threads inside the block (restored after)."""
     import numba
 
     old = numba.get_num_threads()
-    numba.set_num_threads(1)
+    numba.set_num_threads(max(1, min(int(n), numba.config.NUMBA_NUM_THREADS)))
     try:
         yield
     finally:
@@ -96,14 +96,8 @@ def single_threaded():
 
 def _in_worker(fn, item, threads):
     """Task body on a worker: the function with numba limited to the worker's threads."""
-    import numba
-
-    old = numba.get_num_threads()
-    numba.set_num_threads(max(1, min(threads, numba.config.NUMBA_NUM_THREADS)))
-    try:
+    with numba_threads(threads):
         return fn(item)
-    finally:
-        numba.set_num_threads(old)
 
 
 def run_tasks(fn: Callable[[Any], Any], items: Iterable[Any], *, client=None, retries: int = 2,
