@@ -58,7 +58,7 @@ _CAMERA_KEYS = {"x_range", "y_range", "shape", "noise_var", "subsamples"}
 _FILTER_KEYS = {
     "n_members", "method", "estimate", "grid", "prior_range", "model_noise_std",
     "random_walk_std", "random_walk_when_off", "inflation", "mda", "seed", "parameter_model",
-    "localization_radius", "heat_mass", "transforms", "emulator", "bounds",
+    "localization_radius", "heat_mass", "transforms", "emulator", "bounds", "prior",
 }
 _PARAMETERS = ("mua", "mus", "VHC", "TC")
 _DATA_KEYS = {"file", "columns", "time_offset"}
@@ -249,6 +249,9 @@ def identify_config_from_dict(cfg: dict) -> IdentifyConfig:
     grid = tuple(_num(f"filter.grid[{i}]", v, integer=True, lo=1) for i, v in enumerate(grid))
     if "prior_range" in flt:
         setup_kw["prior_range"] = _pair("filter.prior_range", flt["prior_range"], positive=True)
+    prior = _prior(flt.get("prior", {}), setup_kw)
+    if prior:
+        setup_kw["prior"] = prior
     for k, kw in (("model_noise_std", dict(lo=0)), ("random_walk_when_off", dict(lo=0)),
                   ("inflation", dict(positive=True)), ("localization_radius", dict(positive=True))):
         if k in flt:
@@ -283,14 +286,13 @@ def identify_config_from_dict(cfg: dict) -> IdentifyConfig:
     for k in ("mua_range", "mus_range"):
         if k in emu:
             emulator_kw[k] = _pair(f"filter.emulator.{k}", emu[k], positive=True)
-    lo_f, hi_f = setup_kw.get("prior_range", (0.5, 2.0))
     for name, default in (("mua", (0.1, 20.0)), ("mus", (10.0, 2000.0))):  # EmulatorSpec's
         t_lo, t_hi = emulator_kw.get(f"{name}_range", default)
-        v = getattr(m, name)
-        if not (t_lo <= lo_f * v and hi_f * v <= t_hi):
+        (p_lo, p_hi), where = _prior_of(name, setup_kw, m)
+        if not (t_lo <= p_lo and p_hi <= t_hi):
             raise ConfigError(
                 f"filter.emulator.{name}_range = {[t_lo, t_hi]} must cover the prior of {name}, "
-                f"[{lo_f * v:g}, {hi_f * v:g}] cm^-1 (filter.prior_range times G.media[0].{name})")
+                f"[{p_lo:g}, {p_hi:g}] cm^-1 ({where})")
     exact = emu.get("exact", False)
     if not isinstance(exact, bool):
         raise ConfigError(f"filter.emulator.exact must be true or false, got {exact!r}")
@@ -308,6 +310,26 @@ def identify_config_from_dict(cfg: dict) -> IdentifyConfig:
     return out
 
 
+def _prior(table, setup_kw: dict) -> dict:
+    """``[filter.prior]``: a uniform prior [lo, hi] in physical units per parameter."""
+    names = setup_kw.get("estimate", ("mua", "mus"))
+    table = check_keys("filter.prior", table, set(_PARAMETERS))
+    extra = sorted(set(table) - set(names))
+    if extra:
+        raise ConfigError(f"filter.prior.{extra[0]}: {extra[0]} is not estimated "
+                          f"(filter.estimate = {list(names)})")
+    return {name: _pair(f"filter.prior.{name}", table[name], positive=True) for name in table}
+
+
+def _prior_of(name: str, setup_kw: dict, medium) -> tuple[tuple[float, float], str]:
+    """The prior range of ``name`` and where it comes from (for error messages)."""
+    if name in setup_kw.get("prior", {}):
+        return setup_kw["prior"][name], f"filter.prior.{name}"
+    lo_f, hi_f = setup_kw.get("prior_range", (0.5, 2.0))
+    v = getattr(medium, name)
+    return (lo_f * v, hi_f * v), f"filter.prior_range times G.media[0].{name}"
+
+
 def _bounds(table, setup_kw: dict, medium) -> np.ndarray | None:
     """``[filter.bounds]``: the physical range of each estimated parameter's mean."""
     names = setup_kw.get("estimate", ("mua", "mus"))
@@ -318,17 +340,17 @@ def _bounds(table, setup_kw: dict, medium) -> np.ndarray | None:
     if extra:
         raise ConfigError(f"filter.bounds.{extra[0]}: {extra[0]} is not estimated "
                           f"(filter.estimate = {list(names)})")
-    lo_f, hi_f = setup_kw.get("prior_range", (0.5, 2.0))
     out = []
     for name in names:
         nominal = getattr(medium, name)
-        lo, hi = nominal / 20, nominal * 20  # enkf.tissue.identify's default
+        (p_lo, p_hi), where = _prior_of(name, setup_kw, medium)
+        # enkf.tissue.TissueFilterSetup.default_param_bounds
+        lo, hi = min(nominal / 20, p_lo / 10), max(nominal * 20, p_hi * 10)
         if name in table:
             lo, hi = _pair(f"filter.bounds.{name}", table[name], positive=True)
-            if not (lo <= lo_f * nominal and hi_f * nominal <= hi):
+            if not (lo <= p_lo and p_hi <= hi):
                 raise ConfigError(f"filter.bounds.{name} = {[lo, hi]} must contain the prior "
-                                  f"[{lo_f * nominal:g}, {hi_f * nominal:g}] (filter.prior_range "
-                                  f"times G.media[0].{name})")
+                                  f"[{p_lo:g}, {p_hi:g}] ({where})")
         out.append((lo, hi))
     return np.array(out)
 
@@ -366,6 +388,7 @@ def check_identify_keys(cfg: dict) -> None:
     flt = check_keys("filter", cfg.get("filter", {}), _FILTER_KEYS)
     check_keys("filter.emulator", flt.get("emulator", {}), _EMULATOR_KEYS)
     check_keys("filter.bounds", flt.get("bounds", {}), set(_PARAMETERS))
+    check_keys("filter.prior", flt.get("prior", {}), set(_PARAMETERS))
     check_keys("data", cfg.get("data", {}), _DATA_KEYS)
     run_table(cfg)
 

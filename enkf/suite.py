@@ -31,6 +31,7 @@ SUITE: dict[str, tuple[list | None, list | None]] = {
     "coarse_model_error": (["--photons", "1000000"], ["--photons", "10000000"]),
     "emulator_accuracy": (None, []),
     "enkf_posterior": (None, []),
+    "identifiability": ([], []),
     "paper_runs": (None, ["--twin"]),
     "image_vs_point": (None, []),
     "sensitivity": ([], []),

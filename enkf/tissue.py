@@ -69,7 +69,7 @@ class TissueFilterSetup:
     nominal : dict
         Nominal values of mua, mus (cm^-1), VHC (J cm^-3 K^-1), TC (W cm^-1 K^-1):
         VHC and TC are used as known values when not estimated, and the priors are
-        ``prior_range`` times the nominal values.
+        ``prior_range`` times the nominal values (unless ``prior`` names the parameter).
     estimate : tuple of str
         ``("mua", "mus")`` or ``("mua", "mus", "VHC", "TC")``.
     sensor_positions : (p, 3) cm, point sensors (may be empty, shape (0, 3), with an image)
@@ -82,6 +82,10 @@ class TissueFilterSetup:
         between temperatures and observations; the parameters stay global. Needs
         ``method="enkf"``.
     tracked_positions : (n_tracked, 3) cm, points whose temperature is reported
+    prior : dict, optional
+        ``{name: (lo, hi)}`` in the parameter's own units: the uniform prior of that
+        parameter, in place of ``prior_range`` times its nominal value (e.g. a range
+        measured on similar tissue). Only estimated parameters may be named.
     """
 
     grid: fem.BoxGrid
@@ -98,6 +102,7 @@ class TissueFilterSetup:
     T_initial: float = 0.0  #: deg C
     heat_boundary: fem.HeatBoundary = field(default_factory=fem.HeatBoundary)
     prior_range: tuple[float, float] = (0.5, 2.0)
+    prior: dict = field(default_factory=dict)  #: {name: (lo, hi)} in physical units
     model_noise_std: float = 0.002  #: deg C per step, C = std^2 I
     random_walk_std: float | Sequence[float] = 0.002  #: log units per step, E = std^2 I
     #: factor on the random walk for steps with the laser off: 1 walks always (the paper);
@@ -143,6 +148,19 @@ class TissueFilterSetup:
         if not 0 < lo < hi:
             raise ValueError(f"prior_range must be (lo, hi) with 0 < lo < hi, got "
                              f"{self.prior_range!r}")
+        self.prior = dict(self.prior or {})
+        for name, rng in self.prior.items():
+            if name not in est:
+                raise ValueError(f"prior[{name!r}]: {name} is not estimated (estimate = {est})")
+            try:
+                p_lo, p_hi = (float(v) for v in rng)
+            except (TypeError, ValueError):
+                raise ValueError(f"prior[{name!r}] must be (lo, hi) in "
+                                 f"{PARAMETER_UNITS[name]}, got {rng!r}") from None
+            if not (np.isfinite(p_hi) and 0 < p_lo < p_hi):
+                raise ValueError(f"prior[{name!r}] must be (lo, hi) with 0 < lo < hi "
+                                 f"({PARAMETER_UNITS[name]}), got {rng!r}")
+            self.prior[name] = (p_lo, p_hi)
         self.sensor_positions = np.asarray(self.sensor_positions, float).reshape(-1, 3)
         if self.sensor_positions.shape[0] == 0 and self.image is None:
             raise ValueError("sensor_positions is empty and there is no image: nothing observed")
@@ -157,6 +175,20 @@ class TissueFilterSetup:
         for name in ("model_noise_std", "trend_prior_std"):
             if not (np.isfinite(getattr(self, name)) and getattr(self, name) >= 0):
                 raise ValueError(f"{name} must be >= 0, got {getattr(self, name)!r}")
+
+    def prior_bounds(self) -> tuple[np.ndarray, np.ndarray]:
+        """(lo, hi) of the uniform prior of each estimated parameter, in ``estimate`` order."""
+        lo_f, hi_f = self.prior_range
+        pairs = [self.prior.get(n, (lo_f * self.nominal[n], hi_f * self.nominal[n]))
+                 for n in self.estimate]
+        return np.array([p[0] for p in pairs]), np.array([p[1] for p in pairs])
+
+    def default_param_bounds(self) -> np.ndarray:
+        """(n_par, 2) health-check range of each mean: 1/20 to 20 times the nominal value,
+        widened to a tenth of the prior's low end and ten times its high end."""
+        nominal = np.array([self.nominal[n] for n in self.estimate])
+        lo, hi = self.prior_bounds()
+        return np.column_stack([np.minimum(nominal / 20, lo / 10), np.maximum(nominal * 20, hi * 10)])
 
 
 @dataclass
@@ -317,8 +349,7 @@ def _assemble(setup: TissueFilterSetup, param_bounds=None, warm_dt: float | None
     P_track = fem.probe_matrix(model.mesh, setup.tracked_positions.T)
     names = setup.estimate
     nominal = np.array([setup.nominal[n] for n in names])
-    lo, hi = setup.prior_range
-    prior = uniform_prior(np.full(npts, float(setup.T_initial)), lo * nominal, hi * nominal)
+    prior = uniform_prior(np.full(npts, float(setup.T_initial)), *setup.prior_bounds())
     n = len(names)
     rw = np.broadcast_to(np.asarray(setup.random_walk_std, float), (n,)) ** 2
 
@@ -360,7 +391,7 @@ def _assemble(setup: TissueFilterSetup, param_bounds=None, warm_dt: float | None
     config = FilterConfig(n_members=setup.n_members, method=setup.method,
                           inflation=setup.inflation, seed=setup.seed, mda=setup.mda)
     if param_bounds is None:
-        param_bounds = np.column_stack([nominal / 20, nominal * 20])
+        param_bounds = setup.default_param_bounds()
     # stop on non-finite values, a parameter mean beyond the bounds, or a collapsed
     # spread (below 1e-6 of the nominal value: the data can no longer move it)
     min_std = np.concatenate([1e-6 * nominal, np.zeros(len(bounds_extra))])
@@ -382,7 +413,7 @@ def identify(setup: TissueFilterSetup, times: np.ndarray, data: np.ndarray, *,
     data : (M, p) deg C at ``setup.sensor_positions`` (then the image's pixels);
         NaN = missing (no analysis)
     param_bounds : (n_par, 2), physical range of each parameter's ensemble mean;
-        leaving it stops the run (default: 1/20 and 20 times the nominal values)
+        leaving it stops the run (default: :meth:`TissueFilterSetup.default_param_bounds`)
 
     Returns
     -------

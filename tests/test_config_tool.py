@@ -27,9 +27,10 @@ def run(*argv):
     return main([str(a) for a in argv])
 
 
-def with_(path: str, value):
-    """BASE with ``value`` at the dotted ``path`` ('G.media.0.mua'); None deletes."""
-    cfg = copy.deepcopy(BASE)
+def with_(path: str, value, base=None):
+    """``base`` (default BASE) with ``value`` at the dotted ``path`` ('G.media.0.mua');
+    None deletes."""
+    cfg = copy.deepcopy(BASE if base is None else base)
     *head, last = path.split(".")
     node = cfg
     for k in head:
@@ -85,6 +86,13 @@ def with_(path: str, value):
     ("filter.bounds.mua", [0.8, 2.0], "filter.bounds.mua = [0.8, 2.0] must contain the prior"),
     ("filter.bounds.VHC", [1.0, 10.0], "filter.bounds.VHC: VHC is not estimated"),
     ("filter.bounds.k", [1.0, 10.0], "unknown key filter.bounds.k"),
+    ("filter.prior.mua", [2.0, 0.5], "filter.prior.mua must have lo < hi, got [2.0, 0.5]"),
+    ("filter.prior.mus", [-5.0, 200.0], "filter.prior.mus[0] must be > 0, got -5.0"),
+    ("filter.prior.mus", [50.0, float("nan")], "filter.prior.mus[1] must be finite, got nan"),
+    ("filter.prior.TC", [0.001, 0.01], "filter.prior.TC: TC is not estimated"),
+    ("filter.prior.g", [0.8, 0.9], "unknown key filter.prior.g"),
+    ("filter.prior.mua", [0.05, 3.0], "filter.emulator.mua_range = [0.1, 20.0] must cover the "
+                                      "prior of mua, [0.05, 3] cm^-1 (filter.prior.mua)"),
     ("filter.emulator.mus_range", [60.0, 2000.0], "filter.emulator.mus_range = [60.0, 2000.0] "
                                                   "must cover the prior of mus, [50, 200]"),
     ("G.media.0.mua", 15.0, "filter.emulator.mua_range = [0.1, 20.0] must cover the prior"),
@@ -130,6 +138,21 @@ def test_paper_configs_match_the_paper():
     assert ap.setup_kw["estimate"] == ("mua", "mus", "VHC", "TC")
     m = ap.model.G.media[0]
     assert (m.mua, m.mus, m.VHC, m.TC) == (1.0, 100.0, 3.76, 0.0037)
+
+
+def test_prior_table_sets_each_parameters_own_range():
+    cfg = identify_config_from_dict(with_("filter.prior.mus", [80.0, 400.0]))
+    assert cfg.setup_kw["prior"] == {"mus": (80.0, 400.0)}
+    setup = cfg.setup(absorption=lambda mua, mus: None)
+    lo, hi = setup.prior_bounds()  # mua keeps prior_range times the medium's value
+    assert lo.tolist() == [0.5, 80.0] and hi.tolist() == [2.0, 400.0]
+    # the default health range reaches ten times beyond the prior
+    assert setup.default_param_bounds()[1].tolist() == [5.0, 4000.0]
+    # explicit bounds must contain the new prior, not the old one
+    with pytest.raises(ConfigError, match=r"filter.bounds.mus = \[100.0, 1000.0\] must contain "
+                                          r"the prior \[80, 400\] \(filter.prior.mus\)"):
+        identify_config_from_dict(with_("filter.prior.mus", [80.0, 400.0],
+                                        with_("filter.bounds.mus", [100.0, 1000.0])))
 
 
 def test_bounds_become_the_health_check_range():
