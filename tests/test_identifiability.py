@@ -1,19 +1,14 @@
 """The Cramér-Rao machinery of validation/identifiability.py on models with known answers."""
 
-import importlib.util
-from pathlib import Path
-
 import numpy as np
 import pytest
 from scipy.stats import norm
 
+from enkf.suite import _load_script, validation_dir
+
 
 def _module():
-    path = Path(__file__).parents[1] / "validation" / "identifiability.py"
-    spec = importlib.util.spec_from_file_location("identifiability", path)
-    mod = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(mod)
-    return mod
+    return _load_script(validation_dir(), "identifiability")
 
 
 class _LinearSensor:
