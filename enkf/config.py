@@ -332,6 +332,8 @@ def _prior_of(name: str, setup_kw: dict, medium) -> tuple[tuple[float, float], s
 
 def _bounds(table, setup_kw: dict, medium) -> np.ndarray | None:
     """``[filter.bounds]``: the physical range of each estimated parameter's mean."""
+    from .tissue import default_bounds
+
     names = setup_kw.get("estimate", ("mua", "mus"))
     table = check_keys("filter.bounds", table, set(_PARAMETERS))
     if not table:
@@ -344,8 +346,7 @@ def _bounds(table, setup_kw: dict, medium) -> np.ndarray | None:
     for name in names:
         nominal = getattr(medium, name)
         (p_lo, p_hi), where = _prior_of(name, setup_kw, medium)
-        # enkf.tissue.TissueFilterSetup.default_param_bounds
-        lo, hi = min(nominal / 20, p_lo / 10), max(nominal * 20, p_hi * 10)
+        lo, hi = default_bounds([nominal], [p_lo], [p_hi])[0]
         if name in table:
             lo, hi = _pair(f"filter.bounds.{name}", table[name], positive=True)
             if not (lo <= p_lo and p_hi <= hi):

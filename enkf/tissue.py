@@ -52,6 +52,14 @@ PARAMETER_NAMES = ("mua", "mus", "VHC", "TC")
 PARAMETER_UNITS = {"mua": "cm^-1", "mus": "cm^-1", "VHC": "J cm^-3 K^-1", "TC": "W cm^-1 K^-1"}
 
 
+def default_bounds(nominal, prior_lo, prior_hi) -> np.ndarray:
+    """(n_par, 2) default health-check range of each parameter's mean: 1/20 to 20 times
+    the nominal value, widened to a tenth of the prior's low end and ten times its high end."""
+    nominal, prior_lo, prior_hi = (np.asarray(a, float) for a in (nominal, prior_lo, prior_hi))
+    return np.column_stack([np.minimum(nominal / 20, prior_lo / 10),
+                            np.maximum(nominal * 20, prior_hi * 10)])
+
+
 @dataclass
 class TissueFilterSetup:
     """Everything the filter's forward model and the filter need.
@@ -184,11 +192,9 @@ class TissueFilterSetup:
         return np.array([p[0] for p in pairs]), np.array([p[1] for p in pairs])
 
     def default_param_bounds(self) -> np.ndarray:
-        """(n_par, 2) health-check range of each mean: 1/20 to 20 times the nominal value,
-        widened to a tenth of the prior's low end and ten times its high end."""
-        nominal = np.array([self.nominal[n] for n in self.estimate])
-        lo, hi = self.prior_bounds()
-        return np.column_stack([np.minimum(nominal / 20, lo / 10), np.maximum(nominal * 20, hi * 10)])
+        """(n_par, 2) health-check range of each mean (:func:`default_bounds`)."""
+        return default_bounds(np.array([self.nominal[n] for n in self.estimate]),
+                              *self.prior_bounds())
 
 
 @dataclass

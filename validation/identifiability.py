@@ -28,13 +28,13 @@ from pathlib import Path
 import numpy as np
 
 import fem
-from enkf.paper import TABLE, emulator_for, filter_setup, mua_ramp, mus_ramp
+from enkf.paper import PULSES, TABLE, emulator_for, filter_setup, mua_ramp, mus_ramp
+from enkf.tissue import PARAMETER_NAMES as ALL
 
 #: log-sd of a uniform prior on [0.5, 2] x nominal
 PRIOR_LOG_SD = 0.38
-T_PULSE = 5.0  # s, end of the paper's pulse
+T_PULSE = PULSES["all-params"][1]  # s, end of the paper's pulse (it starts at 0)
 
-ALL = ("mua", "mus", "VHC", "TC")
 #: (label, scenario of the truth, estimated parameters, knots per optical parameter,
 #: prior log-sd of VHC and TC)
 CASES = [
