@@ -19,8 +19,8 @@ from pathlib import Path
 
 import numpy as np
 
+from enkf.app.readers import follow_csv
 from enkf.paper import TruthConfig, emulator_for, filter_setup, generate_truth, noisy_sensor
-from enkf.stream import follow_csv
 from enkf.tissue import OnlineIdentifier
 
 

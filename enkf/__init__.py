@@ -1,14 +1,30 @@
-"""Ensemble Kalman filtering: a generic filter (pure array math) and the
-tissue-identification application that drives it with the laser-tissue model.
+"""Ensemble Kalman filtering for joint state and parameter estimation.
 
-Generic part (no knowledge of tissue, photons or meshes):
+The package root is the generic filter: pure array math on ``(N, n)`` ensembles, with
+no knowledge of tissue, photons or meshes (it imports nothing from ``mcmatlab_py`` or
+``fem``):
 
-- :mod:`enkf.analysis`: analysis updates on arrays (perturbed-observation EnKF,
-  ETKF, inflation).
+- :mod:`enkf.analysis`: analysis updates (perturbed-observation EnKF, ETKF, localized
+  EnKF, inflation, rotation).
 - :mod:`enkf.transforms`: parameter transforms (identity, log, logit).
-- :mod:`enkf.driver`: the augmented-state filter loop (:func:`run_filter`).
-- :mod:`enkf.models`: toy models for verification (linear-Gaussian with its exact
-  Kalman filter, Lorenz-96).
+- :mod:`enkf.problem`: what is filtered and how (:class:`FilterConfig`,
+  :class:`FilterProblem`, the prior, :class:`FilterResult`).
+- :mod:`enkf.health`: the health check that stops a run gone wrong.
+- :mod:`enkf.loop`: the augmented-state filter loop (:func:`run_filter`).
+- :mod:`enkf.toy_models`: toy models to verify the filter (linear-Gaussian with its
+  exact Kalman filter, Lorenz-96).
+- :mod:`enkf.checks`: input checks shared by these modules.
+
+Subpackages, imported by name only (``import enkf`` loads none of them):
+
+- :mod:`enkf.tissue`: the application, identifying tissue optics from a thermal sensor
+  (``from enkf.tissue import identify``).
+- :mod:`enkf.paper`: the paper's experiments (Arnold & Fichera).
+- :mod:`enkf.app`: the command-line tool ``tissue-enkf`` (parser, commands, TOML
+  config, data readers, run directories, reports, the validation suite).
+
+Dependencies point one way: ``enkf.app -> enkf.paper -> enkf.tissue -> enkf``,
+``enkf.tissue -> mcmatlab_py -> fem``.
 
 Glossary (as in DAPPER and Arnold & Fichera): ``N`` ensemble size; ``E`` ensemble
 ``(N, n)``, members in rows; ``A`` anomalies ``E - mean``; ``Y`` ensemble in
@@ -18,20 +34,29 @@ error covariance; ``K`` Kalman gain; ``theta`` parameters in physical units;
 variances; ``E_rw`` random-walk covariance. See docs/enkf.md.
 """
 
+from importlib.metadata import PackageNotFoundError, version
+
 from .analysis import enkf_perturbed_obs, etkf, inflate, random_rotation
-from .driver import (
+from .health import HealthCheck
+from .loop import run_filter
+from .problem import (
+    DEFAULT_METHOD,
     FilterConfig,
     FilterDivergence,
     FilterProblem,
     FilterResult,
-    HealthCheck,
     StepReport,
-    run_filter,
     uniform_prior,
 )
 from .transforms import IdentityTransform, LogitTransform, LogTransform
 
+try:
+    __version__ = version("tissue-enkf")
+except PackageNotFoundError:  # pragma: no cover - running from a source tree
+    __version__ = "0+unknown"
+
 __all__ = [
+    "DEFAULT_METHOD",
     "FilterConfig",
     "FilterDivergence",
     "FilterProblem",
@@ -41,6 +66,7 @@ __all__ = [
     "LogTransform",
     "LogitTransform",
     "StepReport",
+    "__version__",
     "enkf_perturbed_obs",
     "etkf",
     "inflate",

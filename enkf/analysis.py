@@ -72,7 +72,7 @@ from collections.abc import Callable
 import numpy as np
 import scipy.linalg as sla
 
-from ._validate import as_generator, covariance, float_array
+from .checks import as_generator, covariance, float_array
 
 __all__ = ["analysis", "enkf_localized", "enkf_perturbed_obs", "etkf", "gaspari_cohn", "inflate",
            "random_rotation"]

@@ -16,7 +16,7 @@ HERE = Path(__file__).parent
 
 
 def main(config=HERE / "tiny.toml", data=HERE / "tiny_data.csv", cache_dir=None):
-    from enkf.config import load_identify
+    from enkf.app.config import load_identify
     from enkf.tissue import identify
 
     cfg = load_identify(config)

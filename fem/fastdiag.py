@@ -60,9 +60,9 @@ import scipy.linalg as sla
 import scipy.sparse as sp
 
 from . import _kernels
-from ._threads import blas_threads
 from .bc import HeatBoundary
 from .mesh import BoxGrid
+from .threads import blas_threads
 
 __all__ = ["KroneckerSolver", "MASS_KINDS", "NotApplicable", "one_d_mass", "one_d_operators"]
 

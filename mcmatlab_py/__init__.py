@@ -18,9 +18,16 @@ TC : thermal conductivity, W cm^-1 K^-1
 NA : normalized absorption, absorbed power per volume per W incident, W cm^-3 W^-1
 NFR : normalized fluence rate, W cm^-2 W^-1
 E, A : Arrhenius activation energy (J/mol) and frequency factor (1/s)
+wavelength : nm (``MC.wavelength``), selects media given as functions of wavelength
+FR, T, FD : fluence rate (W cm^-2), temperature (deg C), fractional damage (0..1)
+n_bins : sub-media a FR-, T- or FD-dependent medium is split into
 """
 
+from ._strict import NotBuiltError
 from .media import Medium
 from .model import Geometry, LightSource, Model, MonteCarloSimulation
+from .spectra import calc_mua, calc_mus
+from .stl import find_inside_voxels
 
-__all__ = ["Geometry", "LightSource", "Medium", "Model", "MonteCarloSimulation"]
+__all__ = ["Geometry", "LightSource", "Medium", "Model", "MonteCarloSimulation", "NotBuiltError",
+           "calc_mua", "calc_mus", "find_inside_voxels"]

@@ -48,6 +48,8 @@ import numpy as np
 from .media import Medium
 from .model import Model
 
+__all__ = ["ConfigError", "check_keys", "load_model", "model_from_config", "read_toml"]
+
 
 class ConfigError(ValueError):
     """A configuration file that cannot be used; the message names the key and the value."""

@@ -27,7 +27,7 @@ import os
 from collections.abc import Callable, Iterable, Sequence
 from typing import Any
 
-from ._progress import Progress
+from .progress import Progress
 
 __all__ = ["TaskError", "connect", "numba_threads", "run_tasks"]
 

@@ -33,6 +33,17 @@ import numpy as np
 from .media import Medium
 from .model import Geometry, MonteCarloSimulation
 
+__all__ = [
+    "AbsorptionEmulator",
+    "DirectMonteCarloAbsorption",
+    "EmulatorSpec",
+    "default_cache_dir",
+    "direct_member",
+    "interpolate_log_na",
+    "symmetrize",
+    "table_point",
+]
+
 CACHE_VERSION = 5
 #: The table holds log(NA + NA_OFFSET): smooth where NA is zero or noisy in voxels
 #: that (almost) no photon reaches, and exactly inverted on evaluation.
@@ -264,6 +275,7 @@ class AbsorptionEmulator:
     absorbed: np.ndarray = None  #: (n_mua, n_mus) absorbed fraction of each table point
     out_of_range: str = "error"  #: "error" or "clamp"
     build_seconds: float = 0.0
+    exact = False  #: an interpolation, not Monte Carlo (enkf.tissue.absorption.Absorption)
     _lmua: np.ndarray = field(init=False, repr=False)
     _lmus: np.ndarray = field(init=False, repr=False)
     inverse: np.ndarray = field(init=False, repr=False)  #: (nvox,) orbit of each voxel
@@ -462,6 +474,7 @@ class DirectMonteCarloAbsorption:
     spec: EmulatorSpec
     calls: int = 0
     client: object = None  #: a dask.distributed client: one task per member
+    exact = True  #: every call runs Monte Carlo (enkf.tissue.absorption.Absorption)
 
     @property
     def shape(self) -> tuple[int, int, int]:

@@ -6,6 +6,8 @@ from pathlib import Path
 
 import numpy as np
 
+__all__ = ["voxel_hexahedra", "write_voxel_vtu"]
+
 
 def voxel_hexahedra(G) -> tuple[np.ndarray, np.ndarray]:
     """Points ((nx+1)(ny+1)(nz+1), 3) and VTK-ordered hexahedra (nx*ny*nz, 8) of the grid.

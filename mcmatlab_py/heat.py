@@ -23,12 +23,15 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ._progress import Progress
+from ._strict import NotBuiltError, StrictAttributes
 from .media import check_positive
+from .progress import Progress
+
+__all__ = ["HeatSimulation", "simulate_heat_distribution"]
 
 
 @dataclass
-class HeatSimulation:
+class HeatSimulation(StrictAttributes):
     """Heat simulation settings and results (MCmatlab's ``model.HS``).
 
     Results (filled by :meth:`Model.simulate_heat_distribution`):
@@ -73,6 +76,13 @@ class HeatSimulation:
     mesh: object = None
     snapshots: list | None = None
     mc_runs: int = 0
+
+    _owner_label = "HS"
+    _renamed = {"Tinitial": "T_initial", "sensorsTimeVector": "sensor_times",
+                "silentMode": "progress (= not silentMode)"}
+    _not_built = ("useGPU", "useAllCPUs", "makeMovie", "deferMovieWrite", "largeTimeSteps",
+                  "durationEnd", "plotTempLimits", "nUpdates", "mediaPropRecalcPeriod",
+                  "slicePositions", "maxMediaTemps", "movieFrames", "mediaProperties", "M")
 
     def validate(self, G) -> None:
         if not callable(self.P):
@@ -123,6 +133,11 @@ class HeatSimulation:
                 if getattr(m, name) is None and getattr(self, f"{name}_t") is None:
                     raise ValueError(f"G.media[{i}].{name} is needed by the heat simulation, "
                                      "got None")
+                if callable(getattr(m, name)):
+                    raise NotBuiltError(
+                        f"G.media[{i}].{name} is a function of (T, FD): MCmatlab's heat "
+                        "simulation with temperature- or damage-dependent media is not built "
+                        "yet (mcmatlab_py.media_bins.thermal_media_properties evaluates them)")
         if not (self.absorption == "monte_carlo" or callable(self.absorption)):
             raise ValueError("HS.absorption must be 'monte_carlo' or a callable (mua, mus) -> "
                              f"NA, got {self.absorption!r}")
@@ -205,7 +220,7 @@ def simulate_heat_distribution(model) -> None:
                               .reshape(-1, 3).T) if len(HS.temp_sensor_positions) else None
     single_thermal = len(media) == 1
 
-    mua, mus, g, nref = optical_arrays(media)
+    mua, mus, g, nref = optical_arrays(media, MC.wavelength)
     current_optics = None
     NA = MC.NA
 

@@ -1,9 +1,39 @@
-"""Media: the optical and thermal properties of one tissue type (MCmatlab's ``mediaPropertiesFunc``)."""
+"""Media: the optical and thermal properties of one tissue type (MCmatlab's ``mediumProperties``).
+
+As in MCmatlab, ``mua``, ``mus`` and ``g`` may be a number, a function of wavelength
+``f(wavelength)`` (nm), or a function ``f(wavelength, FR, T, FD)`` of wavelength,
+fluence rate (W/cm^2), temperature (deg C) and fractional damage (0..1); ``n`` a
+number or a function of wavelength; ``VHC`` and ``TC`` a number or a function
+``f(T, FD)``. Functions of FR, T or FD receive 1-D arrays over the voxels of the
+medium and must compute element-wise; such a medium is split into ``n_bins``
+sub-media (see :mod:`mcmatlab_py.media_bins`).
+"""
 
 from __future__ import annotations
 
+import inspect
 import math
+from collections.abc import Callable
 from dataclasses import dataclass
+
+import numpy as np
+
+from ._strict import StrictAttributes
+
+__all__ = ["Medium", "check_positive"]
+
+OPTICAL_FIELDS = ("mua", "mus", "g")  #: may depend on (wavelength, FR, T, FD)
+THERMAL_FIELDS = ("VHC", "TC")  #: may depend on (T, FD)
+
+#: field -> (accepted argument counts of a function, what they are)
+_ARITIES = {
+    "mua": ((1, 4), "(wavelength) or (wavelength, FR, T, FD)"),
+    "mus": ((1, 4), "(wavelength) or (wavelength, FR, T, FD)"),
+    "g": ((1, 4), "(wavelength) or (wavelength, FR, T, FD)"),
+    "n": ((1,), "(wavelength)"),
+    "VHC": ((2,), "(T, FD)"),
+    "TC": ((2,), "(T, FD)"),
+}
 
 
 def check_positive(owner: str, field: str, value, *, allow_zero: bool = False) -> float:
@@ -20,69 +50,203 @@ def check_positive(owner: str, field: str, value, *, allow_zero: bool = False) -
     return v
 
 
+def _range_problem(field: str, v: np.ndarray) -> str | None:
+    """What is wrong with values ``v`` of ``field`` (None if nothing): one rule per field."""
+    if field == "n":
+        if np.isnan(v).any():
+            return "must not be NaN"
+        return "must be >= 1" if (v < 1).any() else None  # inf: a perfect reflector
+    if not np.isfinite(v).all():
+        return "must be finite"
+    if field == "g":
+        return "must be in [-1, 1]" if (np.abs(v) > 1).any() else None
+    if field in THERMAL_FIELDS:
+        return "must be > 0" if (v <= 0).any() else None
+    return "must be >= 0" if (v < 0).any() else None  # mua, mus, E, A
+
+
+def _first_bad(field: str, v: np.ndarray):
+    for x in np.ravel(v):
+        if _range_problem(field, np.asarray([x])):
+            return float(x)
+    return float(np.ravel(v)[0])
+
+
+def n_arguments(f: Callable) -> int | None:
+    """Number of positional arguments ``f`` takes (None if it cannot be told)."""
+    nin = getattr(f, "nin", None)  # numpy ufuncs
+    if isinstance(nin, int):
+        return nin
+    try:
+        params = inspect.signature(f).parameters.values()
+    except (TypeError, ValueError):
+        return None
+    kinds = [p.kind for p in params]
+    if inspect.Parameter.VAR_POSITIONAL in kinds:
+        return None
+    return sum(k in (inspect.Parameter.POSITIONAL_ONLY, inspect.Parameter.POSITIONAL_OR_KEYWORD)
+               for k in kinds)
+
+
 @dataclass
-class Medium:
-    """One medium of the geometry.
+class Medium(StrictAttributes):
+    """One medium of the geometry (MCmatlab's ``mediumProperties``).
 
     Parameters
     ----------
     name : str
         Label used in plots and error messages.
-    mua : float
-        Absorption coefficient, cm^-1 (>= 0).
-    mus : float
-        Scattering coefficient, cm^-1 (>= 0).
-    g : float
-        Henyey-Greenstein anisotropy, in (-1, 1).
-    n : float
-        Refractive index (>= 1).
-    VHC : float, optional
-        Volumetric heat capacity, J cm^-3 K^-1 (> 0); needed by the heat simulation.
-    TC : float, optional
-        Thermal conductivity, W cm^-1 K^-1 (> 0); needed by the heat simulation.
+    mua : float or callable
+        Absorption coefficient, cm^-1 (>= 0): a number, ``mua(wavelength)`` or
+        ``mua(wavelength, FR, T, FD)``.
+    mus : float or callable
+        Scattering coefficient, cm^-1 (>= 0), as ``mua``.
+    g : float or callable
+        Henyey-Greenstein anisotropy in [-1, 1], as ``mua``; ``g = 1`` scatters
+        without deflection (MCmatlab's air in examples 1, 3, 4).
+    n : float or callable
+        Refractive index (>= 1), or ``n(wavelength)``; ``inf`` is a perfect reflector.
+    VHC : float or callable, optional
+        Volumetric heat capacity, J cm^-3 K^-1 (> 0), or ``VHC(T, FD)``; needed by the heat
+        simulation.
+    TC : float or callable, optional
+        Thermal conductivity, W cm^-1 K^-1 (> 0), or ``TC(T, FD)``; needed by the heat
+        simulation.
     E : float, optional
         Arrhenius activation energy, J/mol (>= 0), for thermal damage.
     A : float, optional
         Arrhenius frequency factor, 1/s (>= 0), for thermal damage.
+    n_bins : int
+        Sub-media that a medium with FR-, T- or FD-dependent properties is split into
+        (MCmatlab's ``nBins``); 1 for others.
     """
 
     name: str
-    mua: float
-    mus: float
-    g: float = 0.0
-    n: float = 1.0
-    VHC: float | None = None
-    TC: float | None = None
+    mua: float | Callable
+    mus: float | Callable
+    g: float | Callable = 0.0
+    n: float | Callable = 1.0
+    VHC: float | Callable | None = None
+    TC: float | Callable | None = None
     E: float | None = None
     A: float | None = None
+    n_bins: int = 1
+
+    _owner_label = "Medium"
+    _renamed = {"nBins": "n_bins"}
+    _not_built = ("customPhaseFunc", "QY", "ES", "PY")
 
     def __post_init__(self):
-        owner = f"Medium({self.name!r})"
-        self.mua = check_positive(owner, "mua", self.mua, allow_zero=True)
-        self.mus = check_positive(owner, "mus", self.mus, allow_zero=True)
-        g = check_positive(owner, "g", abs(_num(owner, "g", self.g)), allow_zero=True)
-        if not g < 1.0:
-            raise ValueError(f"{owner}.g must be in (-1, 1), got {self.g!r}")
-        self.g = float(self.g)
-        n = _num(owner, "n", self.n)
-        if not n >= 1.0:
-            raise ValueError(f"{owner}.n must be >= 1, got {self.n!r}")
-        self.n = n
-        for field in ("VHC", "TC"):
+        owner = self._label
+        for field in ("mua", "mus", "g", "n", "VHC", "TC"):
             value = getattr(self, field)
-            if value is not None:
-                setattr(self, field, check_positive(owner, field, value))
+            if value is None and field in THERMAL_FIELDS:
+                continue
+            if callable(value):
+                self._arity(field)
+            else:
+                setattr(self, field, self._number(field, value))
         for field in ("E", "A"):
             value = getattr(self, field)
             if value is not None:
                 setattr(self, field, check_positive(owner, field, value, allow_zero=True))
+        nb = self.n_bins
+        if isinstance(nb, bool) or not isinstance(nb, (int, np.integer)) or nb < 1 or nb > 255:
+            raise ValueError(f"{owner}.n_bins must be an integer in 1..255, got {nb!r}")
+        self.n_bins = int(nb)
 
+    @property
+    def _label(self) -> str:
+        return f"Medium({self.name!r})"
 
-def _num(owner: str, field: str, value) -> float:
-    try:
-        v = float(value)
-    except (TypeError, ValueError):
-        raise ValueError(f"{owner}.{field} must be a number, got {value!r}") from None
-    if math.isnan(v) or math.isinf(v):
-        raise ValueError(f"{owner}.{field} must be finite, got {value!r}")
-    return v
+    def _number(self, field: str, value) -> float:
+        if isinstance(value, bool):
+            raise ValueError(f"{self._label}.{field} must be a number, got {value!r}")
+        try:
+            v = float(value)
+        except (TypeError, ValueError):
+            raise ValueError(f"{self._label}.{field} must be a number or a function, "
+                             f"got {value!r}") from None
+        problem = _range_problem(field, np.asarray([v]))
+        if problem:
+            raise ValueError(f"{self._label}.{field} {problem}, got {value!r}")
+        return v
+
+    def _arity(self, field: str) -> int:
+        f = getattr(self, field)
+        allowed, meaning = _ARITIES[field]
+        k = n_arguments(f)
+        if k not in allowed:
+            raise ValueError(f"{self._label}.{field} must be a number or a function of "
+                             f"{meaning}, got {f!r} taking {k} arguments")
+        return k
+
+    # ------------------------------------------------------------------ evaluation
+
+    def depends_on_state(self, field: str) -> bool:
+        """True if ``field`` is a function of FR, T or FD (the medium must be binned)."""
+        value = getattr(self, field)
+        if not callable(value):
+            return False
+        return field in THERMAL_FIELDS or self._arity(field) == 4
+
+    @property
+    def is_state_dependent(self) -> bool:
+        """True if any optical property depends on FR, T or FD."""
+        return any(self.depends_on_state(f) for f in OPTICAL_FIELDS)
+
+    def value(self, field: str, wavelength: float | None = None) -> float:
+        """``field`` as one number: a constant, or the function at ``wavelength`` (nm).
+
+        Raises ValueError naming the field if the result is out of range, and
+        :class:`ValueError` if a function of wavelength is given no wavelength.
+        """
+        v = getattr(self, field)
+        if not callable(v):
+            return float(v)
+        if self.depends_on_state(field):
+            raise ValueError(f"{self._label}.{field} depends on FR, T or FD: evaluate it with "
+                             "values(), or bin it with mcmatlab_py.media_bins")
+        if wavelength is None:
+            raise ValueError(f"{self._label}.{field} is a function of wavelength: set "
+                             "MC.wavelength (nm)")
+        where = f"{field}(wavelength={wavelength})"
+        out = np.asarray(v(wavelength), dtype=np.float64)
+        if out.size != 1:
+            raise ValueError(f"{self._label}.{where} must return one number, got shape {out.shape}")
+        return float(self._checked(field, out.reshape(()), where))
+
+    def values(self, field: str, wavelength: float | None, FR: np.ndarray, T: np.ndarray,
+               FD: np.ndarray) -> np.ndarray:
+        """``field`` at every voxel: (n,) float64 from (n,) FR (W/cm^2), T (deg C), FD.
+
+        Constants and functions of wavelength are broadcast; ``VHC``/``TC`` take (T, FD).
+        """
+        v = getattr(self, field)
+        shape = np.shape(FR)
+        if not callable(v):
+            return np.full(shape, float(v))
+        if not self.depends_on_state(field):
+            return np.full(shape, self.value(field, wavelength))
+        if field in THERMAL_FIELDS:
+            out, where = v(T, FD), f"{field}(T, FD)"
+        else:
+            if wavelength is None:
+                raise ValueError(f"{self._label}.{field} is a function of wavelength: set "
+                                 "MC.wavelength (nm)")
+            out, where = v(wavelength, FR, T, FD), f"{field}(wavelength={wavelength}, FR, T, FD)"
+        out = np.asarray(out, dtype=np.float64)
+        try:
+            out = np.broadcast_to(out, shape)
+        except ValueError:
+            raise ValueError(f"{self._label}.{where} must return a number or an array of shape "
+                             f"{shape} (one per voxel), got shape {out.shape}") from None
+        return np.array(self._checked(field, out, where), dtype=np.float64)
+
+    def _checked(self, field: str, out, where: str):
+        arr = np.asarray(out, dtype=np.float64)
+        problem = _range_problem(field, arr)
+        if problem:
+            raise ValueError(f"{self._label}.{where} returned {_first_bad(field, arr)!r}: "
+                             f"{field} {problem}")
+        return out

@@ -14,7 +14,9 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .media import Medium, check_positive
+from ._strict import NotBuiltError, StrictAttributes
+from .media import Medium, check_positive, n_arguments
+from .media_bins import state_field
 
 SOURCE_TYPES = ("pencil", "tophat", "gaussian", "plane_wave", "isotropic_point")
 BOUNDARY_TYPES = {
@@ -37,7 +39,7 @@ def _check_int(owner: str, name: str, value, minimum: int = 1) -> int:
 
 
 @dataclass
-class Geometry:
+class Geometry(StrictAttributes):
     """The voxel cuboid (MCmatlab's ``model.G``).
 
     x and y span [-Lx/2, Lx/2] and [-Ly/2, Ly/2]; z spans [0, Lz] and points into
@@ -52,9 +54,15 @@ class Geometry:
     Ly: float = 0.1  #: cm
     Lz: float = 0.1  #: cm
     media: list[Medium] = field(default_factory=list)  #: media, indexed by ``geom_func``
-    #: ``geom_func(X, Y, Z) -> (nx, ny, nz)`` int medium index at the voxel centres (cm);
-    #: ``None`` fills the cuboid with ``media[0]``.
+    #: ``geom_func(X, Y, Z, params)`` or ``geom_func(X, Y, Z)`` -> (nx, ny, nz) int medium
+    #: index at the voxel centres (cm); ``None`` fills the cuboid with ``media[0]``.
     geom_func: Callable | None = None
+    #: anything, passed as ``params`` to a four-argument ``geom_func`` (MCmatlab's geomFuncParams)
+    geom_func_params: object = None
+
+    _owner_label = "G"
+    _renamed = {"mediaPropertiesFunc": "media"}
+    _not_built = ("silentMode", "mediaPropParams", "M_raw")
 
     #: more voxels than this cannot be held (a medium map, per-thread int64 tallies)
     MAX_VOXELS = 200_000_000
@@ -114,7 +122,17 @@ class Geometry:
         if self.geom_func is None:
             return np.zeros((self.nx, self.ny, self.nz), dtype=np.int32)
         X, Y, Z = np.meshgrid(self.x, self.y, self.z, indexing="ij")
-        M = np.asarray(self.geom_func(X, Y, Z))
+        k = n_arguments(self.geom_func)
+        if k == 4:
+            M = np.asarray(self.geom_func(X, Y, Z, self.geom_func_params))
+        elif k == 3 or k is None:
+            if self.geom_func_params is not None:
+                raise ValueError("G.geom_func_params is set but G.geom_func takes (X, Y, Z): give "
+                                 f"it a fourth argument, got {self.geom_func!r}")
+            M = np.asarray(self.geom_func(X, Y, Z))
+        else:
+            raise ValueError("G.geom_func must take (X, Y, Z) or (X, Y, Z, params), "
+                             f"got {self.geom_func!r} taking {k} arguments")
         if M.shape != X.shape:
             raise ValueError(
                 f"G.geom_func must return an array of shape {X.shape}, got shape {M.shape}"
@@ -135,7 +153,7 @@ class Geometry:
 
 
 @dataclass
-class LightSource:
+class LightSource(StrictAttributes):
     """The light source (MCmatlab's ``model.MC.lightSource`` for the cases we support).
 
     ``pencil``, ``tophat`` and ``gaussian`` beams are collimated along +z and enter
@@ -149,6 +167,10 @@ class LightSource:
     x_focus: float = 0.0  #: cm
     y_focus: float = 0.0  #: cm
     z_focus: float = 0.0  #: cm, isotropic point sources only
+
+    _owner_label = "MC.light_source"
+    _not_built = ("emitterLength", "focalPlaneIntensityDistribution", "FPID",
+                  "angularIntensityDistribution", "AID", "psi", "theta", "phi")
 
     def validate(self, G: Geometry) -> None:
         if self.source_type not in SOURCE_TYPES:
@@ -181,7 +203,7 @@ class LightSource:
 
 
 @dataclass
-class MonteCarloSimulation:
+class MonteCarloSimulation(StrictAttributes):
     """Monte Carlo settings and results (MCmatlab's ``model.MC``).
 
     Results (filled by :meth:`Model.run_monte_carlo`):
@@ -213,6 +235,13 @@ class MonteCarloSimulation:
     batch_size: int = 1000  #: photons per random stream (part of what a seed means)
     progress: bool = True  #: progress bar on stderr for runs longer than a few seconds
     light_source: LightSource = field(default_factory=LightSource)
+    #: nm; selects the value of media given as functions of wavelength (one wavelength)
+    wavelength: float | None = None
+    # the voxel state seen by media that depend on it: a number or an (nx, ny, nz) array.
+    # MCmatlab takes them from MC.P * MC.NFR, HS.T and 1 - exp(-HS.Omega); here they are given.
+    FR: float | np.ndarray = 0.0  #: W/cm^2, fluence rate
+    T: float | np.ndarray = 37.0  #: deg C, temperature
+    FD: float | np.ndarray = 0.0  #: fractional damage, 0..1
 
     # results
     NA: np.ndarray | None = None
@@ -229,6 +258,24 @@ class MonteCarloSimulation:
     simulation_time: float | None = None
     cores_used: float | None = None
     seed_used: int | None = None
+    #: (nx, ny, nz) int32 sub-medium index the kernel ran on (``G``'s map unless media were split)
+    M: np.ndarray | None = None
+    #: the sub-media's mua, mus, g, n (:class:`mcmatlab_py.media_bins.OpticalMediaProperties`)
+    media_properties: object = None
+
+    _owner_label = "MC"
+    _renamed = {"LS": "light_source", "normalizedAbsorption": "NA",
+                "normalizedFluenceRate": "NFR", "silentMode": "progress (= not silentMode)",
+                "useAllCPUs": "n_threads"}
+    _not_built = (
+        "useGPU", "GPUdevice", "requestCollectedPhotons", "calcNormalizedFluenceRate", "calcNFR",
+        "nExamplePaths", "examplePaths", "farFieldRes", "farField", "farFieldTheta",
+        "farFieldPhi", "smoothingLengthScale", "interfaceNormals", "P", "spectrumFunc",
+        "spectrum", "FRinitial", "FRdepIterations", "useLightCollector", "lightCollector", "LC",
+        "depositionCriteria", "sourceDistribution", "nPhotonsCollected", "CDFs",
+        *(f"{pre}_{side}" for pre in ("normalizedIrradiance", "NI")
+          for side in ("xpos", "xneg", "ypos", "yneg", "zpos", "zneg")),
+    )
 
     @property
     def energy_balance(self) -> float:
@@ -264,9 +311,18 @@ class MonteCarloSimulation:
         if not isinstance(self.light_source, LightSource):
             raise ValueError(f"MC.light_source must be a LightSource, got {self.light_source!r}")
         self.light_source.validate(G)
+        if self.wavelength is not None:
+            if np.ndim(self.wavelength) > 0:
+                raise NotBuiltError("MCmatlab's broadband MC.wavelength (an array of wavelengths) "
+                                    "is not built yet")
+            self.wavelength = check_positive("MC", "wavelength", self.wavelength)
+        shape = (G.nx, G.ny, G.nz)
+        self.FR = state_field("MC.FR", self.FR, shape, lower=0.0)
+        self.T = state_field("MC.T", self.T, shape)
+        self.FD = state_field("MC.FD", self.FD, shape, lower=0.0, upper=1.0)
 
 
-class Model:
+class Model(StrictAttributes):
     """An MCmatlab model: ``G`` geometry, ``MC`` Monte Carlo, ``HS`` heat simulation.
 
     Examples
@@ -284,6 +340,10 @@ class Model:
     >>> model.MC.NA.shape
     (20, 20, 10)
     """
+
+    _owner_label = "model"
+    _extra_attributes = ("G", "MC", "HS")
+    _not_built = ("FMC",)
 
     def __init__(self):
         from .heat import HeatSimulation

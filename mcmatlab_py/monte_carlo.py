@@ -9,7 +9,9 @@ import numba
 import numpy as np
 
 from . import _mc_kernel as K
-from ._progress import Progress
+from ._strict import NotBuiltError
+from .media_bins import optical_media_properties
+from .progress import Progress
 
 _SRC_CODES = {
     "pencil": K.SRC_PENCIL,
@@ -35,13 +37,20 @@ class MCResult:
     kernel_cpu_seconds: float = 0.0  #: process CPU time spent in the kernel (all threads)
 
 
-def optical_arrays(media) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """(mua, mus, g, n) arrays of a list of media, float64."""
-    mua = np.array([m.mua for m in media], dtype=np.float64)
-    mus = np.array([m.mus for m in media], dtype=np.float64)
-    g = np.array([m.g for m in media], dtype=np.float64)
-    n = np.array([m.n for m in media], dtype=np.float64)
-    return mua, mus, g, n
+def optical_arrays(media, wavelength: float | None = None
+                   ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """(mua, mus, g, n) arrays of a list of media at ``wavelength`` (nm), float64.
+
+    One value per medium: media that depend on FR, T or FD are binned by
+    :func:`mcmatlab_py.media_bins.optical_media_properties` (as ``run_monte_carlo`` does).
+    """
+    for m in media:
+        if m.is_state_dependent:
+            raise NotBuiltError(
+                f"Medium({m.name!r}) depends on FR, T or FD: only run_monte_carlo splits such "
+                "media into sub-media; MCmatlab's coupled FR/T/FD iteration is not built yet")
+    return tuple(np.array([m.value(f, wavelength) for m in media], dtype=np.float64)
+                 for f in ("mua", "mus", "g", "n"))
 
 
 def simulate(G, MC, M: np.ndarray, mua, mus, g, nref, *, seed: int, n_photons: int | None,
@@ -162,9 +171,11 @@ def _simulate_distributed(G, MC, M, mua, mus, g, nref, *, seed, n_photons, clien
 def run_monte_carlo(model, client=None) -> None:
     """Validate ``model.G`` and ``model.MC``, run the Monte Carlo, and fill ``model.MC``."""
     G, MC = model.G, model.MC
-    M = G.medium_map()  # validates G
+    M_raw = G.medium_map()  # validates G
     MC.validate(G)
-    mua, mus, g, nref = optical_arrays(G.media)
+    # media at MC.wavelength; media depending on FR, T, FD split into sub-media (new M)
+    props = optical_media_properties(G.media, M_raw, MC.wavelength, MC.FR, MC.T, MC.FD)
+    M, mua, mus, g, nref = props.M, props.mua, props.mus, props.g, props.n
     seed = MC.seed if MC.seed is not None else int(np.random.SeedSequence().entropy % 2**63)
     n_photons = MC.n_photons_requested
     time_limit = None
@@ -175,6 +186,8 @@ def run_monte_carlo(model, client=None) -> None:
                    time_limit_s=time_limit, client=client)
     store_results(MC, res, M, mua, G.dx * G.dy * G.dz)
     MC.seed_used = seed
+    MC.M = M
+    MC.media_properties = props
 
 
 def store_results(MC, res: MCResult, M: np.ndarray, mua: np.ndarray, dV: float) -> None:

@@ -6,6 +6,8 @@ from pathlib import Path
 
 import numpy as np
 
+__all__ = ["plot_na_slices"]
+
 
 def plot_na_slices(model, path: str | Path, *, field: str = "NA") -> None:
     """Save a PNG of a voxel field: the xz slice through the beam axis and the xy surface slice."""

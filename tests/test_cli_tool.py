@@ -8,7 +8,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from enkf.cli import main
+from enkf.app.cli import main
 
 EX = Path(__file__).parents[1] / "examples"
 TINY = (EX / "tiny.toml").read_text()
@@ -67,7 +67,7 @@ def test_examples_run(tmp_path, cache):
     assert est.param_mean.shape == (21, 2)
     # the committed example data come from make_example_data.py: same times and gaps, and
     # values equal up to Monte Carlo noise (bit-equal while the kernel's streams stay)
-    from enkf.config import read_sensor_csv
+    from enkf.app.readers import read_sensor_csv
 
     t_new, y_new, _ = read_sensor_csv(load("make_example_data").main(out_dir=tmp_path), 1)
     t_old, y_old, _ = read_sensor_csv(EX / "tiny_data.csv", 1)
@@ -111,14 +111,6 @@ def test_follow_writes_each_estimate_as_the_data_come(tmp_path, cache):
     assert (out / "figures" / "estimates.png").exists() and (out / "run.json").exists()
 
 
-def bad_config(tmp_path, old, new):
-    text = TINY.replace(old, new)
-    assert text != TINY, old
-    p = tmp_path / "bad.toml"
-    p.write_text(text)
-    return p
-
-
 @pytest.mark.parametrize("old, new, message", [
     ("mua = 1.0 ", "mua = -1.0 ", "mua"),
     ("mus = 100.0 ", "mus = nan ", "mus"),
@@ -132,8 +124,8 @@ def bad_config(tmp_path, old, new):
     ("n_mua = 4", "n_mua = 2", "n_mua"),
     ("grid = [5, 5, 5]", "grid = [5, 5]", "filter.grid"),
 ])
-def test_bad_config_exits_2_and_writes_nothing(tmp_path, capsys, old, new, message):
-    cfg = bad_config(tmp_path, old, new)
+def test_bad_config_exits_2_and_writes_nothing(tmp_path, capsys, bad_toml, old, new, message):
+    cfg = bad_toml(old, new)
     out = tmp_path / "out"
     assert run("identify", cfg, "--data", EX / "tiny_data.csv", "--out", out) == 2
     err = capsys.readouterr().err

@@ -9,8 +9,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from enkf.cli import main
-from enkf.config import identify_config_from_dict, load_identify, read_sensor_csv
+from enkf.app.cli import main
+from enkf.app.config import identify_config_from_dict, load_identify
+from enkf.app.readers import read_sensor_csv
 from mcmatlab_py.config import ConfigError, load_model, model_from_config
 
 EX = Path(__file__).parents[1] / "examples"
@@ -49,8 +50,8 @@ def with_(path: str, value, base=None):
     ("G.media.0.mus", float("nan"), "mus must be finite, got nan"),
     ("G.media.0.VHC", 0.0, "VHC must be > 0, got 0.0"),
     ("G.media.0.TC", -0.1, "TC must be > 0, got -0.1"),
-    ("G.media.0.g", 1.0, "g must be in (-1, 1), got 1.0"),
-    ("G.media.0.g", -1.5, "g must be in (-1, 1), got -1.5"),
+    ("G.media.0.g", 1.5, "g must be in [-1, 1], got 1.5"),
+    ("G.media.0.g", -1.5, "g must be in [-1, 1], got -1.5"),
     ("G.media.0.n", 0.5, "n must be >= 1, got 0.5"),
     ("G.nx", 0, "G.nx"),
     ("G.Lz", 0.0, "G.Lz must be > 0, got 0.0"),
@@ -224,7 +225,6 @@ def test_npz_needs_a_camera(tmp_path):
 
 # ------------------------------------------------------------------ command line
 
-from tests.test_cli_tool import bad_config as bad_toml  # noqa: E402 - one helper for both
 
 
 @pytest.mark.parametrize("old, new, message", [
@@ -240,9 +240,9 @@ from tests.test_cli_tool import bad_config as bad_toml  # noqa: E402 - one helpe
     ("nz = 5", "nz = -5", "G.nz"),
     ("VHC = 3.76 ", "VHC = 0 ", "VHC must be > 0"),
 ])
-def test_heat_bad_input_exits_2_and_writes_nothing(tmp_path, capsys, old, new, message):
+def test_heat_bad_input_exits_2_and_writes_nothing(tmp_path, capsys, old, new, message, bad_toml):
     out = tmp_path / "out"
-    assert run("heat", bad_toml(tmp_path, old, new), "--out", out) == 2
+    assert run("heat", bad_toml(old, new), "--out", out) == 2
     err = capsys.readouterr().err
     assert err.startswith("error: ") and message in err and err.count("\n") == 1
     assert not out.exists()

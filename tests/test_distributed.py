@@ -123,7 +123,7 @@ def test_split_range_covers_every_batch_once():
 
 
 def test_mc_command_on_a_local_cluster_writes_the_same_maps(tmp_path):
-    from enkf.cli import main
+    from enkf.app.cli import main
 
     cfg = Path(__file__).parents[1] / "examples" / "standard_tissue.toml"
     common = [str(cfg), "--photons", "20000", "--quiet", "--seed", "4"]
@@ -136,7 +136,7 @@ def test_mc_command_on_a_local_cluster_writes_the_same_maps(tmp_path):
 
 
 def test_identify_batch_on_a_local_cluster_equals_this_machine(tmp_path):
-    from enkf.cli import main
+    from enkf.app.cli import main
 
     ex = Path(__file__).parents[1] / "examples"
     bad = tmp_path / "bad.csv"

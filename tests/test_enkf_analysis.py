@@ -9,7 +9,7 @@ import pytest
 import scipy.linalg as sla
 
 from enkf import enkf_perturbed_obs, etkf, inflate, random_rotation
-from enkf.models import kalman_analysis, kalman_filter, simulate_linear_gaussian
+from enkf.toy_models import kalman_analysis, kalman_filter, simulate_linear_gaussian
 
 # A small linear-Gaussian system: 3 states, 2 correlated observations.
 F = np.array([[0.9, 0.2, 0.0], [0.0, 0.8, 0.3], [0.1, 0.0, 0.7]])

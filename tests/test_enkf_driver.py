@@ -14,7 +14,7 @@ from enkf import (
     run_filter,
     uniform_prior,
 )
-from enkf.models import kalman_filter, lorenz96_step
+from enkf.toy_models import kalman_filter, lorenz96_step
 
 # Linear state with a parameter forcing it: x_{k+1} = F x_k + g theta_k + q_k,
 # theta_{k+1} = theta_k + xi_k (Arnold & Fichera's random walk). In the augmented

@@ -14,7 +14,7 @@ import numpy as np
 import pytest
 
 from enkf import FilterConfig, run_filter
-from enkf.models import lorenz96_filter_problem
+from enkf.toy_models import lorenz96_filter_problem
 
 SPINUP, STEPS = 200, 2000
 

@@ -18,7 +18,7 @@ from enkf import (
     run_filter,
     uniform_prior,
 )
-from enkf.models import kalman_analysis
+from enkf.toy_models import kalman_analysis
 
 MU = np.array([1.0, -1.0, 0.5])
 P = np.array([[1.0, 0.3, 0.0], [0.3, 2.0, 0.2], [0.0, 0.2, 0.5]])

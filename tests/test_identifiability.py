@@ -4,11 +4,11 @@ import numpy as np
 import pytest
 from scipy.stats import norm
 
-from enkf.suite import _load_script, validation_dir
+from enkf.app.suite import load_script, validation_dir
 
 
 def _module():
-    return _load_script(validation_dir(), "identifiability")
+    return load_script(validation_dir(), "identifiability")
 
 
 class _LinearSensor:

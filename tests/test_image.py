@@ -1,19 +1,19 @@
-"""Whole-image observations (enkf.image) and the localized EnKF analysis."""
+"""Whole-image observations (enkf.tissue.image) and the localized EnKF analysis."""
 
 import numpy as np
 import pytest
 
 import fem
 from enkf.analysis import enkf_localized, enkf_perturbed_obs, gaspari_cohn
-from enkf.image import ThermalImage, load_frames
+from enkf.app.readers import load_frames
 from enkf.tissue import TissueForwardModel, identify
-from tests.test_tissue import GRID, setup
+from enkf.tissue.image import ThermalImage
 
 CAMERA = ThermalImage(x_range=(-0.15, 0.15), y_range=(-0.1, 0.1), shape=(4, 6))
 
 
-def test_pixel_average_of_a_linear_field_is_its_value_at_the_centre():
-    mesh = GRID.mesh()
+def test_pixel_average_of_a_linear_field_is_its_value_at_the_centre(tissue):
+    mesh = tissue.grid.mesh()
     x, y, z = mesh.p
     T = 20.0 + 3.0 * x - 5.0 * y + 7.0 * z
     pix = CAMERA.matrix(mesh) @ T
@@ -23,8 +23,8 @@ def test_pixel_average_of_a_linear_field_is_its_value_at_the_centre():
     assert pix.shape == (24,) and c[0, 0] < c[1, 0]  # C order: x runs fastest along a row
 
 
-def test_cubic_surface_interpolation_is_exact_for_cubics():
-    mesh = GRID.mesh()
+def test_cubic_surface_interpolation_is_exact_for_cubics(tissue):
+    mesh = tissue.grid.mesh()
     x, y, z = mesh.p
     T = 1 + x**3 - 2 * x * y**2 + y**3 + 5 * z
     cam = ThermalImage(CAMERA.x_range, CAMERA.y_range, CAMERA.shape, subsamples=1)
@@ -59,10 +59,10 @@ def test_bad_camera(kw, pattern):
         ThermalImage(**args)
 
 
-def test_camera_outside_the_tissue_is_refused():
+def test_camera_outside_the_tissue_is_refused(tissue):
     cam = ThermalImage(x_range=(-0.3, 0.1), y_range=(-0.1, 0.1), shape=(2, 2))
     with pytest.raises(ValueError, match="outside the tissue"):
-        cam.matrix(GRID.mesh())
+        cam.matrix(tissue.grid.mesh())
 
 
 def test_load_frames(tmp_path):
@@ -117,8 +117,8 @@ def twin_image(s, mua, mus, seed=0):
 
 
 @pytest.mark.parametrize("kw", [dict(), dict(method="enkf", localization_radius=1.0)])
-def test_identify_from_an_image_with_dead_pixels(kw):
-    s = setup(sensor_positions=np.zeros((0, 3)), image=CAMERA, **kw)
+def test_identify_from_an_image_with_dead_pixels(kw, tissue):
+    s = tissue.setup(sensor_positions=np.zeros((0, 3)), image=CAMERA, **kw)
     times, frames = twin_image(s, 1.4, 100.0)
     frames[3, :5] = np.nan  # dead pixels in one frame
     frames[7] = np.nan  # a lost frame: no analysis
@@ -127,4 +127,4 @@ def test_identify_from_an_image_with_dead_pixels(kw):
     assert not est.analysed[7] and est.analysed[3]
     assert abs(est.param_mean[-1, 0] - 1.4) < 3 * est.param_std[-1, 0] + 0.05
     with pytest.raises(ValueError, match="nothing observed"):
-        setup(sensor_positions=np.zeros((0, 3)))
+        tissue.setup(sensor_positions=np.zeros((0, 3)))

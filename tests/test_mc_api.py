@@ -5,7 +5,7 @@ import json
 import numpy as np
 import pytest
 
-from enkf.cli import main
+from enkf.app.cli import main
 from mcmatlab_py import Medium, Model
 
 SMALL_TOML = """

@@ -5,7 +5,7 @@ import json
 import numpy as np
 import pytest
 
-from enkf.cli import main
+from enkf.app.cli import main
 from enkf.paper import mua_ramp, mus_ramp, true_parameters
 
 SMALL = ["--fine", "10", "10", "5", "--truth-photons", "3000", "--emulator-photons", "1500",

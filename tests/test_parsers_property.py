@@ -8,7 +8,8 @@ import numpy as np
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from enkf.config import check_identify_keys, identify_config_from_dict, read_sensor_csv
+from enkf.app.config import check_identify_keys, identify_config_from_dict
+from enkf.app.readers import read_sensor_csv
 from mcmatlab_py.config import ConfigError, model_from_config, read_toml
 
 EX = Path(__file__).parents[1] / "examples"

@@ -1,4 +1,4 @@
-"""Risk of thermal injury from the ensemble (enkf.risk): analytic damage, probabilities as
+"""Risk of thermal injury from the ensemble (enkf.tissue.risk): analytic damage, probabilities as
 ensemble fractions, recording, bad input, exports, and an end-to-end run with identify."""
 
 from types import SimpleNamespace
@@ -8,8 +8,8 @@ import pytest
 from scipy.integrate import quad
 
 import fem
-from enkf.risk import MCMATLAB_A, MCMATLAB_E, RiskSnapshot, RiskTracker, plot_depth_maps, xz_slice
 from enkf.tissue import TissueFilterSetup, TissueForwardModel, identify
+from enkf.tissue.risk import MCMATLAB_A, MCMATLAB_E, RiskSnapshot, RiskTracker, plot_depth_maps, xz_slice
 from mcmatlab_py import Medium
 from mcmatlab_py.heat import HeatSimulation
 
@@ -209,22 +209,21 @@ def test_vtu_series_single_file_and_depth_maps(tmp_path):
 
 
 # ------------------------------------------------------------------ with the filter
-from tests.test_tissue import GRID, NOMINAL, absorption  # noqa: E402 - the same stand-in
 
 
-def test_end_to_end_with_identify():
+def test_end_to_end_with_identify(tissue):
     """Heated from 45 deg C: the tracker's damage equals an independent trapezoid over the
     states identify reports; the top is damaged, the bottom is not; the probabilities behave."""
     setup = TissueFilterSetup(
-        grid=GRID, absorption=absorption, T_initial=45.0,
+        grid=tissue.grid, absorption=tissue.absorption, T_initial=45.0,
         power=HeatSimulation(P=2.0, duration_on=1.0, duration_off=1.0).laser_power,
-        nominal=NOMINAL, n_members=20, seed=1, method="etkf")
+        nominal=tissue.nominal, n_members=20, seed=1, method="etkf")
     times = 0.1 * np.arange(1, 21)
     model = TissueForwardModel(setup)  # identical-twin data at the nominal optics
-    T, t0, data = np.full((1, GRID.npoints), 45.0), 0.0, []
+    T, t0, data = np.full((1, tissue.grid.npoints), 45.0), 0.0, []
     for t1 in times:  # the top reaches 62.5 deg C at 1 s, the bottom 51 deg C
         T = model(T, np.array([[1.0, 100.0]]), t0, t1)
-        data.append(T[0, GRID.node_index(3, 3, 0)])
+        data.append(T[0, tissue.grid.node_index(3, 3, 0)])
         t0 = t1
     data = np.array(data)[:, None] + 0.1 * np.random.default_rng(0).standard_normal((20, 1))
     tracker = RiskTracker(E=E, A=A, record_times=[0.5, 1.0, 2.0])
@@ -242,13 +241,13 @@ def test_end_to_end_with_identify():
     np.testing.assert_allclose(tracker.omega, ref, rtol=1e-12)
     snaps = tracker.snapshots
     assert [s.time for s in snaps] == pytest.approx([0.5, 1.0, 2.0])
-    n = GRID.npoints
+    n = tissue.grid.npoints
     assert all(isinstance(s, RiskSnapshot) and s.p_damage.shape == (n,) for s in snaps)
     for a, b in zip(snaps[:-1], snaps[1:], strict=True):  # damage only grows
         assert np.all(b.p_damage >= a.p_damage) and np.all(b.p_T_ever >= a.p_T_ever)
     for s in snaps:
         assert np.all(s.p_T_ever >= s.p_T) and 0 <= s.p_damage.min() <= s.p_damage.max() <= 1
-    top = GRID.node_index(3, 3, 0)
-    bottom = GRID.node_index(3, 3, 4)
+    top = tissue.grid.node_index(3, 3, 0)
+    bottom = tissue.grid.node_index(3, 3, 4)
     assert snaps[-1].p_damage[top] == 1.0 and snaps[-1].p_damage[bottom] == 0.0
     np.testing.assert_allclose(snaps[-1].T_mean, states[-1][1].mean(axis=0))

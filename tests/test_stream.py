@@ -6,14 +6,13 @@ import time
 import numpy as np
 import pytest
 
-from enkf.stream import follow_csv, parse_line
+from enkf.app.readers import follow_csv, parse_line
 from enkf.tissue import OnlineIdentifier, identify
-from tests.test_tissue import setup, twin_data
 
 
-def test_online_identifier_learns_like_the_batch_filter():
-    s = setup()
-    times, data = twin_data(s, 1.4, 100.0)
+def test_online_identifier_learns_like_the_batch_filter(tissue):
+    s = tissue.setup()
+    times, data = tissue.twin_data(s, 1.4, 100.0)
     online = OnlineIdentifier(s)
     for t, y in zip(times, data, strict=True):
         est = online.update(t, y)
@@ -28,9 +27,9 @@ def test_online_identifier_learns_like_the_batch_filter():
         online.update(times[-1] + 0.1, [1.0, 2.0])
 
 
-def test_a_replay_gives_the_same_estimates():
-    s = setup()
-    times, data = twin_data(s, 1.2, 100.0)
+def test_a_replay_gives_the_same_estimates(tissue):
+    s = tissue.setup()
+    times, data = tissue.twin_data(s, 1.2, 100.0)
     runs = []
     for _ in range(2):
         o = OnlineIdentifier(s)
@@ -38,9 +37,9 @@ def test_a_replay_gives_the_same_estimates():
     np.testing.assert_array_equal(np.array(runs[0]), np.array(runs[1]))
 
 
-def test_follow_reads_lines_as_they_are_appended(tmp_path):
-    s = setup()
-    times, data = twin_data(s, 1.4, 100.0)
+def test_follow_reads_lines_as_they_are_appended(tmp_path, tissue):
+    s = tissue.setup()
+    times, data = tissue.twin_data(s, 1.4, 100.0)
     path = tmp_path / "live.csv"
     written = []
 
@@ -83,10 +82,10 @@ def test_bad_lines_name_the_place(line, pattern):
         parse_line(line, 2, "live.csv:7")
 
 
-def test_follow_refuses_a_wrong_header(tmp_path):
+def test_follow_refuses_a_wrong_header(tmp_path, tissue):
     path = tmp_path / "live.csv"
     for header, pattern in [("time,a,b", "2 data columns, the setup observes 1"),
                             ("t_ms,a", "first column must be 'time'")]:
         path.write_text(f"{header}\n0.1,1,2\n")
         with pytest.raises(ValueError, match=pattern):
-            follow_csv(path, OnlineIdentifier(setup()), lambda *a: None, idle_timeout_s=0.2)
+            follow_csv(path, OnlineIdentifier(tissue.setup()), lambda *a: None, idle_timeout_s=0.2)

@@ -17,7 +17,8 @@ from pathlib import Path
 import numpy as np
 
 import fem
-from enkf.paper import TRACKED_DEPTHS, TruthConfig, generate_truth, paper_model
+from enkf.paper import TruthConfig, generate_truth, paper_model
+from enkf.tissue.parameters import TRACKED_DEPTHS
 
 SHAPES = [(20, 20, 10), (40, 40, 10), (20, 20, 20), (40, 40, 20), (50, 50, 25)]
 TIMES = (1.0, 3.0, 5.0, 6.0, 7.0, 10.0)

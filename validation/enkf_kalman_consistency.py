@@ -22,7 +22,7 @@ from pathlib import Path
 import numpy as np
 
 from enkf import enkf_perturbed_obs, etkf
-from enkf.models import kalman_filter, simulate_linear_gaussian
+from enkf.toy_models import kalman_filter, simulate_linear_gaussian
 
 REPORT = Path(__file__).parent / "reports" / "enkf_kalman_consistency.md"
 

@@ -1,4 +1,4 @@
-"""Lorenz-96 benchmark of Sakov & Oke (2008) for the generic filter (enkf.driver).
+"""Lorenz-96 benchmark of Sakov & Oke (2008) for the generic filter (enkf.loop).
 
 Setup (Sakov & Oke 2008, sec. 4; DAPPER ``mods/Lorenz96/sakov2008.py``): 40
 variables, F = 8, RK4 with dt = 0.05, every variable observed every step with
@@ -20,7 +20,7 @@ from pathlib import Path
 import numpy as np
 
 from enkf import FilterConfig, run_filter
-from enkf.models import lorenz96_filter_problem
+from enkf.toy_models import lorenz96_filter_problem
 
 REPORT = Path(__file__).parent / "reports" / "enkf_lorenz96.md"
 

@@ -42,8 +42,8 @@ import numpy as np
 
 import fem
 from enkf.paper import emulator_for, filter_setup, paper_model
-from enkf.risk import MCMATLAB_A, MCMATLAB_E, RiskTracker, plot_depth_maps
 from enkf.tissue import TissueForwardModel, identify
+from enkf.tissue.risk import MCMATLAB_A, MCMATLAB_E, RiskTracker, plot_depth_maps
 
 E, A = MCMATLAB_E, MCMATLAB_A  # J/mol, 1/s
 POWER, T0, THRESHOLD = 1.5, 37.0, 60.0  # W, deg C, deg C

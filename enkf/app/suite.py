@@ -17,7 +17,7 @@ from pathlib import Path
 
 import numpy as np
 
-__all__ = ["SUITE", "run_suite"]
+__all__ = ["SUITE", "load_script", "run_suite", "select", "validation_dir"]
 
 #: name -> (quick arguments, full arguments); None: not part of that suite.
 #: "{seed}" is replaced by --seed. "sensitivity" runs in this process (a figure).
@@ -40,9 +40,11 @@ SUITE: dict[str, tuple[list | None, list | None]] = {
 
 def validation_dir() -> Path:
     """The source tree's ``validation/`` folder; ValueError if this is not a checkout."""
-    root = Path(__file__).resolve().parents[1] / "validation"
+    root = Path(__file__).resolve().parents[2] / "validation"
     if not root.is_dir():
-        raise ValueError(f"the validation suite is not here ({root}): run from a source checkout")
+        raise ValueError(f"tissue-enkf validate runs the scripts of the source tree's validation/ "
+                         f"folder, not found at {root} (an installed copy has none): run it "
+                         "from a git checkout installed with pip install -e .")
     return root
 
 
@@ -69,7 +71,7 @@ def _demote(markdown: str) -> str:
     return "\n".join(out)
 
 
-def _load_script(root: Path, name: str):
+def load_script(root: Path, name: str):
     import importlib.util
 
     spec = importlib.util.spec_from_file_location(f"validation_{name}", root / f"{name}.py")
@@ -86,7 +88,7 @@ def _convergence_figure(root: Path, out: Path) -> list[str]:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    rows = np.array(_load_script(root, "fem_convergence").modal(), float)
+    rows = np.array(load_script(root, "fem_convergence").modal(), float)
     h = rows[:, 1]
     fig, ax = plt.subplots(figsize=(5, 4), constrained_layout=True)
     for col, label in ((2, "L2"), (3, "max"), (4, "interior max")):
@@ -103,7 +105,7 @@ def _convergence_figure(root: Path, out: Path) -> list[str]:
 
 
 def _sensitivity(out: Path, full: bool) -> list[str]:
-    from . import paper
+    from .. import paper
 
     grid = (100, 100, 50) if full else (40, 40, 20)
     res = paper.sensitivity_study(grid, 10**6 if full else 200_000, progress=False)
@@ -125,7 +127,7 @@ def run_suite(out: Path, *, full: bool = False, only: list[str] | None = None, s
 
     Returns ``{name: {"status": "ok" | "exit status k" | "error: ...", "seconds": s}}``.
     """
-    from mcmatlab_py._progress import Progress
+    from mcmatlab_py.progress import Progress
 
     root = validation_dir()
     names = select(full, only)

@@ -10,6 +10,8 @@ import numbers
 
 import numpy as np
 
+__all__ = ["as_generator", "cov_sqrt", "covariance", "float_array", "variances"]
+
 
 def as_generator(rng: np.random.Generator | int, name: str = "rng") -> np.random.Generator:
     """Return ``rng`` as a Generator; an int is taken as a seed.

@@ -117,7 +117,7 @@ def write_identify_outputs(out: Path, setup, est, times, data, *, absorption=Non
     """
     import fem
 
-    from .paper import write_estimates_csv
+    from ..tissue.outputs import write_estimates_csv
 
     out = Path(out)
     (out / "figures").mkdir(exist_ok=True)
@@ -163,7 +163,7 @@ def write_identify_outputs(out: Path, setup, est, times, data, *, absorption=Non
         vals = absorption.unique(np.array([mua]), np.array([mus]))[0][absorption.inverse]
         point_data["absorbed_power_per_W"] = vals
     if risk is not None and risk.omega is not None:
-        from .risk import plot_depth_maps
+        from ..tissue.risk import plot_depth_maps
 
         last = risk.snapshots[-1] if risk.snapshots else None
         final = risk.point_data(risk.snapshot())  # the tracker's own names and thresholds

@@ -41,8 +41,10 @@ import numpy as np
 
 from mcmatlab_py.config import ConfigError, check_keys, model_from_config, read_toml
 
+from .readers import apply_time_offset, load_frames, read_sensor_csv
+
 __all__ = ["DataSpec", "IdentifyConfig", "check_identify_keys", "identify_config_from_dict",
-           "load_identify", "read_sensor_csv"]
+           "load_identify"]
 
 
 @dataclass
@@ -89,17 +91,15 @@ class IdentifyConfig:
         """``(times (M,) s, data (M, n_obs) deg C)`` of a CSV, or of an NPZ image series.
 
         Raises ValueError naming the file and the problem (see :func:`read_sensor_csv`
-        and :func:`enkf.image.load_frames`).
+        and :func:`enkf.app.readers.load_frames`).
         """
         data = self.data or DataSpec()
         if Path(path).suffix.lower() == ".npz":
-            from .image import load_frames
-
             if "image" not in self.setup_kw or len(self.setup_kw["sensor_positions"]):
                 raise ValueError(f"{path}: an NPZ image series needs [sensors.camera] and no "
                                  "point sensors (sensors.positions = [])")
             times, frames = load_frames(path, self.setup_kw["image"])
-            return _apply_offset(path, times, frames, data.time_offset)
+            return apply_time_offset(path, times, frames, data.time_offset)
         times, values, _ = read_sensor_csv(path, self.n_obs, columns=data.columns,
                                            time_offset=data.time_offset)
         return times, values
@@ -119,7 +119,7 @@ class IdentifyConfig:
         """The :class:`~enkf.tissue.TissueFilterSetup` with ``absorption``."""
         import fem
 
-        from .tissue import TissueFilterSetup
+        from ..tissue import TissueFilterSetup
 
         G, HS = self.model.G, self.model.HS
         m = G.media[0]
@@ -201,7 +201,7 @@ def identify_config_from_dict(cfg: dict) -> IdentifyConfig:
                                             sens.get("tracked", default_tracked), G)
     if "camera" in sens:
         cam = check_keys("sensors.camera", sens["camera"], _CAMERA_KEYS)
-        from .image import ThermalImage
+        from ..tissue.image import ThermalImage
 
         for k in ("x_range", "y_range", "shape"):
             if k not in cam:
@@ -332,7 +332,7 @@ def _prior_of(name: str, setup_kw: dict, medium) -> tuple[tuple[float, float], s
 
 def _bounds(table, setup_kw: dict, medium) -> np.ndarray | None:
     """``[filter.bounds]``: the physical range of each estimated parameter's mean."""
-    from .tissue import default_bounds
+    from ..tissue import default_bounds
 
     names = setup_kw.get("estimate", ("mua", "mus"))
     table = check_keys("filter.bounds", table, set(_PARAMETERS))
@@ -415,91 +415,3 @@ def load_identify(path: str | Path) -> IdentifyConfig:
     if cfg.data.file is not None and not cfg.data.file.is_absolute():
         cfg.data.file = Path(path).parent / cfg.data.file
     return cfg
-
-
-def _apply_offset(path, times: np.ndarray, values: np.ndarray, offset: float | None):
-    """Shift times by ``data.time_offset`` and drop the readings before the laser starts."""
-    if offset is None:
-        if times[0] <= 0:
-            raise ValueError(f"{path}: times must be > 0 s (the prior is at t = 0; set "
-                             f"data.time_offset to the laser's start), got {float(times[0])!r}")
-        return times, values
-    times = times - offset
-    keep = times > 0
-    if not np.any(keep):
-        raise ValueError(f"{path}: no reading after the laser's start (data.time_offset = "
-                         f"{offset!r} s, last time {float(times[-1] + offset)!r} s)")
-    return times[keep], values[keep]
-
-
-def read_sensor_csv(path: str | Path, n_columns: int | None = None, *,
-                    columns: list[str] | None = None, time_offset: float | None = None
-                    ) -> tuple[np.ndarray, np.ndarray, list[str]]:
-    """``(times (M,) s, data (M, p) deg C, column names)`` of a measured-data CSV.
-
-    A header names the columns: ``time`` (s) first, then one column per sensor (and
-    pixel); empty fields or ``nan`` are gaps. Raises ValueError naming the file, the
-    line and the problem for: a missing or unreadable file, no header, no rows, a
-    field that is not a number, a wrong number of fields or columns, Inf, a missing,
-    negative or zero time, unsorted or duplicate times.
-
-    Parameters
-    ----------
-    n_columns : the number of data columns the config observes (checked)
-    columns : header names of the data columns to use, in this order (other columns
-        are ignored; a missing name is an error); default: every column after ``time``
-    time_offset : s, subtracted from the times (the laser's start on the data's
-        clock); the readings at or before the start are then dropped. Default: none,
-        and every time must be > 0.
-    """
-    from .stream import parse_line
-
-    path = Path(path)
-    try:
-        text = path.read_text(encoding="utf-8")
-    except FileNotFoundError:
-        raise ValueError(f"data file {str(path)!r} does not exist") from None
-    except (OSError, UnicodeDecodeError) as err:
-        raise ValueError(f"data file {str(path)!r} cannot be read as text: {err}") from None
-    lines = [(i + 1, ln) for i, ln in enumerate(text.splitlines())
-             if ln.strip() and not ln.lstrip().startswith("#")]
-    if not lines:
-        raise ValueError(f"data file {str(path)!r} is empty (need a header: time, sensors...)")
-    _, head = lines[0]
-    names = [h.strip() for h in head.split(",")]
-    if names[0].lower() not in ("time", "t", "time_s"):
-        raise ValueError(f"{path}:{lines[0][0]}: the first column must be 'time' (s), got "
-                         f"{names[0]!r} (is this a CSV with a header?)")
-    if len(names) < 2:
-        raise ValueError(f"{path}:{lines[0][0]}: no sensor columns after 'time'")
-    if len(set(names)) != len(names):
-        dup = next(n for n in names if names.count(n) > 1)
-        raise ValueError(f"{path}:{lines[0][0]}: the header names column {dup!r} twice")
-    if columns is not None:
-        missing = [c for c in columns if c not in names[1:]]
-        if missing:
-            raise ValueError(f"{path}:{lines[0][0]}: missing column {missing[0]!r} (data.columns);"
-                             f" the header has {names}")
-        pick = [names.index(c) - 1 for c in columns]
-    else:
-        pick = list(range(len(names) - 1))
-    if n_columns is not None and len(pick) != n_columns:
-        raise ValueError(f"{path}:{lines[0][0]}: {len(pick)} data columns, the config "
-                         f"observes {n_columns} (sensors.positions, then camera pixels)")
-    if len(lines) == 1:
-        raise ValueError(f"data file {str(path)!r} has a header but no rows")
-    times, rows = [], []
-    for no, ln in lines[1:]:
-        t, y = parse_line(ln, len(names), f"{path}:{no}")
-        times.append(t)
-        rows.append(y[pick])
-    times = np.array(times)
-    d = np.diff(times)
-    if np.any(d <= 0):
-        k = int(np.flatnonzero(d <= 0)[0])
-        what = "duplicate" if d[k] == 0 else "unsorted"
-        raise ValueError(f"{path}: {what} times: {float(times[k])!r} then "
-                         f"{float(times[k + 1])!r} s")
-    times, values = _apply_offset(path, times, np.array(rows).reshape(len(times), len(pick)),
-                                  time_offset)
-    return times, values, ["time"] + [names[j + 1] for j in pick]

@@ -3,12 +3,13 @@
 from __future__ import annotations
 
 import contextlib
-import json
 import shutil
 import tempfile
 from pathlib import Path
 
-import numpy as np
+from ..tissue.outputs import write_json
+
+__all__ = ["atomic_dir", "check_out_dir", "write_json"]
 
 
 def check_out_dir(out: str | Path, force: bool) -> Path:
@@ -38,22 +39,3 @@ def atomic_dir(out: str | Path, force: bool = False):
     if out.exists():
         shutil.rmtree(out)
     tmp.rename(out)
-
-
-def _jsonable(obj):
-    if isinstance(obj, dict):
-        return {str(k): _jsonable(v) for k, v in obj.items()}
-    if isinstance(obj, (list, tuple)):
-        return [_jsonable(v) for v in obj]
-    if isinstance(obj, np.ndarray):
-        return _jsonable(obj.tolist())
-    if isinstance(obj, np.generic):
-        return obj.item()
-    if isinstance(obj, float) and not np.isfinite(obj):
-        return None
-    return obj
-
-
-def write_json(path: str | Path, data: dict) -> None:
-    """Write ``data`` as indented JSON (numpy scalars and arrays converted; NaN -> null)."""
-    Path(path).write_text(json.dumps(_jsonable(data), indent=2) + "\n")

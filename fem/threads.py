@@ -15,6 +15,8 @@ import ctypes
 import threading
 from contextlib import contextmanager
 
+__all__ = ["blas_threads"]
+
 _LOCK = threading.Lock()
 _LIBS: list | None = None
 

@@ -30,7 +30,7 @@ from collections.abc import Callable
 import numpy as np
 import scipy.linalg as sla
 
-from ._validate import as_generator, covariance, float_array
+from .checks import as_generator, covariance, float_array
 
 __all__ = [
     "kalman_analysis",
@@ -260,7 +260,7 @@ def lorenz96_filter_problem(n_steps: int, rng: np.random.Generator | int):
     All 40 variables observed every 0.05 with unit variance; the prior is the truth's
     initial state plus N(0, I). Returns ``(problem, truth)``, truth ``(n_steps + 1, 40)``.
     """
-    from .driver import FilterProblem
+    from .problem import FilterProblem
 
     times, truth, obs = lorenz96_twin(n_steps, rng)
     problem = FilterProblem(

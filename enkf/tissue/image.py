@@ -16,14 +16,12 @@ localization for the perturbed-observation filter.
 
 from __future__ import annotations
 
-import zipfile
 from dataclasses import dataclass
-from pathlib import Path
 
 import numpy as np
 import scipy.sparse as sp
 
-__all__ = ["ThermalImage", "load_frames"]
+__all__ = ["ThermalImage"]
 
 
 @dataclass(frozen=True)
@@ -153,40 +151,3 @@ def _cubic_surface_probes(grid, pts: np.ndarray) -> sp.csr_matrix:
             vals.append(wx[:, a] * wy[:, b])
     return sp.csr_matrix((np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))),
                          shape=(pts.shape[0], grid.npoints))
-
-
-def load_frames(path: str | Path, image: ThermalImage | None = None
-                ) -> tuple[np.ndarray, np.ndarray]:
-    """``(times (n,), frames (n, ny*nx))`` from an NPZ with ``times`` and ``frames``.
-
-    Frames are (n, ny, nx) deg C, NaN for dead pixels; ``image`` checks the shape.
-    Raises ValueError naming the problem (missing array, wrong shape, Inf, unsorted or
-    duplicate times, no frames).
-    """
-    path = Path(path)
-    try:
-        with np.load(path, allow_pickle=False) as f:
-            arrays = {k: np.asarray(f[k], float) for k in ("times", "frames") if k in f.files}
-    except (OSError, EOFError, ValueError, zipfile.BadZipFile) as exc:
-        raise ValueError(f"{path}: not a readable NPZ file ({exc})") from exc
-    missing = [k for k in ("times", "frames") if k not in arrays]
-    if missing:
-        raise ValueError(f"{path}: missing array(s) {missing} (need 'times' and 'frames')")
-    times, frames = arrays["times"], arrays["frames"]
-    if times.ndim != 1 or times.size == 0:
-        raise ValueError(f"{path}: 'times' must be a non-empty 1-D array, got shape {times.shape}")
-    if frames.ndim != 3 or frames.shape[0] != times.size:
-        raise ValueError(f"{path}: 'frames' must be (n, ny, nx) with n = {times.size}, "
-                         f"got shape {frames.shape}")
-    if image is not None and frames.shape[1:] != tuple(int(v) for v in image.shape):
-        raise ValueError(f"{path}: frames are {frames.shape[1:]} pixels, the camera "
-                         f"(ThermalImage.shape) {tuple(image.shape)}")
-    if not np.all(np.isfinite(times)):
-        raise ValueError(f"{path}: 'times' must be finite, got {float(times[~np.isfinite(times)][0])!r}")
-    if np.any(np.diff(times) <= 0):
-        k = int(np.flatnonzero(np.diff(times) <= 0)[0])
-        raise ValueError(f"{path}: 'times' must be strictly increasing, got {float(times[k])!r} then "
-                         f"{float(times[k + 1])!r}")
-    if np.any(np.isinf(frames)):
-        raise ValueError(f"{path}: 'frames' hold Inf (use NaN for a dead pixel)")
-    return times, frames.reshape(times.size, -1)

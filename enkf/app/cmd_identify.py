@@ -1,0 +1,219 @@
+"""``identify``: the filter on measured data (one file, a batch, or a live stream)."""
+
+from __future__ import annotations
+
+import sys
+import time
+from pathlib import Path
+
+from .common import apply_threads, close_client, dask_client
+
+__all__ = ["cmd_identify"]
+
+def _identify_one(cfg, absorption, seed, data_path, out_dir, quiet=True) -> dict:
+    """Run the filter on one data file and write its outputs into ``out_dir`` (a task)."""
+    from mcmatlab_py.progress import Progress
+
+    from ..tissue import identify
+    from .report import write_identify_outputs
+
+    setup = cfg.setup(absorption, seed=seed)
+    times, data = cfg.read_data(data_path)
+    medium = cfg.model.G.media[0]
+    risk = None
+    if medium.E and medium.A:  # MCmatlab's damage model: the risk of injury per node
+        from ..tissue.risk import RiskTracker
+
+        risk = RiskTracker(E=medium.E, A=medium.A, record_every=10)
+    bar = Progress(len(times), "filter", enabled=not quiet)
+
+    def callback(rep):
+        if risk is not None:
+            risk(rep)
+        bar.update(rep.step)
+
+    t0 = time.perf_counter()
+    try:
+        est = identify(setup, times, data, callback=callback, param_bounds=cfg.param_bounds)
+    finally:
+        bar.close()
+    summary = write_identify_outputs(Path(out_dir), setup, est, times, data,
+                                     absorption=absorption, risk=risk)
+    summary["data"] = str(data_path)
+    summary["wall_s"] = time.perf_counter() - t0
+    return summary
+
+
+def cmd_identify(args) -> int:
+    from .config import load_identify
+    from .report import manifest
+    from .rundir import atomic_dir, check_out_dir, write_json
+
+    check_out_dir(args.out, args.force)
+    apply_threads(args.threads)
+    cfg = load_identify(args.config)
+    if args.data is None and args.follow is None and cfg.data.file is not None:
+        args.data = [str(cfg.data.file)]
+    if (args.data is None) == (args.follow is None):
+        raise ValueError("give --data FILE [FILE ...] or --follow FILE (or data.file in the "
+                         "config)")
+    if args.follow is not None and cfg.data.time_offset is not None:
+        raise ValueError("data.time_offset is not supported with --follow: write the times "
+                         "from the laser's start")
+    seed = args.seed if args.seed is not None else cfg.setup_kw.get("seed", 0)
+    files = [Path(f) for f in (args.data or [])]
+    if len(files) == 1:  # one dataset: bad data is bad input (exit 2, nothing written);
+        # in a batch a bad file is reported in batch.csv and the others go on
+        cfg.read_data(files[0])
+    t0 = time.perf_counter()
+    client = dask_client(args, cfg.raw)
+    try:
+        absorption = cfg.emulator(cache_dir=args.cache_dir, progress=not args.quiet,
+                                  client=client)
+        t_emu = time.perf_counter() - t0
+        if args.follow is not None:
+            return _follow(args, cfg, absorption, seed, t_emu)
+        with atomic_dir(args.out, args.force) as tmp:
+            if len(files) == 1:
+                summary = _identify_one(cfg, absorption, seed, files[0], tmp, args.quiet)
+                rows = [summary]
+            else:
+                rows = _identify_batch(cfg, absorption, seed, files, tmp, client, args.quiet)
+            manifest(tmp / "run.json", command="identify", config=cfg.raw, seed=seed,
+                     timings={"emulator": t_emu, "total": time.perf_counter() - t0},
+                     extra={"data": [str(f) for f in files]})
+            if len(files) > 1:
+                write_json(tmp / "summary.json", {"runs": rows})
+    finally:
+        close_client(client)
+    for r in rows:
+        if r.get("stopped"):
+            print(f"warning: {r['data']}: the filter stopped early: {r['stopped']} (estimates "
+                  "up to then are written)", file=sys.stderr)
+    if not args.quiet:
+        for r in rows:
+            if "error" in r:
+                print(f"{r['data']}: failed: {r['error']}", file=sys.stderr)
+                continue
+            par = ", ".join(f"{k} {v['estimate_final']:.4g} +- {v['std_final']:.2g}"
+                            for k, v in r["parameters"].items())
+            stop = f" (stopped: {r['stopped']})" if r["stopped"] else ""
+            print(f"{r['data']}: {par}{stop}")
+        print(f"-> {args.out}")
+    return 0
+
+
+def _identify_batch(cfg, absorption, seed, files, tmp, client, quiet) -> list:
+    import functools
+    import shutil
+
+    from mcmatlab_py.distributed import TaskError, run_tasks
+
+    names = []
+    for f in files:  # one sub-directory per file, unique names
+        base, k = f.stem, 1
+        while base in names:
+            k += 1
+            base = f"{f.stem}-{k}"
+        names.append(base)
+    for n in names:
+        (tmp / n).mkdir()
+    # the emulator travels once per task (tens of MB at most); results are small dicts
+    task = functools.partial(_batch_task, cfg, absorption, seed)
+    results = run_tasks(task, [(str(f), str(tmp / n)) for f, n in zip(files, names, strict=True)],
+                        client=client, errors="return", retries=1, progress=not quiet,
+                        label="identify")
+    rows = []
+    for f, n, r in zip(files, names, results, strict=True):
+        if isinstance(r, TaskError):
+            rows.append({"data": str(f), "dir": "", "error": str(r.error)})
+            shutil.rmtree(tmp / n, ignore_errors=True)
+        else:
+            rows.append({**r, "dir": n})
+    keys = list(next((r["parameters"] for r in rows if "parameters" in r), {}))
+    lines = ["data,dir,status," + ",".join(f"{k}_mean,{k}_std" for k in keys) + ",message"]
+    for r in rows:
+        if "error" in r:
+            vals = ",".join("," for _ in keys)
+            lines.append(f"{r['data']},{r['dir']},error,{vals},\"{r['error']}\"")
+        else:
+            vals = ",".join(f"{r['parameters'][k]['estimate_final']:.6g},"
+                            f"{r['parameters'][k]['std_final']:.6g}" for k in keys)
+            status = "stopped" if r["stopped"] else "ok"
+            lines.append(f"{r['data']},{r['dir']},{status},{vals},\"{r['stopped'] or ''}\"")
+    (tmp / "batch.csv").write_text("\n".join(lines) + "\n")
+    return rows
+
+
+def _batch_task(cfg, absorption, seed, item):
+    data_path, out_dir = item
+    return _identify_one(cfg, absorption, seed, data_path, out_dir)
+
+
+def _follow(args, cfg, absorption, seed, t_emu) -> int:
+    """Online mode: --out is written as the data come (not atomically: it is live)."""
+    from ..tissue import OnlineIdentifier
+    from .readers import follow_csv
+    from .report import manifest
+
+    out = Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
+    setup = cfg.setup(absorption, seed=seed)
+    ident = OnlineIdentifier(setup, param_bounds=cfg.param_bounds,
+                             dt_hint=1.0 / cfg.rate if cfg.rate else 0.1)
+    names = list(setup.estimate)
+    cols = ["time_s"] + [f"{n}_{s}" for n in names for s in ("mean", "std")] + [
+        f"T{j}_{s}" for j in range(len(setup.tracked_positions)) for s in ("mean", "std")]
+    fh = open(out / "estimates.csv", "w", encoding="utf-8")
+    fh.write(",".join(cols) + "\n")
+    fh.flush()
+    last_fig = [0.0]
+
+    def on_update(est, line):
+        vals = [est.time] + [v for i in range(len(names))
+                             for v in (est.param_mean[i], est.param_std[i])]
+        vals += [v for j in range(len(est.tracked_mean))
+                 for v in (est.tracked_mean[j], est.tracked_std[j])]
+        fh.write(",".join(f"{v:.8g}" for v in vals) + "\n")
+        fh.flush()  # the estimate is on disk before the next frame is read
+        now = time.perf_counter()
+        if now - last_fig[0] > 2.0:  # the figure, at most every 2 s (it takes ~0.3 s)
+            _live_figure(out, ident, setup)
+            last_fig[0] = time.perf_counter()
+
+    t0 = time.perf_counter()
+    try:
+        n = follow_csv(args.follow, ident, on_update, idle_timeout_s=args.idle_timeout,
+                       columns=None if cfg.data.columns is None else ["time", *cfg.data.columns])
+    finally:
+        fh.close()
+    _live_figure(out, ident, setup)
+    manifest(out / "run.json", command="identify --follow", config=cfg.raw, seed=seed,
+             timings={"emulator": t_emu, "stream": time.perf_counter() - t0},
+             extra={"follow": str(args.follow), "readings": n})
+    if not args.quiet:
+        print(f"{n} readings assimilated -> {out}")
+    return 0
+
+
+def _live_figure(out, ident, setup) -> None:
+    import numpy as np
+
+    from ..tissue import TissueEstimates
+    from .report import plot_identification
+
+    h = ident.history
+    if not h:
+        return
+    est = TissueEstimates(
+        times=np.array([e.time for e in h]), names=setup.estimate,
+        param_mean=np.array([e.param_mean for e in h]), param_std=np.array([e.param_std for e in h]),
+        tracked_positions=setup.tracked_positions,
+        tracked_mean=np.array([e.tracked_mean for e in h]),
+        tracked_std=np.array([e.tracked_std for e in h]),
+        analysed=np.array([e.analysed for e in h]),
+        step_latency_s=np.array([e.latency_s for e in h]), filter_wall_s=0.0)
+    (Path(out) / "figures").mkdir(exist_ok=True)
+    tmp = Path(out) / "figures" / ".estimates.png.tmp.png"
+    plot_identification(tmp, est, None, None, setup.power)
+    tmp.replace(Path(out) / "figures" / "estimates.png")  # a viewer never sees half a file

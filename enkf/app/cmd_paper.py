@@ -1,0 +1,83 @@
+"""``paper``: the paper's experiments and its sensitivity study."""
+
+from __future__ import annotations
+
+import sys
+
+from .common import apply_threads, close_client, dask_client
+
+__all__ = ["cmd_paper"]
+
+def cmd_paper(args) -> int:
+    from .. import paper
+    from .rundir import check_out_dir
+
+    check_out_dir(args.out, args.force)
+    apply_threads(args.threads)
+    if args.members < 2:
+        raise ValueError(f"--members must be >= 2, got {args.members}")
+    verbose = not args.quiet
+    client = dask_client(args)
+    try:
+        return _paper(args, paper, client, verbose)
+    finally:
+        close_client(client)
+
+
+def _paper(args, paper, client, verbose) -> int:
+    from .rundir import atomic_dir
+
+    if args.scenario == "sensitivity":
+        res = paper.sensitivity_study(tuple(args.fine), args.truth_photons or 10**6,
+                                      progress=verbose, client=client)
+        with atomic_dir(args.out, args.force) as tmp:
+            (tmp / "figures").mkdir()
+            paper.plot_sensitivity(tmp / "figures" / "sensitivity.png", res)
+            cols = [f"T_mua_{v:g}" for v in res["mua"]] + [f"T_mus_{v:g}" for v in res["mus"]]
+            import numpy as np
+
+            np.savetxt(tmp / "sensitivity.csv", np.column_stack(
+                [res["times"], *res["mua"].values(), *res["mus"].values()]), delimiter=",",
+                header="time_s," + ",".join(cols), comments="", fmt="%.8g")
+        return 0
+    tcfg = paper.TruthConfig(scenario=args.scenario, grid=tuple(args.fine))
+    if args.truth_photons is not None:
+        if args.truth_photons < 1:
+            raise ValueError(f"--truth-photons must be >= 1, got {args.truth_photons}")
+        tcfg.n_photons_constant = tcfg.n_photons_per_step = args.truth_photons
+    if verbose:
+        print(f"truth on {tcfg.grid} voxels, emulator on the 20 x 20 x 10 filter grid "
+              "(both cached after the first run) ...", file=sys.stderr)
+    run = paper.run_experiment(args.scenario, 0 if args.seed is None else args.seed,
+                               n_members=args.members, method=args.method, truth_config=tcfg,
+                               emulator_photons=args.emulator_photons,
+                               emulator_table=args.emulator_table, exact=args.exact,
+                               cache_dir=args.cache_dir, progress=verbose, client=client)
+    with atomic_dir(args.out, args.force) as tmp:
+        paper.write_run(run, tmp)
+        from .report import manifest
+
+        manifest(tmp / "run.json", command=f"paper {args.scenario}",
+                 config={"scenario": args.scenario, "members": args.members,
+                         "method": args.method, "fine": list(args.fine),
+                         "truth_photons": args.truth_photons,
+                         "emulator_photons": args.emulator_photons,
+                         "emulator_table": args.emulator_table, "exact": args.exact},
+                 seed=run.summary["seed"], timings={"total": run.summary["wall_seconds"],
+                                                    **{k: v for k, v in
+                                                       run.summary["timing"].items()
+                                                       if k.endswith("_s")}})
+    if verbose:
+        summary = run.summary
+        for name, p in summary["parameters"].items():
+            print(f"{name}: final {p['estimate_final']:.4g} +- {p['std_final']:.2g} "
+                  f"(truth {p['truth_final']:.4g}, rel. error {p['relative_error_final']:.3f})")
+        for name, p in summary["temperatures"].items():
+            print(f"T at {name}: rmse {p['rmse']:.3f} deg C, coverage {p['coverage_2sd']:.2f}")
+        tm = summary["timing"]
+        print(f"filter {tm['filter_wall_s']:.2f} s for {tm['steps']} steps, median step "
+              f"{1e3 * tm['step_latency_median_s']:.1f} ms, max "
+              f"{1e3 * tm['step_latency_max_s']:.1f} ms -> {args.out}")
+        if summary["diverged"]:
+            print(f"warning: {summary['diverged']}", file=sys.stderr)
+    return 0

@@ -1,0 +1,43 @@
+"""What every command shares: exit statuses, threads, the Dask client."""
+
+from __future__ import annotations
+
+from .config import run_table
+
+__all__ = ["EXIT_BAD_INPUT", "EXIT_CHECK_FAILED", "apply_threads", "close_client", "dask_client"]
+
+EXIT_BAD_INPUT = 2
+EXIT_CHECK_FAILED = 1  #: validate: a check failed (its report is still written)
+
+
+def dask_client(args, config: dict | None = None):
+    """The Dask client of --scheduler / --workers (or the config's [run] table), or None."""
+    scheduler, workers = getattr(args, "scheduler", None), getattr(args, "workers", None)
+    if scheduler is None and workers is None and config is not None:
+        scheduler, workers = run_table(config)
+    if scheduler is None and workers is None:
+        return None
+    if scheduler is not None and workers is not None:
+        raise ValueError("give --scheduler or --workers, not both")
+    if workers is not None and workers < 1:
+        raise ValueError(f"--workers must be >= 1, got {workers}")
+    from mcmatlab_py.distributed import connect
+
+    return connect(scheduler, n_workers=workers)
+
+
+def close_client(client) -> None:
+    if client is not None:
+        cluster = getattr(client, "cluster", None)
+        client.close()
+        if cluster is not None:
+            cluster.close()
+
+
+def apply_threads(threads):
+    if threads is not None:
+        import numba
+
+        if threads < 1:
+            raise ValueError(f"--threads must be >= 1, got {threads}")
+        numba.set_num_threads(min(threads, numba.config.NUMBA_NUM_THREADS))

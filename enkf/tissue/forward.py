@@ -1,0 +1,108 @@
+"""The filter's forward model: one implicit heat step per interval, and the observation."""
+
+from __future__ import annotations
+
+import warnings
+
+import numpy as np
+import scipy.sparse as sp
+
+import fem
+
+from .absorption import as_absorption
+from .parameters import column
+from .setup import TissueFilterSetup
+
+__all__ = ["TissueForwardModel", "observation_operator"]
+
+
+class TissueForwardModel:
+    """The forecast ``F(T, theta)`` of the filter: one implicit heat step per interval."""
+
+    def __init__(self, setup: TissueFilterSetup):
+        self.setup = setup
+        g = setup.grid
+        self.mesh = g.mesh()
+        self.absorption = absorption = as_absorption(setup.absorption, g.shape)
+        # an emulator of nodal loads on this mesh: gather, no operator at all
+        self._nodal = absorption.kind == "load"
+        if self._nodal:
+            if tuple(absorption.shape) != tuple(n + 1 for n in g.shape):
+                raise ValueError(f"the load emulator's mesh has {absorption.shape} nodes, the "
+                                 f"filter's grid {tuple(n + 1 for n in g.shape)}")
+            self.L = None
+        else:
+            # fold the expansion of the symmetry orbits into the voxel -> node operator
+            inv = absorption.inverse
+            expand = sp.csr_matrix((np.ones(inv.size), (np.arange(inv.size), inv)))
+            L = fem.voxel_load_matrix(self.mesh, g).tocsr()  # (npoints, nvox)
+            self.L = (L @ expand).tocsr()  # (npoints, n_unique)
+        self.steppers: dict[float, fem.HeatStepper] = {}
+        self.col = {name: column(setup.estimate, name) for name in setup.estimate}
+        self._warned = False
+
+    def stepper(self, dt: float) -> fem.HeatStepper:
+        key = round(dt, 9)
+        if key not in self.steppers:
+            s = self.setup
+            self.steppers[key] = fem.HeatStepper(self.mesh, s.nominal["VHC"], s.nominal["TC"], dt,
+                                                 theta=s.theta, boundary=s.heat_boundary,
+                                                 operator=s.heat_operator,
+                                                 mass=s.heat_mass if s.heat_operator == "kronecker"
+                                                 else "lumped")
+        return self.steppers[key]
+
+    def warm_up(self, dt: float) -> None:
+        """Build the solver and load the JIT code before the online loop (not timed there).
+
+        The exact mode runs no Monte Carlo for a warm-up (zero power)."""
+        s = self.setup
+        N = s.n_members
+        theta = np.tile([s.nominal[n] for n in s.estimate], (N, 1))
+        npts = self.mesh.p.shape[1]
+        self.step(np.zeros((N, npts)), theta, 0.0, dt, 0.0 if self.absorption.exact else 1.0)
+
+    def loads(self, theta: np.ndarray, power: float) -> np.ndarray:
+        """(N, n_nodes) W: nodal heat loads of the members' optics at laser power ``power``."""
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always")
+            vals = self.absorption.unique(theta[:, self.col["mua"]], theta[:, self.col["mus"]])
+        if caught and not self._warned:
+            warnings.warn(str(caught[0].message), RuntimeWarning, stacklevel=3)
+            self._warned = True
+        if self._nodal:
+            return power * vals[:, self.absorption.inverse]
+        return (self.L @ (power * vals).T).T
+
+    def step(self, E_state: np.ndarray, theta: np.ndarray, t0: float, t1: float,
+             power: float) -> np.ndarray:
+        """Members ``E_state`` (N, n_nodes) deg C from ``t0`` to ``t1`` (s) at laser power
+        ``power`` (W), each with its parameters ``theta`` (N, n_par) in ``estimate`` order."""
+        s = self.setup
+        load = self.loads(theta, power) if power != 0.0 else None
+        kw = {}
+        if "VHC" in self.col:
+            kw["vhc_scale"] = theta[:, self.col["VHC"]] / s.nominal["VHC"]
+        if "TC" in self.col:
+            kw["tc_scale"] = theta[:, self.col["TC"]] / s.nominal["TC"]
+        return self.stepper(t1 - t0).step(E_state, load, **kw)
+
+    def __call__(self, E_state: np.ndarray, theta: np.ndarray, t0: float, t1: float):
+        """The filter's forecast: :meth:`step` at the laser power of the interval's middle."""
+        return self.step(E_state, theta, t0, t1, self.setup.power(0.5 * (t0 + t1)))
+
+
+def observation_operator(setup: TissueFilterSetup, mesh):
+    """``(P (p, n_nodes) csr, noise variances (p,), positions (p, 3) cm)`` of the point
+    sensors followed by the image's pixels (pixel centres on z = 0)."""
+    blocks, var, xyz = [], [], []
+    n_pts = setup.sensor_positions.shape[0]
+    if n_pts:
+        blocks.append(fem.probe_matrix(mesh, setup.sensor_positions.T))  # points are (3, n)
+        var.append(np.broadcast_to(np.asarray(setup.sensor_noise_var, float), (n_pts,)))
+        xyz.append(setup.sensor_positions)
+    if setup.image is not None:
+        blocks.append(setup.image.matrix(mesh))
+        var.append(np.full(setup.image.n_pixels, float(setup.image.noise_var)))
+        xyz.append(setup.image.pixel_centers())
+    return (sp.vstack(blocks).tocsr(), np.concatenate(var), np.vstack(xyz))

@@ -1,0 +1,187 @@
+"""identify: run the tissue filter on a series of sensor readings (see :mod:`enkf.tissue`)."""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable
+from dataclasses import dataclass
+
+import numpy as np
+import scipy.sparse as sp
+
+import fem
+from fem.threads import blas_threads
+
+from ..analysis import gaspari_cohn
+from ..health import HealthCheck
+from ..loop import run_filter
+from ..problem import FilterConfig, FilterDivergence, FilterProblem, FilterResult, StepReport, uniform_prior
+from ..transforms import IdentityTransform, LogTransform
+from .forward import TissueForwardModel, observation_operator
+from .setup import TissueFilterSetup
+
+__all__ = ["FilterPieces", "TissueEstimates", "assemble", "identify"]
+
+
+@dataclass
+class TissueEstimates:
+    """Filter output in physical units (step 0 is the prior).
+
+    ``param_mean``/``param_std``: (M+1, n_par) in the order of ``names``;
+    ``tracked_mean``/``tracked_std``: (M+1, n_tracked) deg C at ``tracked_positions``.
+    ``step_latency_s``: (M,) wall time of each filter step.
+    """
+
+    times: np.ndarray
+    names: tuple
+    param_mean: np.ndarray
+    param_std: np.ndarray
+    tracked_positions: np.ndarray
+    tracked_mean: np.ndarray
+    tracked_std: np.ndarray
+    analysed: np.ndarray
+    step_latency_s: np.ndarray
+    filter_wall_s: float
+    result: FilterResult | None = None
+    diverged: str | None = None  #: message when the filter stopped early
+
+
+@dataclass
+class FilterPieces:
+    """What :func:`identify` and the online identifier build from a setup."""
+
+    model: TissueForwardModel
+    P_obs: sp.csr_matrix
+    noise_var: np.ndarray
+    P_track: sp.csr_matrix
+    prior: Callable
+    rw: np.ndarray
+    transforms: object
+    dynamics: Callable | None
+    localization: tuple | None
+    walk_scale: Callable | None
+    config: FilterConfig
+    health: HealthCheck
+    n: int
+
+    def problem(self, times, data, prior=None, t0: float = 0.0) -> FilterProblem:
+        s = self.model.setup
+        return FilterProblem(
+            forecast=self.model, observation=self.P_obs, obs_times=times, obs_data=data,
+            obs_cov=self.noise_var, prior=prior or self.prior,
+            model_noise=s.model_noise_std ** 2, param_noise=self.rw,
+            transforms=self.transforms, t0=t0, param_dynamics=self.dynamics,
+            localization=self.localization, param_noise_scale=self.walk_scale)
+
+
+def assemble(setup: TissueFilterSetup, param_bounds=None, warm_dt: float | None = None
+              ) -> FilterPieces:
+    model = TissueForwardModel(setup)
+    npts = model.mesh.p.shape[1]
+    if warm_dt is not None:
+        model.warm_up(warm_dt)
+    P_obs, noise_var, obs_xyz = observation_operator(setup, model.mesh)
+    P_track = fem.probe_matrix(model.mesh, setup.tracked_positions.T)
+    names = setup.estimate
+    nominal = np.array([setup.nominal[n] for n in names])
+    prior = uniform_prior(np.full(npts, float(setup.T_initial)), *setup.prior_bounds())
+    n = len(names)
+    rw = np.broadcast_to(np.asarray(setup.random_walk_std, float), (n,)) ** 2
+
+    def walk_scale(t0, t1):
+        return 1.0 if setup.power(0.5 * (t0 + t1)) > 0 else setup.random_walk_when_off
+
+    transforms = LogTransform()
+    dynamics = None
+    bounds_extra = np.zeros((0, 2))
+    if setup.parameter_model == "trend":
+        level_prior, sv = prior, float(setup.trend_prior_std)
+
+        def prior(rng, N):  # noqa: F811 - the levels' prior plus zero-mean rates
+            X0, th = level_prior(rng, N)
+            return X0, np.hstack([th, sv * rng.standard_normal((N, n))])
+
+        rw = np.concatenate([rw, np.broadcast_to(
+            np.asarray(setup.trend_noise_std, float), (n,)) ** 2])
+        transforms = [LogTransform()] * n + [IdentityTransform()] * n
+
+        def dynamics(U, t0, t1):
+            U = U.copy()
+            U[:, :n] += U[:, n:] * ((t1 - t0) * walk_scale(t0, t1))
+            return U
+
+        bounds_extra = np.tile([-1e3, 1e3], (n, 1))  # rates: no physical bound
+    localization = None
+    if setup.localization_radius is not None:
+        # Houtekamer & Mitchell (2001): taper the temperature-observation and the
+        # observation-observation covariances; the parameters stay global (rows of ones)
+        c = 0.5 * float(setup.localization_radius)  # the taper reaches zero at 2c
+        d_xy = np.linalg.norm(model.mesh.p.T[:, None, :] - obs_xyz[None, :, :], axis=2)
+        d_yy = np.linalg.norm(obs_xyz[:, None, :] - obs_xyz[None, :, :], axis=2)
+        n_theta = len(names) * (2 if setup.parameter_model == "trend" else 1)
+        rho_xy = np.vstack([gaspari_cohn(d_xy / c), np.ones((n_theta, obs_xyz.shape[0]))])
+        localization = (rho_xy, gaspari_cohn(d_yy / c))
+    config = FilterConfig(n_members=setup.n_members, method=setup.method,
+                          inflation=setup.inflation, seed=setup.seed, mda=setup.mda)
+    if param_bounds is None:
+        param_bounds = setup.default_param_bounds()
+    # stop on non-finite values, a parameter mean beyond the bounds, or a collapsed
+    # spread (below 1e-6 of the nominal value: the data can no longer move it)
+    min_std = np.concatenate([1e-6 * nominal, np.zeros(len(bounds_extra))])
+    health = HealthCheck(param_bounds=np.vstack([param_bounds, bounds_extra]),
+                         min_param_std=min_std)
+    return FilterPieces(model, P_obs, noise_var, P_track, prior, rw, transforms, dynamics,
+                   localization, None if setup.random_walk_when_off == 1.0 else walk_scale,
+                   config, health, n)
+
+
+def identify(setup: TissueFilterSetup, times: np.ndarray, data: np.ndarray, *,
+             callback: Callable[[StepReport], None] | None = None,
+             param_bounds: np.ndarray | None = None) -> TissueEstimates:
+    """Run the filter on sensor data.
+
+    Parameters
+    ----------
+    times : (M,) s, strictly increasing, after 0 (the prior is at t = 0)
+    data : (M, p) deg C at ``setup.sensor_positions`` (then the image's pixels);
+        NaN = missing (no analysis)
+    param_bounds : (n_par, 2), physical range of each parameter's ensemble mean;
+        leaving it stops the run (default: :meth:`TissueFilterSetup.default_param_bounds`)
+
+    Returns
+    -------
+    TissueEstimates; if the filter diverges, the estimates up to that point with
+    ``diverged`` set to the message.
+    """
+    pieces = assemble(setup, param_bounds, float(times[0]) if len(times) else None)
+    problem = pieces.problem(times, data)
+    P_track, n = pieces.P_track, pieces.n
+    M = len(times)
+    tr_mean = np.full((M + 1, P_track.shape[0]), np.nan)
+    tr_std = np.full_like(tr_mean, np.nan)
+
+    def record(rep: StepReport):
+        Y = (P_track @ rep.state_ensemble.T).T
+        tr_mean[rep.step] = Y.mean(axis=0)
+        tr_std[rep.step] = Y.std(axis=0, ddof=1)
+        if callback is not None:
+            callback(rep)
+
+    t0 = time.perf_counter()
+    diverged = None
+    try:
+        # the filter's dense products are small (50 x 5000): threaded BLAS only spins, and
+        # on a busy machine it is 20-30 times slower (measured); numba kernels keep the cores
+        with blas_threads(1):
+            res = run_filter(problem, pieces.config, health=pieces.health, callback=record)
+    except FilterDivergence as err:
+        res = err.result
+        diverged = str(err)
+    wall = time.perf_counter() - t0
+    k = len(res.times)
+    return TissueEstimates(
+        times=res.times, names=setup.estimate, param_mean=res.param_mean[:, :n],
+        param_std=res.param_std[:, :n],
+        tracked_positions=setup.tracked_positions, tracked_mean=tr_mean[:k],
+        tracked_std=tr_std[:k], analysed=res.analysed, step_latency_s=res.step_latency_s,
+        filter_wall_s=wall, result=res, diverged=diverged)

@@ -1,0 +1,81 @@
+"""The filter one reading at a time, for a live sensor."""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, replace
+
+import numpy as np
+
+from fem.threads import blas_threads
+
+from ..loop import run_filter
+from .identify import assemble
+from .setup import TissueFilterSetup
+
+__all__ = ["OnlineEstimate", "OnlineIdentifier"]
+
+
+@dataclass
+class OnlineEstimate:
+    """The filter's state after one reading (physical units; see TissueEstimates)."""
+
+    time: float
+    param_mean: np.ndarray  #: (n_par,)
+    param_std: np.ndarray  #: (n_par,)
+    tracked_mean: np.ndarray  #: (n_tracked,) deg C
+    tracked_std: np.ndarray  #: (n_tracked,) deg C
+    analysed: bool
+    latency_s: float  #: wall time of this update
+
+
+class OnlineIdentifier:
+    """The filter one reading at a time, for a live sensor (``identify --follow``).
+
+    Each :meth:`update` forecasts the ensemble from the previous reading's time to the
+    new one and assimilates the new reading (NaN entries are skipped), so the estimate
+    is ready before the next frame arrives. The random numbers of reading ``k`` come
+    from ``(setup.seed, k)``: a replay of the same readings gives the same estimates
+    (they differ from :func:`identify`'s, which draws from one stream).
+
+    Raises :class:`~enkf.problem.FilterDivergence` when the health check stops the
+    filter (the estimates so far stay in :attr:`history`).
+    """
+
+    def __init__(self, setup: TissueFilterSetup, *, param_bounds=None, dt_hint: float = 0.1):
+        self.setup = setup
+        self._pieces = assemble(setup, param_bounds, dt_hint)
+        rng = np.random.default_rng([setup.seed, 0])
+        self._X, self._theta = self._pieces.prior(rng, setup.n_members)
+        self.time = 0.0
+        self.history: list[OnlineEstimate] = []
+        self.names = setup.estimate
+        self.n_obs = self._pieces.P_obs.shape[0]
+
+    def update(self, t: float, y) -> OnlineEstimate:
+        """Assimilate the reading ``y`` ((p,) deg C, NaN = missing) taken at ``t`` (s)."""
+        t = float(t)
+        if not np.isfinite(t) or t <= self.time:
+            raise ValueError(f"reading time must be finite and after {self.time} s, got {t!r}")
+        y = np.asarray(y, float).reshape(-1)
+        if y.shape != (self.n_obs,):
+            raise ValueError(f"a reading must hold {self.n_obs} values (sensors then pixels), "
+                             f"got {y.size}")
+        X, theta = self._X, self._theta
+        problem = self._pieces.problem(np.array([t]), y[None, :],
+                                       prior=lambda rng, N: (X, theta), t0=self.time)
+        seed = int(np.random.SeedSequence([self.setup.seed, len(self.history) + 1])
+                   .generate_state(1)[0])
+        config = replace(self._pieces.config, seed=seed)
+        tic = time.perf_counter()
+        with blas_threads(1):
+            res = run_filter(problem, config, health=self._pieces.health)
+        self._X, self._theta = res.state_ensemble, res.param_ensemble
+        Y = (self._pieces.P_track @ self._X.T).T
+        n = self._pieces.n
+        est = OnlineEstimate(t, res.param_mean[-1, :n], res.param_std[-1, :n], Y.mean(axis=0),
+                             Y.std(axis=0, ddof=1), bool(res.analysed[-1]),
+                             time.perf_counter() - tic)
+        self.time = t
+        self.history.append(est)
+        return est

@@ -1,0 +1,47 @@
+"""Files every run writes: the estimates table, and JSON with NumPy values made plain."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+
+__all__ = ["jsonable", "write_estimates_csv", "write_json"]
+
+def write_estimates_csv(path, est, truth=None, data=None) -> None:
+    """``estimates.csv``: time; mean and std of each parameter and tracked temperature."""
+    cols = ["time_s"]
+    arrays = [est.times]
+    for i, name in enumerate(est.names):
+        cols += [f"{name}_mean", f"{name}_std"]
+        arrays += [est.param_mean[:, i], est.param_std[:, i]]
+    for j, pos in enumerate(est.tracked_positions):
+        tag = f"T_z{pos[2]:.2f}"
+        cols += [f"{tag}_mean", f"{tag}_std"]
+        arrays += [est.tracked_mean[:, j], est.tracked_std[:, j]]
+    if data is not None:
+        cols.append("sensor_data")
+        arrays.append(np.r_[np.nan, data][: len(est.times)])
+    table = np.column_stack(arrays)
+    np.savetxt(path, table, delimiter=",", header=",".join(cols), comments="", fmt="%.8g")
+
+
+def jsonable(obj):
+    """``obj`` with NumPy arrays and scalars made plain Python, non-finite floats None."""
+    if isinstance(obj, dict):
+        return {str(k): jsonable(v) for k, v in obj.items()}
+    if isinstance(obj, (list, tuple)):
+        return [jsonable(v) for v in obj]
+    if isinstance(obj, np.ndarray):
+        return jsonable(obj.tolist())
+    if isinstance(obj, np.generic):
+        return obj.item()
+    if isinstance(obj, float) and not np.isfinite(obj):
+        return None
+    return obj
+
+
+def write_json(path: str | Path, data: dict) -> None:
+    """Write ``data`` as indented JSON (numpy scalars and arrays converted; NaN -> null)."""
+    Path(path).write_text(json.dumps(jsonable(data), indent=2) + "\n")

@@ -1,0 +1,53 @@
+"""The tissue parameters the filter can estimate: names, units, default ranges, probe depths.
+
+One table each; every module asks here instead of knowing that column 0 is mua.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+__all__ = [
+    "ESTIMATES",
+    "PARAMETER_LABELS",
+    "PARAMETER_NAMES",
+    "PARAMETER_UNITS",
+    "TRACKED_DEPTHS",
+    "column",
+    "default_bounds",
+    "tracked_points",
+]
+
+#: every parameter the filter can estimate, in the order of the state's parameter block
+PARAMETER_NAMES = ("mua", "mus", "VHC", "TC")
+#: units of each parameter (MCmatlab's and the paper's)
+PARAMETER_UNITS = {"mua": "cm^-1", "mus": "cm^-1", "VHC": "J cm^-3 K^-1", "TC": "W cm^-1 K^-1"}
+#: the same units for matplotlib labels
+PARAMETER_LABELS = {"mua": "cm$^{-1}$", "mus": "cm$^{-1}$", "VHC": "J cm$^{-3}$ K$^{-1}$",
+                    "TC": "W cm$^{-1}$ K$^{-1}$"}
+#: the parameter sets that can be estimated: the optics, or the optics and thermal properties
+ESTIMATES = (PARAMETER_NAMES[:2], PARAMETER_NAMES)
+#: cm, depths below the sensor whose temperature the paper reports (and the tool by default)
+TRACKED_DEPTHS = (0.0, 0.1, 0.2)
+
+
+def column(names, name: str) -> int:
+    """Index of parameter ``name`` in ``names`` (an ``estimate`` tuple); ValueError if absent."""
+    names = tuple(names)
+    if name not in names:
+        raise ValueError(f"parameter {name!r} is not estimated (estimate = {names})")
+    return names.index(name)
+
+
+def tracked_points(depths=TRACKED_DEPTHS, x: float = 0.0, y: float = 0.0,
+                   Lz: float | None = None) -> np.ndarray:
+    """(n, 3) cm: points below ``(x, y)`` at ``depths``, those deeper than ``Lz`` dropped."""
+    return np.array([[x, y, float(z)] for z in depths if Lz is None or z <= Lz], float)
+
+
+def default_bounds(nominal, prior_lo, prior_hi) -> np.ndarray:
+    """(n_par, 2) default health-check range of each parameter's mean: 1/20 to 20 times
+    the nominal value, widened to a tenth of the prior's low end and ten times its high end."""
+    nominal, prior_lo, prior_hi = (np.asarray(a, float) for a in (nominal, prior_lo, prior_hi))
+    return np.column_stack([np.minimum(nominal / 20, prior_lo / 10),
+                            np.maximum(nominal * 20, prior_hi * 10)])

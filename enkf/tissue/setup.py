@@ -1,0 +1,152 @@
+"""What the tissue filter needs: the grid, the absorption model, the laser, priors, noise."""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+
+import numpy as np
+
+import fem
+
+from ..problem import DEFAULT_METHOD
+from .absorption import Absorption
+from .parameters import ESTIMATES, PARAMETER_NAMES, PARAMETER_UNITS, default_bounds, tracked_points
+
+__all__ = ["TissueFilterSetup"]
+
+
+@dataclass
+class TissueFilterSetup:
+    """Everything the filter's forward model and the filter need.
+
+    Parameters
+    ----------
+    grid : fem.BoxGrid
+        The filter's coarse voxel grid (also the emulator's grid).
+    absorption : Absorption or callable
+        An :class:`~enkf.tissue.absorption.Absorption` (the emulator
+        :class:`~mcmatlab_py.emulator.AbsorptionEmulator` or its exact mode), or a plain
+        ``absorption(mua (N,), mus (N,)) -> NA (N, nx, ny, nz)`` in W/cm^3/W.
+    power : callable
+        ``power(t) -> W``, the laser power at time ``t`` (s), e.g.
+        :meth:`mcmatlab_py.heat.HeatSimulation.laser_power`.
+    nominal : dict
+        Nominal values of mua, mus (cm^-1), VHC (J cm^-3 K^-1), TC (W cm^-1 K^-1):
+        VHC and TC are used as known values when not estimated, and the priors are
+        ``prior_range`` times the nominal values (unless ``prior`` names the parameter).
+    estimate : tuple of str
+        ``("mua", "mus")`` or ``("mua", "mus", "VHC", "TC")``.
+    sensor_positions : (p, 3) cm, point sensors (may be empty, shape (0, 3), with an image)
+    sensor_noise_var : float or (p,), deg C^2 (the paper: 0.01)
+    image : enkf.image.ThermalImage, optional
+        A camera's pixels over the top face, observed after the point sensors: the data
+        then have ``p + image.n_pixels`` columns (pixels in C order of the frame).
+    localization_radius : float, optional
+        cm: covariance localization (Gaspari-Cohn taper, zero beyond this distance)
+        between temperatures and observations; the parameters stay global. Needs
+        ``method="enkf"``.
+    tracked_positions : (n_tracked, 3) cm, points whose temperature is reported
+    prior : dict, optional
+        ``{name: (lo, hi)}`` in the parameter's own units: the uniform prior of that
+        parameter, in place of ``prior_range`` times its nominal value (e.g. a range
+        measured on similar tissue). Only estimated parameters may be named.
+    """
+
+    grid: fem.BoxGrid
+    absorption: Absorption | Callable
+    power: Callable[[float], float]
+    nominal: dict
+    estimate: tuple = ("mua", "mus")
+    sensor_positions: np.ndarray = field(default_factory=lambda: np.zeros((1, 3)))
+    sensor_noise_var: float | np.ndarray = 0.01
+    image: object = None  #: enkf.image.ThermalImage or None
+    localization_radius: float | None = None  #: cm, or None for no localization
+    tracked_positions: np.ndarray = field(default_factory=tracked_points)
+    T_initial: float = 0.0  #: deg C
+    heat_boundary: fem.HeatBoundary = field(default_factory=fem.HeatBoundary)
+    prior_range: tuple[float, float] = (0.5, 2.0)
+    prior: dict = field(default_factory=dict)  #: {name: (lo, hi)} in physical units
+    model_noise_std: float = 0.002  #: deg C per step, C = std^2 I
+    random_walk_std: float | Sequence[float] = 0.002  #: log units per step, E = std^2 I
+    #: factor on the random walk for steps with the laser off: 1 walks always (the paper);
+    #: 0 holds the parameters still when nothing heats the tissue, which is what changes
+    #: them (and, with the laser off, they no longer act on the forecast at all)
+    random_walk_when_off: float = 1.0
+    #: "random_walk" (the paper): log theta_(n+1) = log theta_n + xi. "trend": a local
+    #: linear trend, log theta_(n+1) = log theta_n + v_n dt + xi, v_(n+1) = v_n + eta,
+    #: with the rates v (1/s, in log units) filtered beside the parameters: a smooth
+    #: drift (heating that changes the tissue steadily) is followed with a much smaller
+    #: walk, so the data of many steps add up instead of being forgotten.
+    parameter_model: str = "random_walk"
+    trend_prior_std: float = 0.2  #: 1/s, prior spread of each rate v (mean 0)
+    trend_noise_std: float | Sequence[float] = 0.02  #: 1/s per step, std of eta
+    n_members: int = 50
+    method: str = DEFAULT_METHOD  #: "etkf" or "enkf" (see enkf.problem.FilterConfig)
+    inflation: float = 1.0
+    mda: int = 1  #: analysis iterations per step (see enkf.driver.FilterConfig.mda)
+    seed: int = 0
+    theta: float = 1.0  #: time scheme of the heat steps (1: backward Euler)
+    #: "kronecker" (default): the tensor-product operator of :class:`fem.HeatStepper`, equal
+    #: to P1 away from the box edges, with no per-member cost when VHC and TC are estimated;
+    #: "p1": the exact P1 matrices (an edge correction per new pair of member scales)
+    heat_operator: str = "kronecker"
+    #: 1-D mass of the tensor-product operator: "averaged" (default) cancels the leading
+    #: discretization error of the lumped mass; at the paper's true parameters the
+    #: 20 x 20 x 10 surface temperature is then within 0.1% of the fine truth instead of
+    #: 1.1% cold (validation/reports/coarse_model_error.md). "lumped" is the P1 lumped mass.
+    heat_mass: str = "averaged"
+
+    def __post_init__(self):
+        est = tuple(self.estimate)
+        if est not in ESTIMATES:
+            raise ValueError(f"estimate must be one of {ESTIMATES}, got {self.estimate!r}")
+        self.estimate = est
+        for name in PARAMETER_NAMES:
+            v = self.nominal.get(name)
+            if v is None or not np.isfinite(v) or v <= 0:
+                raise ValueError(f"nominal[{name!r}] must be > 0 ({PARAMETER_UNITS[name]}), "
+                                 f"got {v!r}")
+        lo, hi = self.prior_range
+        if not 0 < lo < hi:
+            raise ValueError(f"prior_range must be (lo, hi) with 0 < lo < hi, got "
+                             f"{self.prior_range!r}")
+        self.prior = dict(self.prior or {})
+        for name, rng in self.prior.items():
+            if name not in est:
+                raise ValueError(f"prior[{name!r}]: {name} is not estimated (estimate = {est})")
+            try:
+                p_lo, p_hi = (float(v) for v in rng)
+            except (TypeError, ValueError):
+                raise ValueError(f"prior[{name!r}] must be (lo, hi) in "
+                                 f"{PARAMETER_UNITS[name]}, got {rng!r}") from None
+            if not (np.isfinite(p_hi) and 0 < p_lo < p_hi):
+                raise ValueError(f"prior[{name!r}] must be (lo, hi) with 0 < lo < hi "
+                                 f"({PARAMETER_UNITS[name]}), got {rng!r}")
+            self.prior[name] = (p_lo, p_hi)
+        self.sensor_positions = np.asarray(self.sensor_positions, float).reshape(-1, 3)
+        if self.sensor_positions.shape[0] == 0 and self.image is None:
+            raise ValueError("sensor_positions is empty and there is no image: nothing observed")
+        if self.localization_radius is not None and not (
+                np.isfinite(self.localization_radius) and self.localization_radius > 0):
+            raise ValueError(f"localization_radius must be > 0 (cm) or None, got "
+                             f"{self.localization_radius!r}")
+        self.tracked_positions = np.atleast_2d(np.asarray(self.tracked_positions, float))
+        if self.parameter_model not in ("random_walk", "trend"):
+            raise ValueError(f"parameter_model must be 'random_walk' or 'trend', got "
+                             f"{self.parameter_model!r}")
+        for name in ("model_noise_std", "trend_prior_std"):
+            if not (np.isfinite(getattr(self, name)) and getattr(self, name) >= 0):
+                raise ValueError(f"{name} must be >= 0, got {getattr(self, name)!r}")
+
+    def prior_bounds(self) -> tuple[np.ndarray, np.ndarray]:
+        """(lo, hi) of the uniform prior of each estimated parameter, in ``estimate`` order."""
+        lo_f, hi_f = self.prior_range
+        pairs = [self.prior.get(n, (lo_f * self.nominal[n], hi_f * self.nominal[n]))
+                 for n in self.estimate]
+        return np.array([p[0] for p in pairs]), np.array([p[1] for p in pairs])
+
+    def default_param_bounds(self) -> np.ndarray:
+        """(n_par, 2) health-check range of each mean (:func:`default_bounds`)."""
+        return default_bounds(np.array([self.nominal[n] for n in self.estimate]),
+                              *self.prior_bounds())
