@@ -29,9 +29,13 @@ N, ensemble
     Member count; ensembles of temperatures are (N, npoints) (DAPPER layout);
     ``vhc_scale``, ``tc_scale`` (N,) are per-member factors on c and k.
 omega
-    Arrhenius damage integral; damaged fraction ``1 - exp(-omega)``.
+    Arrhenius damage integral; damaged fraction ``1 - exp(-omega)``; one step by
+    the midpoint (MCmatlab's) or the trapezoid rule (:func:`advance_damage`).
 P (probes)
     ``probe_matrix(mesh, points)`` (nprobes, npoints): ``T_probe = P @ T``.
+march
+    :func:`march`, the one time loop: ``step(T, t0, t1)`` over the times, the
+    probes read after every step.
 """
 
 from .assembly import (
@@ -45,6 +49,8 @@ from .assembly import (
 from .bc import FACES, FaceBC, HeatBoundary, face_facets, face_nodes
 from .damage import (
     GAS_CONSTANT,
+    KELVIN,
+    advance_damage,
     arrhenius_increment,
     element_to_node,
     fractional_damage,
@@ -52,6 +58,7 @@ from .damage import (
 )
 from .fastdiag import KroneckerSolver, NotApplicable
 from .locate import locate
+from .march import march
 from .mesh import (
     BoxGrid,
     box_mesh,
@@ -76,6 +83,7 @@ def __getattr__(name):  # I/O at the edge: meshio is imported only when used
 __all__ = [
     "FACES",
     "GAS_CONSTANT",
+    "KELVIN",
     "BoxGrid",
     "FaceBC",
     "HeatBoundary",
@@ -83,6 +91,7 @@ __all__ = [
     "KroneckerSolver",
     "NotApplicable",
     "TimeSeriesWriter",
+    "advance_damage",
     "arrhenius_increment",
     "box_mesh",
     "check_mesh",
@@ -96,6 +105,7 @@ __all__ = [
     "load_vector",
     "locate",
     "lumped_mass",
+    "march",
     "mass_matrix",
     "probe_matrix",
     "robin_load",

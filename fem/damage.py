@@ -1,27 +1,74 @@
-r"""Arrhenius thermal damage, as in MCmatlab's heat simulation.
+r"""Arrhenius thermal damage, as in MCmatlab's heat simulation (Henriques 1947).
 
-Over a step of length :math:`\Delta t` from :math:`T^n` to :math:`T^{n+1}`
+The damage integral of a node with activation energy ``E`` (J/mol) and frequency
+factor ``A`` (1/s) grows at the Arrhenius rate
 
 .. math::
 
-    \Omega \mathrel{+}= \Delta t\, A \exp\!\Big(-\frac{E}{R\,(\bar T + 273.15)}\Big),
-    \qquad \bar T = \tfrac12 (T^n + T^{n+1}),
+    k(T) = A \exp\!\Big(-\frac{E}{R\,(T + 273.15)}\Big),
+    \qquad R = 8.3144598\ \mathrm{J\,mol^{-1}\,K^{-1}},
 
-with ``E`` (J/mol) and ``A`` (1/s) per node and :math:`R = 8.3144598` J/(mol K);
-the damaged fraction is :math:`1 - e^{-\Omega}`.  Nodes with ``A = 0`` never
-take damage.  Everything broadcasts over an ensemble (N, npoints).
+with ``T`` in deg C.  Over a step of length :math:`\Delta t` from :math:`T^n` to
+:math:`T^{n+1}` two quadratures are offered (``rule``):
+
+.. math::
+
+    \text{midpoint (MCmatlab's, the default):}\quad
+    \Omega \mathrel{+}= \Delta t\, k\big(\tfrac12 (T^n + T^{n+1})\big),
+
+    \text{trapezoid:}\quad
+    \Omega \mathrel{+}= \tfrac{\Delta t}{2}\,\big(k(T^n) + k(T^{n+1})\big).
+
+Both are exact for a constant temperature and second order in the step.  The
+damaged fraction is :math:`1 - e^{-\Omega}`.  Nodes with ``A = 0`` never take
+damage.  Everything broadcasts over an ensemble (N, npoints).
+
+One numba kernel (:func:`_advance`) does the arithmetic of both rules; the
+functions here validate their input once and call it.
 """
 
 from __future__ import annotations
 
+import math
+
+import numba
 import numpy as np
 
-__all__ = ["GAS_CONSTANT", "arrhenius_increment", "element_to_node", "fractional_damage",
-           "update_damage"]
+__all__ = ["GAS_CONSTANT", "KELVIN", "RULES", "advance_damage", "arrhenius_increment",
+           "element_to_node", "fractional_damage", "update_damage"]
 
 GAS_CONSTANT = 8.3144598  #: J mol^-1 K^-1, as MCmatlab
+KELVIN = 273.15  #: K, the absolute temperature of 0 deg C
+RULES = ("midpoint", "trapezoid")  #: the quadratures of one step, see the module doc
 
 
+# ------------------------------------------------------------------------------ kernel
+@numba.njit(cache=True)
+def _rate(T, E, A):  # pragma: no cover - compiled
+    """Arrhenius rate (1/s) at ``T`` deg C; 0 where ``A = 0``."""
+    if A > 0.0:
+        return A * math.exp(-E / (GAS_CONSTANT * (T + KELVIN)))
+    return 0.0
+
+
+@numba.njit(cache=True)
+def _advance(omega, T_old, T_new, E, A, dt, trapezoid):  # pragma: no cover - compiled
+    """Add one step's damage to ``omega`` (rows, n), in place.
+
+    T_old, T_new : (rows, n) deg C; E, A : (n,) J/mol and 1/s; dt : s;
+    trapezoid : the trapezoid rule if True, else the midpoint rule.
+    """
+    rows, n = omega.shape
+    for m in range(rows):
+        for i in range(n):
+            if trapezoid:
+                omega[m, i] += 0.5 * dt * (_rate(T_old[m, i], E[i], A[i])
+                                           + _rate(T_new[m, i], E[i], A[i]))
+            else:
+                omega[m, i] += dt * _rate(0.5 * (T_old[m, i] + T_new[m, i]), E[i], A[i])
+
+
+# ------------------------------------------------------------------------------ Python layer
 def _rates(E, A) -> tuple[np.ndarray, np.ndarray]:
     E = np.asarray(E, dtype=float)
     A = np.asarray(A, dtype=float)
@@ -32,8 +79,61 @@ def _rates(E, A) -> tuple[np.ndarray, np.ndarray]:
     return E, A
 
 
-def arrhenius_increment(T_old, T_new, dt: float, E, A) -> np.ndarray:
-    """Damage integral increment of one step, dimensionless.
+def advance_damage(omega, T_old, T_new, dt: float, E, A, rule: str = "midpoint") -> np.ndarray:
+    """Add one step's damage integral increment to ``omega``, in place.
+
+    Parameters
+    ----------
+    omega : float64 array, the broadcast shape of the other arguments
+        Damage integral so far (dimensionless); updated in place.
+    T_old, T_new : array (npoints,) or (N, npoints)
+        deg C, temperatures at the start and end of the step.
+    dt : float
+        s, step length (> 0).
+    E : float or array (npoints,)
+        J/mol, activation energy (>= 0).
+    A : float or array (npoints,)
+        1/s, frequency factor (>= 0; 0: no damage).
+    rule : {"midpoint", "trapezoid"}
+        The quadrature of the step (module doc).
+
+    Returns
+    -------
+    numpy.ndarray
+        ``omega``.
+    """
+    if rule not in RULES:
+        raise ValueError(f"rule must be one of {RULES}, got {rule!r}")
+    if not np.isfinite(dt) or dt <= 0:
+        raise ValueError(f"dt must be > 0, got {float(dt)!r}")
+    E, A = _rates(E, A)
+    T_old = np.asarray(T_old, dtype=float)
+    T_new = np.asarray(T_new, dtype=float)
+    shape = np.broadcast_shapes(T_old.shape, T_new.shape, E.shape, A.shape)
+    if not isinstance(omega, np.ndarray) or omega.dtype != np.float64 or omega.shape != shape:
+        raise ValueError(f"omega must be a float64 array of shape {shape}, got "
+                         f"{type(omega).__name__} {getattr(omega, 'dtype', '')} "
+                         f"{np.shape(omega)}")
+    size = math.prod(shape)
+    if size == 0:
+        return omega
+    # rows of n values sharing one E and A per column; per-member E or A: one long row
+    n = shape[-1] if shape and E.ndim <= 1 and A.ndim <= 1 else size
+
+    def rows(x):
+        return np.broadcast_to(x, shape).reshape(-1, n)
+
+    work = np.ascontiguousarray(omega).reshape(-1, n)
+    _advance(work, np.ascontiguousarray(rows(T_old)), np.ascontiguousarray(rows(T_new)),
+             np.ascontiguousarray(rows(E)[0]), np.ascontiguousarray(rows(A)[0]), float(dt),
+             rule == "trapezoid")
+    if not np.shares_memory(work, omega):
+        omega[...] = work.reshape(shape)
+    return omega
+
+
+def arrhenius_increment(T_old, T_new, dt: float, E, A, rule: str = "midpoint") -> np.ndarray:
+    """Damage integral increment of one step, dimensionless (see :func:`advance_damage`).
 
     Parameters
     ----------
@@ -45,19 +145,20 @@ def arrhenius_increment(T_old, T_new, dt: float, E, A) -> np.ndarray:
         J/mol, activation energy.
     A : float or array (npoints,)
         1/s, frequency factor (0: no damage).
+    rule : {"midpoint", "trapezoid"}
+
+    Returns
+    -------
+    numpy.ndarray
+        The broadcast shape of the arguments.
     """
-    if not np.isfinite(dt) or dt <= 0:
-        raise ValueError(f"dt must be > 0, got {float(dt)!r}")
-    E, A = _rates(E, A)
-    Tmean = 0.5 * (np.asarray(T_old, dtype=float) + np.asarray(T_new, dtype=float))
-    with np.errstate(over="ignore", under="ignore"):
-        rate = A * np.exp(-E / (GAS_CONSTANT * (Tmean + 273.15)))
-    return dt * np.where(A > 0, rate, 0.0)
+    shape = np.broadcast_shapes(np.shape(T_old), np.shape(T_new), np.shape(E), np.shape(A))
+    return advance_damage(np.zeros(shape), T_old, T_new, dt, E, A, rule)
 
 
-def update_damage(omega, T_old, T_new, dt: float, E, A) -> np.ndarray:
+def update_damage(omega, T_old, T_new, dt: float, E, A, rule: str = "midpoint") -> np.ndarray:
     """``omega + arrhenius_increment(...)`` (a new array)."""
-    return np.asarray(omega, dtype=float) + arrhenius_increment(T_old, T_new, dt, E, A)
+    return np.asarray(omega, dtype=float) + arrhenius_increment(T_old, T_new, dt, E, A, rule)
 
 
 def fractional_damage(omega) -> np.ndarray:

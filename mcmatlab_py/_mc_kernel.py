@@ -18,6 +18,18 @@ Two details make the tallies exact and reproducible:
 
 Coordinates inside the kernel are local: ``0 <= px <= Lx`` etc. (the Python
 layer shifts x and y by ``L/2``).
+
+Sources are launched by :func:`mcmatlab_py._sources.launch`. With mismatched
+interfaces, a packet meeting a change of refractive index inside the grid is
+reflected or refracted (Fresnel, Snell) about the smoothed interface normal of
+MCmatlab (:func:`mcmatlab_py.optics.interface_normals`) when ``use_normals`` is set,
+else about the voxel face. A smoothed normal can disagree with the voxel face the
+packet crosses (a reflected ray that still points into the new voxel, a refracted
+one that does not): the component of the new direction normal to that face is then
+mirrored, so that a reflected packet stays in its medium and a refracted one enters
+the new one. ``n = inf`` is a perfect reflector; ``g = 1`` (and -1) scatters without
+(with full) deflection; a medium with a tabulated phase function (``phase_idx >= 0``)
+draws the scattering angle from its table.
 """
 
 import math
@@ -27,6 +39,18 @@ import numpy as np
 
 from ._atomic import fetch_add
 from ._rng import next_double, seed_stream
+from ._sources import (  # noqa: F401  (the source kinds, re-exported)
+    SI_SURFACE,
+    SRC_BEAM,
+    SRC_GAUSSIAN,
+    SRC_ISOTROPIC,
+    SRC_PENCIL,
+    SRC_PLANE_WAVE,
+    SRC_TOPHAT,
+    SRC_VOLUME,
+    launch,
+    sample_pwl,
+)
 
 W_ONE = 2**36  # fixed-point weight of a launched packet (about 1.5e-11 resolution)
 
@@ -42,11 +66,7 @@ T_MISSED = 7
 T_ROULETTE = 8  # weight created by roulette survivors minus weight of packets killed
 N_TALLY = 9
 
-SRC_PENCIL = 0
-SRC_TOPHAT = 1
-SRC_GAUSSIAN = 2
-SRC_PLANE_WAVE = 3
-SRC_ISOTROPIC_POINT = 4
+SRC_ISOTROPIC_POINT = SRC_ISOTROPIC
 
 KILLRANGE = 5.0  # as MCmatlab: photons farther than 2.5 cuboid sizes from the centre die
 
@@ -59,10 +79,13 @@ _FASTMATH = {"nsz", "arcp", "contract", "afn", "reassoc"}
 def _fresnel(n1, n2, ca1):
     """Fresnel reflectance for unpolarised light; returns (R, cos of transmitted angle).
 
-    ``ca1`` is the cosine of the angle of incidence (>= 0).
+    ``ca1`` is the cosine of the angle of incidence (>= 0). ``n = inf`` on either side
+    is a perfect reflector.
     """
     if n1 == n2:
         return 0.0, ca1
+    if n2 == _INF or n1 == _INF:
+        return 1.0, 0.0
     if ca1 > 1.0 - 1e-12:
         r = (n2 - n1) / (n2 + n1)
         return r * r, ca1
@@ -84,6 +107,8 @@ def _hg_cos(g, xi):
     """Henyey-Greenstein deflection cosine from a uniform ``xi``."""
     if g == 0.0:
         return 2.0 * xi - 1.0
+    if g >= 1.0 or g <= -1.0:  # the limits: no deflection, or straight back
+        return g
     tmp = (1.0 - g * g) / (1.0 - g + 2.0 * g * xi)
     c = (1.0 + g * g - tmp * tmp) / (2.0 * g)
     return min(1.0, max(-1.0, c))
@@ -135,10 +160,55 @@ def _clamp(i, n):
 
 
 @numba.njit(cache=True, fastmath=_FASTMATH)
+def _interface_normal(normals, M, nref, n_new, px, py, pz, nx, ny, nz, dx, dy, dz):
+    """Smoothed interface normal at a point, pointing into the medium of index ``n_new``.
+
+    Trilinear interpolation between the 8 voxel centres around the point, over those
+    whose refractive index is ``n_new`` (as MCmatlab); not normalised. ``normals`` is
+    (nx*ny*nz*3,) float32.
+    """
+    fx = px / dx - 0.5
+    fy = py / dy - 0.5
+    fz = pz / dz - 0.5
+    i0 = int(math.floor(fx))
+    j0 = int(math.floor(fy))
+    k0 = int(math.floor(fz))
+    tx = fx - i0
+    ty = fy - j0
+    tz = fz - k0
+    gx = 0.0
+    gy = 0.0
+    gz = 0.0
+    for ci in range(2):
+        i = i0 + ci
+        if i < 0 or i >= nx:
+            continue
+        wi = tx if ci == 1 else 1.0 - tx
+        for cj in range(2):
+            j = j0 + cj
+            if j < 0 or j >= ny:
+                continue
+            wj = wi * (ty if cj == 1 else 1.0 - ty)
+            for ck in range(2):
+                k = k0 + ck
+                if k < 0 or k >= nz:
+                    continue
+                v = (i * ny + j) * nz + k
+                if nref[M[v]] != n_new:
+                    continue
+                wk = wj * (tz if ck == 1 else 1.0 - tz)
+                gx += wk * normals[3 * v]
+                gy += wk * normals[3 * v + 1]
+                gz += wk * normals[3 * v + 2]
+    return gx, gy, gz
+
+
+@numba.njit(cache=True, fastmath=_FASTMATH)
 def transport_batch(
     b, M, mua, mus, g, nref, uniform_medium, nx, ny, nz, dx, dy, dz,
     boundary_type, n_out, matched, roulette, weight_threshold, chance,
-    src_type, src, seed, batch_size, n_total, acc, tally,
+    si, sf, stab, svox, phase_idx, phase_tab, normals, use_normals,
+    seed, batch_size, n_total, acc, tally,
 ):  # fmt: skip
     """Run the photons of batch ``b`` and add their weights into ``acc`` and ``tally``.
 
@@ -149,7 +219,10 @@ def transport_batch(
     uniform_medium : int, the single medium filling the grid, or -1.
     boundary_type : 0 none escape, 1 all escape, 2 top escapes, 3 top and bottom
         escape with cyclic sides (MCmatlab).
-    src : (6,) float64: x_focus, y_focus (local cm), radius, point x, y, z.
+    si, sf, stab, svox : the source (:mod:`mcmatlab_py._sources`).
+    phase_idx : (n_media,) int32, row of ``phase_tab`` of a tabulated phase function, or -1.
+    phase_tab : (n_tables, 2 L) float64 density and cumulative of the scattering angle.
+    normals : (nx*ny*nz*3,) float32 smoothed interface normals, used if ``use_normals``.
     acc : (nx*ny*nz,) int64 absorbed fixed-point weight, updated in place.
     tally : (N_TALLY,) int64, updated in place.
     """
@@ -158,58 +231,51 @@ def transport_batch(
     Lz = nz * dz
     w_thr = np.int64(weight_threshold * W_ONE)
     s0, s1, s2, s3 = seed_stream(seed, b)
+    st = np.empty(4, dtype=np.uint64)  # the random state, for the launch kernel
+    surface = si[SI_SURFACE] == 1
+    n_table = phase_tab.shape[1] // 2
     first = b * batch_size
     last = min(first + batch_size, n_total)
     for _ in range(first, last):
         # ---------------------------------------------------------------- launch
-        ux = 0.0
-        uy = 0.0
-        uz = 1.0
-        pz = 0.0
-        if src_type == SRC_ISOTROPIC_POINT:
-            px = src[3]
-            py = src[4]
-            pz = src[5]
-            s0, s1, s2, s3, r1 = next_double(s0, s1, s2, s3)
-            s0, s1, s2, s3, r2 = next_double(s0, s1, s2, s3)
-            uz = 2.0 * r1 - 1.0
-            st = math.sqrt(max(0.0, 1.0 - uz * uz))
-            ux = st * math.cos(2.0 * math.pi * r2)
-            uy = st * math.sin(2.0 * math.pi * r2)
-        elif src_type == SRC_PLANE_WAVE:
-            s0, s1, s2, s3, r1 = next_double(s0, s1, s2, s3)
-            s0, s1, s2, s3, r2 = next_double(s0, s1, s2, s3)
-            px = r1 * Lx
-            py = r2 * Ly
-        else:
-            rad = 0.0
-            s0, s1, s2, s3, r1 = next_double(s0, s1, s2, s3)
-            s0, s1, s2, s3, r2 = next_double(s0, s1, s2, s3)
-            if src_type == SRC_TOPHAT:
-                rad = src[2] * math.sqrt(r1)
-            elif src_type == SRC_GAUSSIAN:
-                rad = src[2] * math.sqrt(-0.5 * math.log(1.0 - r1))
-            phi = 2.0 * math.pi * r2
-            px = src[0] + rad * math.cos(phi)
-            py = src[1] + rad * math.sin(phi)
+        st[0] = s0
+        st[1] = s1
+        st[2] = s2
+        st[3] = s3
+        px, py, pz, ux, uy, uz, ok = launch(si, sf, stab, svox, nx, ny, nz, dx, dy, dz, st)
+        s0 = st[0]
+        s1 = st[1]
+        s2 = st[2]
+        s3 = st[3]
         w = np.int64(W_ONE)
         tally[T_LAUNCHED] += w
         if boundary_type == 3:  # cyclic sides: fold the entry point into the face
             px = px - Lx * math.floor(px / Lx)
             py = py - Ly * math.floor(py / Ly)
-        if not (0.0 <= px <= Lx and 0.0 <= py <= Ly and 0.0 <= pz <= Lz):
+        if not (ok and 0.0 <= px <= Lx and 0.0 <= py <= Ly and 0.0 <= pz <= Lz):
             tally[T_MISSED] += w
             continue
         ix = _clamp(int(math.floor(px / dx)), nx)
         iy = _clamp(int(math.floor(py / dy)), ny)
         iz = _clamp(int(math.floor(pz / dz)), nz)
         m = M[(ix * ny + iy) * nz + iz]
-        if src_type != SRC_ISOTROPIC_POINT and not matched:
-            # specular reflection of the collimated beam at normal incidence
-            r = (nref[m] - n_out) / (nref[m] + n_out)
-            spec = np.int64(r * r * w)
-            tally[T_SPECULAR] += spec
-            w -= spec
+        if not matched:
+            if surface:
+                # specular reflection at the top face, Fresnel at the ray's angle; refraction
+                rf, cat = _fresnel(n_out, nref[m], uz)
+                spec = np.int64(rf * w)
+                tally[T_SPECULAR] += spec
+                w -= spec
+                if w == 0:
+                    continue
+                if uz < 1.0:
+                    ratio = n_out / nref[m]
+                    ux *= ratio
+                    uy *= ratio
+                    uz = cat
+            elif nref[m] == _INF:  # emitted inside a perfect reflector: no light leaves it
+                tally[T_MISSED] += w
+                continue
         inside = True
         alive = True
         # ------------------------------------------------------------- hop loop
@@ -314,26 +380,68 @@ def transport_batch(
                         mnew = M[(ix * ny + iy) * nz + inew]
                     if not matched and nref[mnew] != nref[m]:
                         ua = ux if axis == 0 else (uy if axis == 1 else uz)
-                        rf, cat = _fresnel(nref[m], nref[mnew], abs(ua))
+                        cin = abs(ua)
+                        smooth = False
+                        if use_normals:
+                            gx, gy, gz = _interface_normal(normals, M, nref, nref[mnew], px, py,
+                                                           pz, nx, ny, nz, dx, dy, dz)
+                            gn = math.sqrt(gx * gx + gy * gy + gz * gz)
+                            ga = gx if axis == 0 else (gy if axis == 1 else gz)
+                            if gn > 0.0 and ga * sgn > 0.0:
+                                gx /= gn
+                                gy /= gn
+                                gz /= gn
+                                c = gx * ux + gy * uy + gz * uz
+                                if c > 0.0:  # else the smoothed surface faces away: use the face
+                                    smooth = True
+                                    cin = min(1.0, c)
+                        rf, cat = _fresnel(nref[m], nref[mnew], cin)
                         s0, s1, s2, s3, r1 = next_double(s0, s1, s2, s3)
-                        if r1 < rf:  # reflect
-                            if axis == 0:
-                                ux = -ux
-                            elif axis == 1:
-                                uy = -uy
-                            else:
-                                uz = -uz
-                            continue
-                        ratio = nref[m] / nref[mnew]
-                        ux *= ratio
-                        uy *= ratio
-                        uz *= ratio
-                        if axis == 0:
-                            ux = sgn * cat
-                        elif axis == 1:
-                            uy = sgn * cat
+                        if smooth:
+                            if r1 < rf:  # reflect about the smoothed normal
+                                ux -= 2.0 * cin * gx
+                                uy -= 2.0 * cin * gy
+                                uz -= 2.0 * cin * gz
+                            else:  # Snell's law in vector form
+                                mu_ = nref[m] / nref[mnew]
+                                k_ = cat - mu_ * cin
+                                ux = mu_ * ux + k_ * gx
+                                uy = mu_ * uy + k_ * gy
+                                uz = mu_ * uz + k_ * gz
+                                un = math.sqrt(ux * ux + uy * uy + uz * uz)
+                                ux /= un
+                                uy /= un
+                                uz /= un
+                            # keep the voxel walk consistent with the outcome (module docstring)
+                            ua = ux if axis == 0 else (uy if axis == 1 else uz)
+                            if (r1 < rf) == (ua * sgn > 0.0):
+                                if axis == 0:
+                                    ux = -ux
+                                elif axis == 1:
+                                    uy = -uy
+                                else:
+                                    uz = -uz
+                            if r1 < rf:
+                                continue
                         else:
-                            uz = sgn * cat
+                            if r1 < rf:  # reflect
+                                if axis == 0:
+                                    ux = -ux
+                                elif axis == 1:
+                                    uy = -uy
+                                else:
+                                    uz = -uz
+                                continue
+                            ratio = nref[m] / nref[mnew]
+                            ux *= ratio
+                            uy *= ratio
+                            uz *= ratio
+                            if axis == 0:
+                                ux = sgn * cat
+                            elif axis == 1:
+                                uy = sgn * cat
+                            else:
+                                uz = sgn * cat
                     if axis == 0:
                         ix = inew
                     elif axis == 1:
@@ -414,7 +522,12 @@ def transport_batch(
                     break
             s0, s1, s2, s3, r1 = next_double(s0, s1, s2, s3)
             s0, s1, s2, s3, r2 = next_double(s0, s1, s2, s3)
-            ux, uy, uz = _spin(ux, uy, uz, _hg_cos(g[m], r1), 2.0 * math.pi * r2)
+            row = phase_idx[m]
+            if row < 0:
+                cost = _hg_cos(g[m], r1)
+            else:
+                cost = math.cos(math.pi * sample_pwl(phase_tab[row], 0, n_table, r1))
+            ux, uy, uz = _spin(ux, uy, uz, cost, 2.0 * math.pi * r2)
             if w < w_thr:
                 if roulette:
                     s0, s1, s2, s3, r1 = next_double(s0, s1, s2, s3)
@@ -438,7 +551,8 @@ def transport_batch(
 def run_batches(
     M, mua, mus, g, nref, uniform_medium, nx, ny, nz, dx, dy, dz,
     boundary_type, n_out, matched, roulette, weight_threshold, chance,
-    src_type, src, seed, batch_size, n_total, batch_start, batch_stop, acc, tally,
+    si, sf, stab, svox, phase_idx, phase_tab, normals, use_normals,
+    seed, batch_size, n_total, batch_start, batch_stop, acc, tally,
 ):  # fmt: skip
     """Run batches ``[batch_start, batch_stop)`` on ``acc.shape[0]`` workers in parallel.
 
@@ -459,5 +573,6 @@ def run_batches(
             transport_batch(
                 b, M, mua, mus, g, nref, uniform_medium, nx, ny, nz, dx, dy, dz,
                 boundary_type, n_out, matched, roulette, weight_threshold, chance,
-                src_type, src, seed, batch_size, n_total, acc[k], tally[k],
+                si, sf, stab, svox, phase_idx, phase_tab, normals, use_normals,
+                seed, batch_size, n_total, acc[k], tally[k],
             )  # fmt: skip

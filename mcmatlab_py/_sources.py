@@ -25,7 +25,7 @@ import math
 import numba
 import numpy as np
 
-from ._rng import next_double
+from ._rng import next_double, seed_stream
 
 # source kinds (si[SI_KIND]); 0..4 keep their historical meaning and arithmetic
 SRC_PENCIL = 0  #: collimated along +z, at the focus (x, y)
@@ -290,3 +290,21 @@ def launch(si, sf, tab, vox, nx, ny, nz, dx, dy, dz, st):
         return tx_, ty_, 0.0, dx_, dy_, dz_, False
     s = tz_ / dz_
     return tx_ - s * dx_, ty_ - s * dy_, 0.0, dx_, dy_, dz_, True
+
+
+@numba.njit(cache=True)
+def launch_many(si, sf, tab, vox, nx, ny, nz, dx, dy, dz, seed, n):
+    """(n, 7) float64: ``launch`` n times from stream 0 of ``seed`` (x, y, z, ux, uy, uz, ok)."""
+    out = np.empty((n, 7))
+    st = np.empty(4, dtype=np.uint64)
+    st[0], st[1], st[2], st[3] = seed_stream(seed, 0)
+    for i in range(n):
+        px, py, pz, ux, uy, uz, ok = launch(si, sf, tab, vox, nx, ny, nz, dx, dy, dz, st)
+        out[i, 0] = px
+        out[i, 1] = py
+        out[i, 2] = pz
+        out[i, 3] = ux
+        out[i, 4] = uy
+        out[i, 5] = uz
+        out[i, 6] = 1.0 if ok else 0.0
+    return out

@@ -29,11 +29,14 @@ class NotBuiltError(NotImplementedError, AttributeError):
 
 
 def camel_to_snake(name: str) -> str:
-    """``nPhotonsRequested`` -> ``n_photons_requested``; runs of capitals stay together
-    (``GPUdevice`` -> ``gpu_device``, ``FRinitial`` -> ``fr_initial``)."""
-    s = re.sub(r"([A-Z]+)([A-Z][a-z])", r"\1_\2", name)
+    """``nPhotonsRequested`` -> ``n_photons_requested``.
+
+    A run of capitals is one acronym, and MCmatlab writes the next word in lower case
+    after it: ``GPUdevice`` -> ``gpu_device``, ``FRdepIterations`` -> ``fr_dep_iterations``.
+    """
+    s = re.sub(r"([A-Z]{2,})(?=[a-z])", r"\1_", name)
     s = re.sub(r"([a-z0-9])([A-Z])", r"\1_\2", s)
-    return s.lower()
+    return re.sub(r"_+", "_", s).lower()
 
 
 class StrictAttributes:
@@ -83,14 +86,17 @@ class StrictAttributes:
         label = cls._owner_label or cls.__name__
         known = cls._known_attributes()
         snake = camel_to_snake(name)
-        not_built = set(cls._not_built) | {camel_to_snake(n) for n in cls._not_built}
-        if name in not_built or snake in not_built:
-            return NotBuiltError(f"MCmatlab's {label}.{name} is not built yet")
         head = f"{label} has no attribute {name!r}"
         if name in cls._renamed:
             return AttributeError(f"{head}: MCmatlab's {name} is {label}.{cls._renamed[name]} here")
-        if snake != name and snake in known:
-            return AttributeError(f"{head}: MCmatlab's {name} is {label}.{snake} here (snake_case)")
+        # our names keep the capitals of math names (NFR, T_initial): compare case-blind
+        by_lower = {k.lower(): k for k in known}
+        if snake != name.lower() and snake in by_lower:
+            return AttributeError(f"{head}: MCmatlab's {name} is {label}.{by_lower[snake]} here "
+                                  "(snake_case)")
+        not_built = set(cls._not_built) | {camel_to_snake(n) for n in cls._not_built}
+        if name in not_built or snake in not_built:
+            return NotBuiltError(f"MCmatlab's {label}.{name} is not built yet")
         methods = {k for klass in cls.__mro__ if klass is not object
                    for k, v in vars(klass).items() if callable(v) and not k.startswith("_")}
         if snake != name and snake in methods:

@@ -46,6 +46,7 @@ from pathlib import Path
 import numpy as np
 
 from .media import Medium
+from .messages import shorten
 from .model import Model
 
 __all__ = ["ConfigError", "check_keys", "load_model", "model_from_config", "read_toml"]
@@ -83,7 +84,7 @@ def read_toml(path: str | Path) -> dict:
     except OSError as err:
         raise ConfigError(f"config file {str(path)!r} cannot be read: {err.strerror}") from None
     try:
-        return tomllib.loads(data.decode("utf-8"))
+        return tomllib.loads(data.decode("utf-8-sig"))  # a byte-order mark is dropped
     except (UnicodeDecodeError, tomllib.TOMLDecodeError) as err:
         raise ConfigError(f"config file {str(path)!r} is not valid TOML: {err}") from None
 
@@ -91,17 +92,17 @@ def read_toml(path: str | Path) -> dict:
 def check_keys(section: str, table, allowed: set[str]) -> dict:
     """Check that ``table`` is a table whose keys are all in ``allowed``."""
     if not isinstance(table, dict):
-        raise ConfigError(f"[{section}] must be a table, got {table!r}")
+        raise ConfigError(f"[{section}] must be a table, got {shorten(repr(table))}")
     unknown = sorted(set(table) - allowed)
     if unknown:
         raise ConfigError(
-            f"unknown key {section}.{unknown[0]} (allowed: {', '.join(sorted(allowed))})")
+            f"unknown key {section}.{shorten(unknown[0])} (allowed: {', '.join(sorted(allowed))})")
     return table
 
 
 def _number(key: str, value) -> float:
     if isinstance(value, bool) or not isinstance(value, (int, float)):
-        raise ConfigError(f"{key} must be a number, got {value!r}")
+        raise ConfigError(f"{key} must be a number, got {shorten(repr(value))}")
     return float(value)
 
 
@@ -114,7 +115,8 @@ def _region_map(regions: list) -> callable:
             raise ConfigError(f"{key}.medium is missing")
         medium = region["medium"]
         if isinstance(medium, bool) or not isinstance(medium, int):
-            raise ConfigError(f"{key}.medium must be an integer index into G.media, got {medium!r}")
+            raise ConfigError(f"{key}.medium must be an integer index into G.media, got "
+                              f"{shorten(repr(medium))}")
         bounds = {}
         for b in ("x_min", "x_max", "y_min", "y_max", "z_min", "z_max"):
             v = _number(f"{key}.{b}", region[b]) if b in region else (
@@ -148,15 +150,16 @@ def _check_hs(table: dict) -> None:
         if k in table:
             v = _number(f"HS.{k}", table[k])
             if not math.isfinite(v):
-                raise ConfigError(f"HS.{k} must be finite, got {table[k]!r}")
+                raise ConfigError(f"HS.{k} must be finite, got {shorten(repr(table[k]))}")
     if "heat_transfer_coefficient" in table and table["heat_transfer_coefficient"] <= 0:
         raise ConfigError(f"HS.heat_transfer_coefficient must be > 0 (W cm^-2 K^-1), got "
-                          f"{table['heat_transfer_coefficient']!r}")
+                          f"{shorten(repr(table['heat_transfer_coefficient']))}")
     if "mesh_divisions" in table:
         md = table["mesh_divisions"]
         if not (isinstance(md, list) and len(md) == 3 and all(
                 isinstance(v, int) and not isinstance(v, bool) and v >= 1 for v in md)):
-            raise ConfigError(f"HS.mesh_divisions must be [nx, ny, nz], integers >= 1, got {md!r}")
+            raise ConfigError(f"HS.mesh_divisions must be [nx, ny, nz], integers >= 1, got "
+                              f"{shorten(repr(md))}")
 
 
 def model_from_config(cfg: dict) -> Model:
@@ -169,7 +172,7 @@ def model_from_config(cfg: dict) -> Model:
     model = Model()
     media_cfg = G_cfg.get("media")
     if not isinstance(media_cfg, list) or not media_cfg:
-        raise ConfigError(f"G.media must be a non-empty array of tables, got {media_cfg!r}")
+        raise ConfigError(f"G.media must be a non-empty array of tables, got {shorten(repr(media_cfg))}")
     media = []
     for i, m in enumerate(media_cfg):
         check_keys(f"G.media[{i}]", m, _MEDIUM_KEYS)
@@ -186,7 +189,7 @@ def model_from_config(cfg: dict) -> Model:
     _set(model.G, "G", G_cfg, skip=("media", "regions"))
     if "regions" in G_cfg:
         if not isinstance(G_cfg["regions"], list):
-            raise ConfigError(f"G.regions must be an array of tables, got {G_cfg['regions']!r}")
+            raise ConfigError(f"G.regions must be an array of tables, got {shorten(repr(G_cfg['regions']))}")
         model.G.geom_func = _region_map(G_cfg["regions"])
     MC_cfg = check_keys("MC", cfg.get("MC", {}), _MC_KEYS)
     _set(model.MC, "MC", MC_cfg, skip=("light_source",))

@@ -395,7 +395,7 @@ def table_point(spec: EmulatorSpec, point: tuple[int, int]) -> tuple[np.ndarray,
     m = spec.model(mua, mus, n_photons=spec.photons_at(mus))
     M = m.G.medium_map()
     m.MC.validate(m.G)
-    res = simulate(m.G, m.MC, M, *optical_arrays(m.G.media), seed=spec.seed,
+    res = simulate(m.G, m.MC, M, *optical_arrays(m.G.media, m.MC.wavelength), seed=spec.seed,
                    n_photons=m.MC.n_photons_requested)
     dV = m.G.dx * m.G.dy * m.G.dz
     na = res.absorbed / (res.n_photons * dV)

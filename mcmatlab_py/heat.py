@@ -197,8 +197,8 @@ def simulate_heat_distribution(model) -> None:
         mesh_grid = fem.BoxGrid(nxm, nym, nzm, G.Lx, G.Ly, G.Lz)
     mesh = mesh_grid.mesh()
     L = fem.voxel_load_matrix(mesh, grid)  # (npoints, nvox): W per node from W/cm^3
-    # media per element: sample the voxel medium map at the element centroids
-    elem_medium = _element_media(mesh, grid, M)
+    # media per element: the voxel that holds the element's centroid
+    elem_medium = M.ravel()[fem.element_voxel_index(mesh, grid)]
 
     def props(t):
         vhc = np.array([m.VHC if m.VHC is not None else np.nan for m in media], float)
@@ -248,18 +248,19 @@ def simulate_heat_distribution(model) -> None:
             NA = MC.NA
         return NA
 
-    times = HS.step_times()
-    T = np.full(mesh.p.shape[1], float(HS.T_initial))
-    Omega = np.zeros_like(T)
+    times = np.r_[0.0, HS.step_times()]
+    T0 = np.full(mesh.p.shape[1], float(HS.T_initial))
+    Omega = np.zeros_like(T0)
     E_node, A_node = _damage_parameters(mesh, elem_medium, media)
-    sensor = [probes @ T] if probes is not None else []
-    snap_every = max(1, len(times) // HS.n_snapshots) if HS.n_snapshots else 0
-    HS.snapshots = [(0.0, T.copy())] if snap_every else []
+    snap_every = max(1, (len(times) - 1) // HS.n_snapshots) if HS.n_snapshots else 0
+    HS.snapshots = [(0.0, T0.copy())] if snap_every else []
     HS.mc_runs = 0
-    bar = Progress(len(times), "heat", enabled=HS.progress)
-    zero_load = np.zeros_like(T)
-    for k, t_end in enumerate(times):
-        t_mid = t_end - 0.5 * HS.dt  # sources and properties at mid-step
+    bar = Progress(len(times) - 1, "heat", enabled=HS.progress)
+
+    def step(T, t0, t1):
+        nonlocal stepper
+        t_mid = t1 - 0.5 * HS.dt  # sources and properties at mid-step
+        scales = {}
         if HS.VHC_t is not None or HS.TC_t is not None:
             vhc, tc = props(t_mid)
             if single_thermal:
@@ -268,28 +269,24 @@ def simulate_heat_distribution(model) -> None:
             else:
                 stepper = fem.HeatStepper(mesh, vhc[elem_medium], tc[elem_medium], HS.dt,
                                           theta=HS.theta, boundary=boundary)
-                scales = {}
-        else:
-            scales = {}
         power = HS.laser_power(t_mid)
-        if power != 0:
-            S = power * absorption_at(t_mid)  # W/cm^3
-            load = L @ S.ravel()
-        else:
-            load = zero_load
-        T_new = stepper.step(T[None, :], load[None, :], **scales)[0] if scales \
-            else stepper.step(T, load)
+        load = L @ (power * absorption_at(t_mid)).ravel() if power != 0 else None  # W
+        if scales:
+            return stepper.step(T[None, :], None if load is None else load[None, :],
+                                **scales)[0]
+        return stepper.step(T, load)
+
+    def on_step(k, t1, T_old, T_new):
         if E_node is not None:
-            Omega += fem.arrhenius_increment(T, T_new, HS.dt, E_node, A_node)
-        T = T_new
-        if probes is not None:
-            sensor.append(probes @ T)
-        if snap_every and (k + 1) % snap_every == 0:
-            HS.snapshots.append((float(t_end), T.copy()))
-        bar.update(k + 1)
+            fem.advance_damage(Omega, T_old, T_new, HS.dt, E_node, A_node)
+        if snap_every and k % snap_every == 0:
+            HS.snapshots.append((t1, T_new.copy()))
+        bar.update(k)
+
+    T, sensor = fem.march(step, T0, times, probes, on_step)
     bar.close()
-    HS.sensor_times = np.r_[0.0, times]
-    HS.sensor_temps = np.array(sensor).reshape(len(times) + 1, -1)
+    HS.sensor_times = times
+    HS.sensor_temps = sensor if sensor is not None else np.empty((len(times), 0))
     HS.mesh = mesh
     HS.T_nodes = T
     shape = tuple(n + 1 for n in mesh_grid.shape)
@@ -297,24 +294,21 @@ def simulate_heat_distribution(model) -> None:
     HS.Omega = Omega.reshape(shape)
 
 
-def _element_media(mesh, grid, M: np.ndarray) -> np.ndarray:
-    """Medium index of each tetrahedron: the voxel that holds its centroid."""
-    c = mesh.p[:, mesh.t].mean(axis=1)  # (3, nelements)
-    idx = []
-    for axis, (n, L, lo) in enumerate(zip(grid.shape, (grid.Lx, grid.Ly, grid.Lz),
-                                          grid.lower, strict=True)):
-        i = np.floor((c[axis] - lo) / (L / n)).astype(int)
-        idx.append(np.clip(i, 0, n - 1))
-    return M[idx[0], idx[1], idx[2]]
-
-
 def _damage_parameters(mesh, elem_medium, media):
-    """Per-node Arrhenius E (J/mol) and A (1/s), from the media of the elements around it."""
+    """Per-node Arrhenius E (J/mol) and A (1/s), from the media of the elements around it.
+
+    A node between media takes the most damageable of them (the largest ``A``, then ``E``),
+    as ``fem.element_to_node(..., how="max")``, so that a node touching damageable tissue
+    can be damaged; E and A come from that one medium, never a mix of two.
+    """
+    import fem
+
     if all(m.E is None or m.A is None for m in media):
         return None, None
     E = np.array([m.E if m.E is not None else 0.0 for m in media])
     A = np.array([m.A if m.A is not None else 0.0 for m in media])
-    # a node takes the medium of the last element that touches it (as voxel corners in MCmatlab)
-    node_medium = np.zeros(mesh.p.shape[1], dtype=int)
-    node_medium[mesh.t.ravel()] = np.repeat(elem_medium[None, :], 4, axis=0).ravel()
+    order = np.lexsort((E, A))  # media from the least to the most damageable
+    rank = np.empty_like(order)
+    rank[order] = np.arange(order.size)
+    node_medium = order[fem.element_to_node(mesh, rank[elem_medium], "max").astype(int)]
     return E[node_medium], A[node_medium]

@@ -352,3 +352,22 @@ def source_arrays(src, G, source_distribution: np.ndarray | None = None):
                     add_table(slot, q)
     tab = np.concatenate(tables) if tables else np.zeros(1)
     return si, sf, tab, vox
+
+
+def sample_light_source(model, n: int, seed: int = 0) -> dict[str, np.ndarray]:
+    """Launch points and directions of ``n`` packets of ``model.MC``'s source, untransported.
+
+    Returns ``x, y, z`` (cm, the model's coordinates), ``ux, uy, uz`` and ``ok``
+    (False for rays that cannot enter the top face), each (n,). Before any
+    refraction at the surface and whether or not the point lies on the cuboid: to
+    look at a source, or to test it against its analytic distribution.
+    """
+    G, MC = model.G, model.MC
+    G.validate()
+    MC.light_source.validate(G)
+    S_ = check_source_distribution(MC.source_distribution, (G.nx, G.ny, G.nz))
+    si, sf, tab, vox = source_arrays(MC.light_source, G, S_)
+    out = S.launch_many(si, sf, tab, vox, G.nx, G.ny, G.nz, G.dx, G.dy, G.dz,
+                        np.uint64(seed), int(n))
+    return {"x": out[:, 0] - G.Lx / 2, "y": out[:, 1] - G.Ly / 2, "z": out[:, 2],
+            "ux": out[:, 3], "uy": out[:, 4], "uz": out[:, 5], "ok": out[:, 6] > 0}

@@ -131,10 +131,14 @@ class Medium(StrictAttributes):
     E: float | None = None
     A: float | None = None
     n_bins: int = 1
+    #: phase function of the scattering angle theta (rad), per solid angle, not necessarily
+    #: normalised: ``f(theta)``, ``f(wavelength, theta)`` (MCmatlab's customPhaseFunc) or
+    #: values at equispaced angles over [0, pi]; replaces Henyey-Greenstein (``g`` unused)
+    custom_phase_func: Callable | np.ndarray | None = None
 
     _owner_label = "Medium"
     _renamed = {"nBins": "n_bins"}
-    _not_built = ("customPhaseFunc", "QY", "ES", "PY")
+    _not_built = ("QY", "ES", "PY")
 
     def __post_init__(self):
         owner = self._label
@@ -154,6 +158,12 @@ class Medium(StrictAttributes):
         if isinstance(nb, bool) or not isinstance(nb, (int, np.integer)) or nb < 1 or nb > 255:
             raise ValueError(f"{owner}.n_bins must be an integer in 1..255, got {nb!r}")
         self.n_bins = int(nb)
+        cpf = self.custom_phase_func
+        if cpf is not None and not callable(cpf):
+            arr = np.asarray(cpf, dtype=np.float64)  # checked in full when tabulated (optics)
+            if arr.ndim != 1 or arr.size < 2:
+                raise ValueError(f"{owner}.custom_phase_func must be a function of theta or a "
+                                 f"1-D array of >= 2 values, got {cpf!r}")
 
     @property
     def _label(self) -> str:

@@ -8,17 +8,21 @@ everything is validated when a simulation starts, and a bad value raises a
 
 from __future__ import annotations
 
-import math
 from collections.abc import Callable
 from dataclasses import dataclass, field
 
 import numpy as np
 
 from ._strict import NotBuiltError, StrictAttributes
+from .light_source import (
+    SOURCE_TYPES,  # noqa: F401  (re-exported)
+    IntensityDistribution,
+    check_source_distribution,
+    validate_light_source,
+)
 from .media import Medium, check_positive, n_arguments
 from .media_bins import state_field
 
-SOURCE_TYPES = ("pencil", "tophat", "gaussian", "plane_wave", "isotropic_point")
 BOUNDARY_TYPES = {
     0: "no escaping boundaries",
     1: "all cuboid boundaries escape",
@@ -154,52 +158,37 @@ class Geometry(StrictAttributes):
 
 @dataclass
 class LightSource(StrictAttributes):
-    """The light source (MCmatlab's ``model.MC.lightSource`` for the cases we support).
+    """The light source (MCmatlab's ``model.MC.lightSource``); see :mod:`mcmatlab_py.light_source`.
 
-    ``pencil``, ``tophat`` and ``gaussian`` beams are collimated along +z and enter
-    the top face centred at (``x_focus``, ``y_focus``); ``plane_wave`` covers the
-    whole top face uniformly; ``isotropic_point`` emits from (``x_focus``,
-    ``y_focus``, ``z_focus``), MCmatlab's convention for point sources.
+    ``source_type`` is MCmatlab's code 0..5 or its name (``pencil``, ``isotropic``,
+    ``plane_wave``, ``lg01``, ``radial``, ``xy``); this port's ``tophat`` and
+    ``gaussian`` (a collimated beam of ``radius``) and ``isotropic_point`` work as
+    before. Beams enter the top face along the axis (``theta``, ``phi``) through the
+    focus; isotropic emitters sit at the focus.
     """
 
-    source_type: str = "pencil"
-    radius: float = 0.0  #: cm: top-hat radius, or the Gaussian's 1/e^2 intensity radius
+    source_type: str | int = "pencil"
+    radius: float = 0.0  #: cm: ``tophat`` radius, or the ``gaussian`` 1/e^2 intensity radius
     x_focus: float = 0.0  #: cm
     y_focus: float = 0.0  #: cm
-    z_focus: float = 0.0  #: cm, isotropic point sources only
+    z_focus: float = 0.0  #: cm: focal plane depth of beams, position of isotropic emitters
+    theta: float = 0.0  #: rad, polar angle of the beam axis (0: along +z, into the tissue)
+    phi: float = 0.0  #: rad, azimuth of the beam axis
+    psi: float = 0.0  #: rad, rotation of an X/Y beam about its axis
+    emitter_length: float = 0.0  #: cm, length of an isotropic line emitter (0: a point)
+    #: near field: the intensity in the focal plane (radial or X/Y, widths in cm)
+    focal_plane_intensity_distribution: IntensityDistribution = field(
+        default_factory=IntensityDistribution)
+    #: far field: the intensity over ray angles (radial or X/Y, half-angles in rad)
+    angular_intensity_distribution: IntensityDistribution = field(
+        default_factory=IntensityDistribution)
 
     _owner_label = "MC.light_source"
-    _not_built = ("emitterLength", "focalPlaneIntensityDistribution", "FPID",
-                  "angularIntensityDistribution", "AID", "psi", "theta", "phi")
+    _renamed = {"FPID": "focal_plane_intensity_distribution",
+                "AID": "angular_intensity_distribution", "beamType": "source_type"}
 
     def validate(self, G: Geometry) -> None:
-        if self.source_type not in SOURCE_TYPES:
-            raise ValueError(
-                f"MC.light_source.source_type must be one of {SOURCE_TYPES}, "
-                f"got {self.source_type!r}"
-            )
-        for name in ("x_focus", "y_focus", "z_focus"):
-            v = getattr(self, name)
-            try:
-                v = float(v)
-            except (TypeError, ValueError):
-                raise ValueError(f"MC.light_source.{name} must be a number, got {v!r}") from None
-            if not math.isfinite(v):
-                raise ValueError(f"MC.light_source.{name} must be finite, got {v!r}")
-            setattr(self, name, v)
-        if self.source_type in ("tophat", "gaussian"):
-            self.radius = check_positive("MC.light_source", "radius", self.radius)
-        else:
-            self.radius = check_positive("MC.light_source", "radius", self.radius,
-                                         allow_zero=True)
-        if self.source_type == "isotropic_point":
-            inside = (abs(self.x_focus) <= G.Lx / 2 and abs(self.y_focus) <= G.Ly / 2
-                      and 0 <= self.z_focus <= G.Lz)
-            if not inside:
-                raise ValueError(
-                    "MC.light_source (x_focus, y_focus, z_focus) must lie inside the cuboid, "
-                    f"got {(self.x_focus, self.y_focus, self.z_focus)}"
-                )
+        validate_light_source(self, G)
 
 
 @dataclass
@@ -235,13 +224,21 @@ class MonteCarloSimulation(StrictAttributes):
     batch_size: int = 1000  #: photons per random stream (part of what a seed means)
     progress: bool = True  #: progress bar on stderr for runs longer than a few seconds
     light_source: LightSource = field(default_factory=LightSource)
-    #: nm; selects the value of media given as functions of wavelength (one wavelength)
-    wavelength: float | None = None
+    #: nm; selects the value of media given as functions of wavelength (one wavelength;
+    #: MCmatlab's default 800 nm)
+    wavelength: float | None = 800.0
     # the voxel state seen by media that depend on it: a number or an (nx, ny, nz) array.
     # MCmatlab takes them from MC.P * MC.NFR, HS.T and 1 - exp(-HS.Omega); here they are given.
     FR: float | np.ndarray = 0.0  #: W/cm^2, fluence rate
     T: float | np.ndarray = 37.0  #: deg C, temperature
     FD: float | np.ndarray = 0.0  #: fractional damage, 0..1
+    #: (nx, ny, nz) >= 0: emit isotropically from the voxels with these weights instead of
+    #: ``light_source`` (MCmatlab's sourceDistribution, example 26); NA is then per W emitted
+    source_distribution: np.ndarray | None = None
+    #: cm, length scale of the smoothing of interface normals (MCmatlab's default 0.1) used
+    #: for Fresnel reflection and refraction when ``matched_interfaces`` is False; 0: Sobel
+    #: normals unsmoothed; None: the voxel faces (this port's extra: exact for planar layers)
+    smoothing_length_scale: float | None = 0.1
 
     # results
     NA: np.ndarray | None = None
@@ -270,9 +267,9 @@ class MonteCarloSimulation(StrictAttributes):
     _not_built = (
         "useGPU", "GPUdevice", "requestCollectedPhotons", "calcNormalizedFluenceRate", "calcNFR",
         "nExamplePaths", "examplePaths", "farFieldRes", "farField", "farFieldTheta",
-        "farFieldPhi", "smoothingLengthScale", "interfaceNormals", "P", "spectrumFunc",
+        "farFieldPhi", "interfaceNormals", "P", "spectrumFunc",
         "spectrum", "FRinitial", "FRdepIterations", "useLightCollector", "lightCollector", "LC",
-        "depositionCriteria", "sourceDistribution", "nPhotonsCollected", "CDFs",
+        "depositionCriteria", "nPhotonsCollected", "CDFs",
         *(f"{pre}_{side}" for pre in ("normalizedIrradiance", "NI")
           for side in ("xpos", "xneg", "ypos", "yneg", "zpos", "zneg")),
     )
@@ -311,6 +308,12 @@ class MonteCarloSimulation(StrictAttributes):
         if not isinstance(self.light_source, LightSource):
             raise ValueError(f"MC.light_source must be a LightSource, got {self.light_source!r}")
         self.light_source.validate(G)
+        self.source_distribution = check_source_distribution(self.source_distribution,
+                                                             (G.nx, G.ny, G.nz))
+        if self.smoothing_length_scale is not None:
+            self.smoothing_length_scale = check_positive("MC", "smoothing_length_scale",
+                                                         self.smoothing_length_scale,
+                                                         allow_zero=True)
         if self.wavelength is not None:
             if np.ndim(self.wavelength) > 0:
                 raise NotBuiltError("MCmatlab's broadband MC.wavelength (an array of wavelengths) "

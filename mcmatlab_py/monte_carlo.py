@@ -13,14 +13,6 @@ from ._strict import NotBuiltError
 from .media_bins import optical_media_properties
 from .progress import Progress
 
-_SRC_CODES = {
-    "pencil": K.SRC_PENCIL,
-    "tophat": K.SRC_TOPHAT,
-    "gaussian": K.SRC_GAUSSIAN,
-    "plane_wave": K.SRC_PLANE_WAVE,
-    "isotropic_point": K.SRC_ISOTROPIC_POINT,
-}
-
 
 @dataclass
 class MCResult:
@@ -119,17 +111,39 @@ def simulate(G, MC, M: np.ndarray, mua, mus, g, nref, *, seed: int, n_photons: i
 
 
 def _kernel_args(G, MC, M, mua, mus, g, nref, seed, n_total):
+    from .light_source import source_arrays
+    from .optics import interface_normals, phase_function_tables
+
     nx, ny, nz = M.shape
-    src = MC.light_source
-    src_arr = np.array([src.x_focus + G.Lx / 2, src.y_focus + G.Ly / 2, src.radius,
-                        src.x_focus + G.Lx / 2, src.y_focus + G.Ly / 2, src.z_focus],
-                       dtype=np.float64)
+    source = source_arrays(MC.light_source, G, getattr(MC, "source_distribution", None))
+    phase = phase_function_tables(G.media, _parent_media(G, MC, len(mua)),
+                                  getattr(MC, "wavelength", None))
     Mf = np.ascontiguousarray(M, dtype=np.int32).ravel()
     uniform = int(Mf[0]) if np.all(Mf == Mf[0]) else -1
+    normals = np.zeros(3, dtype=np.float32)
+    smoothing = getattr(MC, "smoothing_length_scale", None)
+    use_normals = (not MC.matched_interfaces and smoothing is not None
+                   and np.unique(nref[np.unique(Mf)]).size > 1)
+    if use_normals:
+        normals = interface_normals(np.asarray(M), nref, (G.dx, G.dy, G.dz), smoothing)
     return (Mf, mua, mus, g, nref, uniform, nx, ny, nz, G.dx, G.dy, G.dz,
             int(MC.boundary_type), float(MC.n_outside), bool(MC.matched_interfaces),
             bool(MC.russian_roulette), float(MC.weight_threshold), float(MC.roulette_chance),
-            _SRC_CODES[src.source_type], src_arr, np.uint64(seed), MC.batch_size, n_total)
+            *source, *phase, normals, bool(use_normals), np.uint64(seed), MC.batch_size, n_total)
+
+
+def _parent_media(G, MC, n_sub: int) -> np.ndarray:
+    """(n_sub,) index in ``G.media`` of each (sub-)medium the kernel runs on."""
+    if n_sub == len(G.media):
+        return np.arange(n_sub)
+    props = getattr(MC, "media_properties", None)
+    parent = getattr(props, "parent", None)
+    if parent is not None and len(parent) == n_sub:
+        return np.asarray(parent)
+    if any(getattr(m, "custom_phase_func", None) is not None for m in G.media):
+        raise ValueError("custom phase functions need the sub-media's parents "
+                         "(MC.media_properties) when media are split into sub-media")
+    return np.zeros(n_sub, dtype=np.int64)  # Henyey-Greenstein everywhere: parents unused
 
 
 def batch_range(args: tuple, batches: tuple[int, int]) -> tuple[np.ndarray, np.ndarray, float]:
@@ -182,12 +196,12 @@ def run_monte_carlo(model, client=None) -> None:
     if n_photons is None:
         minutes = MC.simulation_time_requested if MC.simulation_time_requested else 0.1
         time_limit = 60.0 * minutes
+    MC.media_properties = props  # before the run: the kernel maps sub-media to media with it
     res = simulate(G, MC, M, mua, mus, g, nref, seed=seed, n_photons=n_photons,
                    time_limit_s=time_limit, client=client)
     store_results(MC, res, M, mua, G.dx * G.dy * G.dz)
     MC.seed_used = seed
     MC.M = M
-    MC.media_properties = props
 
 
 def store_results(MC, res: MCResult, M: np.ndarray, mua: np.ndarray, dV: float) -> None:

@@ -13,7 +13,8 @@ library from mcxyz), used by MCmatlab's ``calc_mua`` helper:
 * fat: the 930 nm lipid band as in MCmatlab's library (which names no source),
   1e-4 cm^-1 outside 870-954 nm;
 * melanin: the interior of a cutaneous melanosome, Jacques' power law
-  :math:`\\mu_a = 6.6\\times 10^{11} \\lambda^{-3.33}` cm^-1 (:func:`melanin_power_law`).
+  :math:`\\mu_a = 6.6\\times 10^{11} \\lambda^{-3.33}` cm^-1 (:func:`melanin_power_law`),
+  tabulated as :math:`679.16\\,(\\lambda/500)^{-3.33}` (its 500 nm value rounded).
 
 Values between the 1 nm points are linear interpolations (MATLAB's ``interp1``).
 Scattering follows the power law of S. L. Jacques, "Optical properties of biological

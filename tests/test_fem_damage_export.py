@@ -6,6 +6,7 @@ import pytest
 from fem import (
     GAS_CONSTANT,
     TimeSeriesWriter,
+    advance_damage,
     arrhenius_increment,
     box_mesh,
     element_to_node,
@@ -36,6 +37,33 @@ def test_arrhenius_matches_formula_and_broadcasts():
         om = update_damage(om, T_old[0] + 30, T_old[0] + 30, 0.01, E, A)
     rate = A * np.exp(-E / (GAS_CONSTANT * (T_old[0] + 30 + 273.15)))
     np.testing.assert_allclose(om, 1.0 * np.where(A > 0, rate, 0), rtol=1e-12)
+
+
+def test_trapezoid_rule_in_place_and_both_rules_agree_at_order_two():
+    """The trapezoid rule is the formula; advance_damage works in place; on a linear ramp
+    the two rules differ by O(dt^2), with opposite signs of the error (convex rate)."""
+    T_old, T_new = np.array([[55.0, 60.0], [58.0, 61.0]]), np.array([[57.0, 66.0], [58.0, 60.0]])
+    E, A = np.array([E_BLOOD, E_BLOOD]), np.array([A_BLOOD, 0.0])
+    rate = lambda T: A * np.exp(-E / (GAS_CONSTANT * (T + 273.15)))  # noqa: E731
+    om = np.ones((2, 2))
+    assert advance_damage(om, T_old, T_new, 0.1, E, A, rule="trapezoid") is om
+    np.testing.assert_allclose(om, 1 + 0.05 * (rate(T_old) + rate(T_new)), rtol=1e-14)
+    np.testing.assert_allclose(
+        arrhenius_increment(T_old, T_new, 0.1, np.tile(E, (2, 1)), A, "trapezoid"), om - 1,
+        rtol=1e-14)  # per-member E
+    ramp = lambda dt: np.arange(0.0, 1.0 + dt / 2, dt) * 10 + 50  # noqa: E731
+    gaps = []
+    for dt in (0.1, 0.05, 0.025):
+        T = ramp(dt)
+        mid, trap = (arrhenius_increment(T[:-1], T[1:], dt, E_BLOOD, A_BLOOD, r).sum()
+                     for r in ("midpoint", "trapezoid"))
+        assert mid < trap
+        gaps.append((trap - mid) / trap)
+    assert np.polyfit(np.log([0.1, 0.05, 0.025]), np.log(gaps), 1)[0] == pytest.approx(2, abs=0.1)
+    with pytest.raises(ValueError, match="rule must be one of"):
+        arrhenius_increment(37.0, 38.0, 0.1, E_BLOOD, A_BLOOD, rule="simpson")
+    with pytest.raises(ValueError, match=r"omega must be a float64 array of shape \(2, 2\)"):
+        advance_damage(np.zeros(2), T_old, T_new, 0.1, E, A)
 
 
 def test_damage_bad_input():

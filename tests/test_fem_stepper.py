@@ -10,6 +10,8 @@ from fem import (
     HeatStepper,
     box_mesh,
     element_voxel_index,
+    march,
+    probe_matrix,
     voxel_load_matrix,
 )
 
@@ -178,3 +180,26 @@ def test_boundary_validation():
         HeatBoundary({"top": 0})
     assert HeatBoundary({"z-": 1})["z-"].kind == "fixed"
     assert HeatBoundary.from_mcmatlab(0).is_insulated
+
+
+def test_march_is_the_loop_of_steps_with_probes_and_callback():
+    mesh = box_mesh(4, 3, 3, 0.4, 0.3, 0.3)
+    stepper = HeatStepper(mesh, C, K, 0.1)
+    T0, f, _, _ = _ensemble(mesh, 3)
+    P = probe_matrix(mesh, np.array([[0.0, 0.0, 0.0], [0.1, 0.05, 0.2]]).T)
+    times = np.array([0.0, 0.1, 0.2, 0.3])
+    seen = []
+    T, readings = march(lambda T, t0, t1: stepper.step(T, f if t1 < 0.25 else None), T0, times,
+                        P, lambda k, t1, a, b: seen.append((k, t1, a.shape, b.shape)))
+    ref = [T0]
+    for k in range(3):
+        ref.append(stepper.step(ref[-1], f if times[k + 1] < 0.25 else None))
+    np.testing.assert_array_equal(T, ref[-1])
+    assert readings.shape == (4, 3, 2)
+    np.testing.assert_allclose(readings, [(P @ R.T).T for R in ref], rtol=1e-14)
+    assert seen == [(k, t, (3, mesh.p.shape[1]), (3, mesh.p.shape[1]))
+                    for k, t in ((1, 0.1), (2, 0.2), (3, 0.3))]
+    T1, r1 = march(lambda T, t0, t1: stepper.step(T), T0[0], times[:2])  # one field, no probes
+    assert T1.shape == T0[0].shape and r1 is None
+    with pytest.raises(ValueError, match="times must increase"):
+        march(lambda T, t0, t1: T, T0, [0.0, 0.2, 0.1])

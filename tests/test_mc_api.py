@@ -76,7 +76,7 @@ def test_simulation_time_requested():
     [
         ({"mua": -1.0}, "mua"),
         ({"mus": float("nan")}, "mus"),
-        ({"g": 1.0}, "g"),
+        ({"g": 1.5}, "g"),
         ({"g": -1.5}, "g"),
         ({"n": 0.9}, "n"),
         ({"VHC": 0.0}, "VHC"),
@@ -140,7 +140,7 @@ def f_na(out):
     "text, message",
     [
         (SMALL_TOML.replace("mua = 1.0", "mua = -1.0"), "mua must be >= 0, got -1.0"),
-        (SMALL_TOML.replace("g = 0.9", "g = 1.2"), "g must be in (-1, 1), got 1.2"),
+        (SMALL_TOML.replace("g = 0.9", "g = 1.2"), "g must be in [-1, 1], got 1.2"),
         (SMALL_TOML.replace("n = 1.3", "n = 0.5"), "n must be >= 1, got 0.5"),
         (SMALL_TOML.replace("nx = 10", "nx = 0"), "G.nx must be >= 1, got 0"),
         (SMALL_TOML.replace("seed = 1", "sead = 1"), "unknown key MC.sead"),

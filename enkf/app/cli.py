@@ -7,13 +7,16 @@ line ``error: ...`` naming it and exits with status 2, writing nothing.
 from __future__ import annotations
 
 import argparse
+import signal
 import sys
+import threading
 
+from .. import __version__
 from .cmd_identify import cmd_identify
 from .cmd_model import cmd_heat, cmd_mc
 from .cmd_paper import cmd_paper
 from .cmd_validate import cmd_validate
-from .common import EXIT_BAD_INPUT
+from .common import EXIT_BAD_INPUT, EXIT_UNEXPECTED, MAX_SEED, shorten
 
 __all__ = ["build_parser", "main"]
 
@@ -23,7 +26,10 @@ def _common(p: argparse.ArgumentParser) -> None:
     p.add_argument("--force", action="store_true", help="replace a non-empty --out")
     p.add_argument("--seed", type=int, default=None, help="random seed (overrides the config)")
     p.add_argument("--threads", type=int, default=None, help="numba threads (default: all cores)")
-    p.add_argument("--quiet", action="store_true", help="no progress bar")
+    p.add_argument("--quiet", action="store_true",
+                   help="no progress bars (the result line is still printed)")
+    p.add_argument("--debug", action="store_true", default=argparse.SUPPRESS,
+                   help="show the traceback of an error instead of one line")
 
 
 def _dask_options(p: argparse.ArgumentParser) -> None:
@@ -50,6 +56,9 @@ def build_parser() -> argparse.ArgumentParser:
         prog="tissue-enkf",
         description="Monte Carlo light transport, FEM heat and ensemble Kalman filtering "
                     "for laser-irradiated tissue.")
+    parser.add_argument("--debug", action="store_true",
+                        help="show the traceback of an error instead of one line")
+    parser.add_argument("--version", action="version", version=f"%(prog)s {__version__}")
     sub = parser.add_subparsers(dest="command", required=True)
     p_mc = sub.add_parser("mc", help="run the Monte Carlo of a TOML model",
                           description="Run MCmatlab-style Monte Carlo light transport for the "
@@ -110,7 +119,10 @@ def build_parser() -> argparse.ArgumentParser:
                     "batch (one Dask task each with --workers/--scheduler) and add batch.csv. "
                     "Exit status 0 (also when the filter's health check stopped a run: "
                     "summary.json says when and why, the estimates up to then are written), "
-                    "2 for bad input.")
+                    "1 when every file of a batch failed (batch.csv says why), 2 for bad "
+                    "input. --follow: a file replaced or truncated while followed is read "
+                    "again from its start (header first) after a warning; Ctrl-C keeps the "
+                    "estimates written so far.")
     p_id.add_argument("config", help="TOML file: [G], [MC], [HS], [sensors], [filter], [data] "
                                       "(see examples/own_data.toml, docs/cli.md)")
     p_id.add_argument("--data", nargs="+", default=None, metavar="FILE",
@@ -119,7 +131,8 @@ def build_parser() -> argparse.ArgumentParser:
                       help="online: read FILE as the acquisition appends to it, write each "
                            "estimate before the next frame (stops at '# end' or when idle)")
     p_id.add_argument("--idle-timeout", type=float, default=10.0,
-                      help="--follow: stop after this many seconds without a new line")
+                      help="--follow: stop after this many seconds without a new line "
+                           "(a finite number > 0; default 10)")
     p_id.add_argument("--cache-dir", default=None, help="emulator cache directory")
     _common(p_id)
     _dask_options(p_id)
@@ -146,23 +159,60 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
+class Terminated(BaseException):
+    """SIGTERM arrived: unwind like Ctrl-C (partial outputs are removed on the way out)."""
+
+
+def _on_sigterm(signum, frame):
+    raise Terminated
+
+
 def main(argv=None) -> int:
+    """Run ``tissue-enkf``; returns the exit status.
+
+    0 success; 1 a validation check failed, or an unexpected error (one line and a hint
+    to report it; ``--debug`` shows the traceback); 2 bad input (one line naming the
+    field and the value, nothing written); 130 Ctrl-C and 143 SIGTERM (partial outputs
+    removed).
+    """
     parser = build_parser()
     args = parser.parse_args(argv)
     from . import report
 
     report.command_line = ["tissue-enkf", *(sys.argv[1:] if argv is None else argv)]
+    old = None
+    if threading.current_thread() is threading.main_thread():
+        old = signal.signal(signal.SIGTERM, _on_sigterm)
     try:
-        if getattr(args, "seed", None) is not None and args.seed < 0:
-            raise ValueError(f"--seed must be >= 0, got {args.seed}")
+        seed = getattr(args, "seed", None)
+        if seed is not None and not 0 <= seed <= MAX_SEED:
+            raise ValueError(f"--seed must be in [0, {MAX_SEED}], got {shorten(seed)}")
         return args.func(args)
-    except KeyboardInterrupt:
-        print("interrupted: nothing written", file=sys.stderr)
+    except KeyboardInterrupt as exc:  # `outcome`: what a command kept (identify --follow)
+        print(f"interrupted: {getattr(exc, 'outcome', 'nothing written')}", file=sys.stderr)
         return 130
+    except Terminated as exc:
+        print(f"terminated (SIGTERM): {getattr(exc, 'outcome', 'nothing written')}",
+              file=sys.stderr)
+        return 143
     except (ValueError, OSError) as err:
+        if args.debug:
+            raise
         msg = str(err).splitlines()[0] if str(err) else type(err).__name__
-        print(f"error: {msg}", file=sys.stderr)
+        # values are cut where a message is made (shorten); this catches the rest
+        print(f"error: {shorten(msg, 400)}", file=sys.stderr)
         return EXIT_BAD_INPUT
+    except Exception as err:  # noqa: BLE001 - the last line of defence: one line, not a traceback
+        if args.debug:
+            raise
+        first = str(err).splitlines()[0] if str(err) else ""
+        print(f"error: unexpected {type(err).__name__}: {shorten(first)}"
+              f"\nThis is a bug in tissue-enkf: please report it with the command line and "
+              f"--debug's traceback.", file=sys.stderr)
+        return EXIT_UNEXPECTED
+    finally:
+        if old is not None:
+            signal.signal(signal.SIGTERM, old)
 
 
 if __name__ == "__main__":

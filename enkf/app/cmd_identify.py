@@ -2,13 +2,18 @@
 
 from __future__ import annotations
 
+import math
 import sys
 import time
 from pathlib import Path
 
-from .common import apply_threads, close_client, dask_client
+from .common import apply_threads, close_client, dask_client, shorten
 
-__all__ = ["cmd_identify"]
+__all__ = ["EXIT_BATCH_FAILED", "cmd_identify"]
+
+EXIT_BATCH_FAILED = 1  #: every file of a batch failed (batch.csv says why)
+#: what ``identify`` writes at the top of --out: what ``--follow --force`` clears first
+_OUTPUTS = ("estimates.csv", "summary.json", "run.json", "batch.csv", "fields", "figures")
 
 def _identify_one(cfg, absorption, seed, data_path, out_dir, quiet=True) -> dict:
     """Run the filter on one data file and write its outputs into ``out_dir`` (a task)."""
@@ -49,6 +54,9 @@ def cmd_identify(args) -> int:
     from .report import manifest
     from .rundir import atomic_dir, check_out_dir, write_json
 
+    if not (math.isfinite(args.idle_timeout) and args.idle_timeout > 0):
+        raise ValueError(f"--idle-timeout must be a finite number of seconds > 0, got "
+                         f"{shorten(args.idle_timeout)}")
     check_out_dir(args.out, args.force)
     apply_threads(args.threads)
     cfg = load_identify(args.config)
@@ -90,6 +98,12 @@ def cmd_identify(args) -> int:
         if r.get("stopped"):
             print(f"warning: {r['data']}: the filter stopped early: {r['stopped']} (estimates "
                   "up to then are written)", file=sys.stderr)
+    if len(files) > 1 and all("error" in r for r in rows):
+        for r in rows:
+            print(f"{r['data']}: failed: {r['error']}", file=sys.stderr)
+        print(f"error: all {len(rows)} data files failed (see {Path(args.out) / 'batch.csv'})",
+              file=sys.stderr)
+        return EXIT_BATCH_FAILED
     if not args.quiet:
         for r in rows:
             if "error" in r:
@@ -130,19 +144,30 @@ def _identify_batch(cfg, absorption, seed, files, tmp, client, quiet) -> list:
             shutil.rmtree(tmp / n, ignore_errors=True)
         else:
             rows.append({**r, "dir": n})
-    keys = list(next((r["parameters"] for r in rows if "parameters" in r), {}))
-    lines = ["data,dir,status," + ",".join(f"{k}_mean,{k}_std" for k in keys) + ",message"]
-    for r in rows:
-        if "error" in r:
-            vals = ",".join("," for _ in keys)
-            lines.append(f"{r['data']},{r['dir']},error,{vals},\"{r['error']}\"")
-        else:
-            vals = ",".join(f"{r['parameters'][k]['estimate_final']:.6g},"
-                            f"{r['parameters'][k]['std_final']:.6g}" for k in keys)
-            status = "stopped" if r["stopped"] else "ok"
-            lines.append(f"{r['data']},{r['dir']},{status},{vals},\"{r['stopped'] or ''}\"")
-    (tmp / "batch.csv").write_text("\n".join(lines) + "\n")
+    _write_batch_csv(tmp / "batch.csv", rows)
     return rows
+
+
+def _write_batch_csv(path: Path, rows: list) -> None:
+    """One row per data file: data, dir, status (ok, stopped, error), then the final mean
+    and std of each parameter, and a message (the error, or why the filter stopped).
+
+    The csv module quotes a path or a message holding commas, quotes or line breaks."""
+    import csv
+
+    keys = list(next((r["parameters"] for r in rows if "parameters" in r), {}))
+    with open(path, "w", encoding="utf-8", newline="") as fh:
+        w = csv.writer(fh, lineterminator="\n")
+        w.writerow(["data", "dir", "status", *(f"{k}_{s}" for k in keys for s in ("mean", "std")),
+                    "message"])
+        for r in rows:
+            if "error" in r:
+                w.writerow([r["data"], r["dir"], "error", *([""] * (2 * len(keys))), r["error"]])
+                continue
+            vals = [f"{r['parameters'][k][f]:.6g}" for k in keys
+                    for f in ("estimate_final", "std_final")]
+            w.writerow([r["data"], r["dir"], "stopped" if r["stopped"] else "ok", *vals,
+                        r["stopped"] or ""])
 
 
 def _batch_task(cfg, absorption, seed, item):
@@ -150,13 +175,34 @@ def _batch_task(cfg, absorption, seed, item):
     return _identify_one(cfg, absorption, seed, data_path, out_dir)
 
 
+def _clear_outputs(out: Path) -> None:
+    """Remove what ``identify`` writes at the top of ``out`` (and nothing else: the
+    directory is written in place, so other files there are left alone)."""
+    import shutil
+
+    for name in _OUTPUTS:
+        p = out / name
+        if p.is_dir() and not p.is_symlink():
+            shutil.rmtree(p)
+        elif p.exists() or p.is_symlink():
+            p.unlink()
+
+
 def _follow(args, cfg, absorption, seed, t_emu) -> int:
-    """Online mode: --out is written as the data come (not atomically: it is live)."""
+    """Online mode: --out is written as the data come (not atomically: it is live).
+
+    With --force the outputs of an earlier run in --out are removed first (no old
+    summary.json or fields/final.vtu beside the new estimates). Interrupted (Ctrl-C,
+    SIGTERM), the estimates so far stay, with a run.json that says so; the exception
+    carries ``outcome``, the line that ``main`` prints.
+    """
     from ..tissue import OnlineIdentifier
     from .readers import follow_csv
     from .report import manifest
 
     out = Path(args.out)
+    if args.force and out.is_dir():
+        _clear_outputs(out)
     out.mkdir(parents=True, exist_ok=True)
     setup = cfg.setup(absorption, seed=seed)
     ident = OnlineIdentifier(setup, param_bounds=cfg.param_bounds,
@@ -182,15 +228,29 @@ def _follow(args, cfg, absorption, seed, t_emu) -> int:
             last_fig[0] = time.perf_counter()
 
     t0 = time.perf_counter()
+
+    def run_json(readings, **extra):
+        manifest(out / "run.json", command="identify --follow", config=cfg.raw, seed=seed,
+                 timings={"emulator": t_emu, "stream": time.perf_counter() - t0},
+                 extra={"follow": str(args.follow), "readings": readings, **extra})
+
     try:
         n = follow_csv(args.follow, ident, on_update, idle_timeout_s=args.idle_timeout,
                        columns=None if cfg.data.columns is None else ["time", *cfg.data.columns])
+    except BaseException as exc:
+        if not isinstance(exc, Exception):  # Ctrl-C, SIGTERM: what is written stays
+            fh.close()
+            k = len(ident.history)
+            exc.outcome = f"{k} readings assimilated, estimates kept in {out}"
+            try:
+                run_json(k, interrupted=True)
+            except Exception:  # noqa: BLE001 - the estimates matter; run.json is a bonus
+                pass
+        raise
     finally:
         fh.close()
     _live_figure(out, ident, setup)
-    manifest(out / "run.json", command="identify --follow", config=cfg.raw, seed=seed,
-             timings={"emulator": t_emu, "stream": time.perf_counter() - t0},
-             extra={"follow": str(args.follow), "readings": n})
+    run_json(n)
     if not args.quiet:
         print(f"{n} readings assimilated -> {out}")
     return 0

@@ -5,6 +5,8 @@ from __future__ import annotations
 import time
 from pathlib import Path
 
+from mcmatlab_py.budget import check_heat
+
 from .common import apply_threads, close_client, dask_client
 
 __all__ = ["cmd_heat", "cmd_mc"]
@@ -30,6 +32,7 @@ def _run_model_mc(args, heat: bool):
     model.MC.validate(model.G)
     if heat:
         model.HS.validate(model.G)
+        check_heat(model.G, model.HS)  # before the Monte Carlo: refuse what cannot finish
         if not model.HS.temp_sensor_positions:
             model.HS.temp_sensor_positions = [(0.0, 0.0, 0.0)]
     client = dask_client(args, raw)

@@ -2,12 +2,17 @@
 
 from __future__ import annotations
 
+from mcmatlab_py.messages import shorten  # re-exported: the one helper of all packages
+
 from .config import run_table
 
-__all__ = ["EXIT_BAD_INPUT", "EXIT_CHECK_FAILED", "apply_threads", "close_client", "dask_client"]
+__all__ = ["EXIT_BAD_INPUT", "EXIT_CHECK_FAILED", "EXIT_UNEXPECTED", "MAX_SEED", "apply_threads",
+           "close_client", "dask_client", "shorten"]
 
 EXIT_BAD_INPUT = 2
 EXIT_CHECK_FAILED = 1  #: validate: a check failed (its report is still written)
+EXIT_UNEXPECTED = 1  #: an error that is not the input's fault (a bug: reported in one line)
+MAX_SEED = 2**63 - 1  #: seeds are non-negative 64-bit integers (numpy and the kernels)
 
 
 def dask_client(args, config: dict | None = None):
@@ -39,5 +44,5 @@ def apply_threads(threads):
         import numba
 
         if threads < 1:
-            raise ValueError(f"--threads must be >= 1, got {threads}")
+            raise ValueError(f"--threads must be >= 1, got {shorten(threads)}")
         numba.set_num_threads(min(threads, numba.config.NUMBA_NUM_THREADS))

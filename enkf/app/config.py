@@ -39,8 +39,12 @@ from pathlib import Path
 
 import numpy as np
 
+from mcmatlab_py.budget import check_filter, check_steps
 from mcmatlab_py.config import ConfigError, check_keys, model_from_config, read_toml
+from mcmatlab_py.messages import shorten
 
+from ..problem import DEFAULT_METHOD
+from ..tissue.parameters import ESTIMATES, PARAMETER_NAMES, TRACKED_DEPTHS, tracked_points
 from .readers import apply_time_offset, load_frames, read_sensor_csv
 
 __all__ = ["DataSpec", "IdentifyConfig", "check_identify_keys", "identify_config_from_dict",
@@ -62,7 +66,7 @@ _FILTER_KEYS = {
     "random_walk_std", "random_walk_when_off", "inflation", "mda", "seed", "parameter_model",
     "localization_radius", "heat_mass", "transforms", "emulator", "bounds", "prior",
 }
-_PARAMETERS = ("mua", "mus", "VHC", "TC")
+_LASER_KEYS = ("P", "duration_on", "T_initial")
 _DATA_KEYS = {"file", "columns", "time_offset"}
 _EMULATOR_KEYS = {"n_photons", "n_mua", "n_mus", "mua_range", "mus_range", "seed", "exact"}
 
@@ -99,9 +103,17 @@ class IdentifyConfig:
                 raise ValueError(f"{path}: an NPZ image series needs [sensors.camera] and no "
                                  "point sensors (sensors.positions = [])")
             times, frames = load_frames(path, self.setup_kw["image"])
-            return apply_time_offset(path, times, frames, data.time_offset)
-        times, values, _ = read_sensor_csv(path, self.n_obs, columns=data.columns,
-                                           time_offset=data.time_offset)
+            times, values = apply_time_offset(path, times, frames, data.time_offset)
+        else:
+            times, values, _ = read_sensor_csv(path, self.n_obs, columns=data.columns,
+                                               time_offset=data.time_offset)
+        max_dt = self.setup_kw.get("max_dt")
+        if max_dt is not None and len(times):
+            check_steps(float(times[-1]) / max_dt, f"{path}: the filter's heat steps over "
+                        f"{float(times[-1]):g} s of data in steps of HS.dt = {max_dt:g} s", "HS.dt")
+        if not np.isfinite(values).any():
+            raise ValueError(f"{path}: no usable reading: all {values.size} values are NaN "
+                             "(the filter would report its prior as the estimate)")
         return times, values
 
     def emulator(self, *, cache_dir=None, progress=True, client=None):
@@ -139,23 +151,23 @@ class IdentifyConfig:
 
 def _num(key, v, *, positive=False, integer=False, lo=None, hi=None):
     if isinstance(v, bool) or not isinstance(v, (int, float)):
-        raise ConfigError(f"{key} must be a number, got {v!r}")
+        raise ConfigError(f"{key} must be a number, got {shorten(repr(v))}")
     if integer and (not isinstance(v, int) and not float(v).is_integer()):
-        raise ConfigError(f"{key} must be an integer, got {v!r}")
+        raise ConfigError(f"{key} must be an integer, got {shorten(repr(v))}")
     if not math.isfinite(v):
-        raise ConfigError(f"{key} must be finite, got {v!r}")
+        raise ConfigError(f"{key} must be finite, got {shorten(repr(v))}")
     if positive and v <= 0:
-        raise ConfigError(f"{key} must be > 0, got {v!r}")
+        raise ConfigError(f"{key} must be > 0, got {shorten(repr(v))}")
     if lo is not None and v < lo:
-        raise ConfigError(f"{key} must be >= {lo}, got {v!r}")
+        raise ConfigError(f"{key} must be >= {lo}, got {shorten(repr(v))}")
     if hi is not None and v > hi:
-        raise ConfigError(f"{key} must be <= {hi}, got {v!r}")
+        raise ConfigError(f"{key} must be <= {hi}, got {shorten(repr(v))}")
     return int(v) if integer else float(v)
 
 
 def _points(key, v, G) -> np.ndarray:
     if not isinstance(v, list) or not all(isinstance(r, list) and len(r) == 3 for r in v):
-        raise ConfigError(f"{key} must be a list of [x, y, z] points in cm, got {v!r}")
+        raise ConfigError(f"{key} must be a list of [x, y, z] points in cm, got {shorten(repr(v))}")
     pts = np.array([[_num(f"{key}[{i}][{j}]", c) for j, c in enumerate(r)]
                     for i, r in enumerate(v)], dtype=float).reshape(-1, 3)
     tol = 1e-9
@@ -168,15 +180,16 @@ def _points(key, v, G) -> np.ndarray:
 
 def _pair(key, v, positive=False):
     if not isinstance(v, list) or len(v) != 2:
-        raise ConfigError(f"{key} must be [lo, hi], got {v!r}")
+        raise ConfigError(f"{key} must be [lo, hi], got {shorten(repr(v))}")
     lo, hi = (_num(f"{key}[{i}]", x, positive=positive) for i, x in enumerate(v))
     if not lo < hi:
-        raise ConfigError(f"{key} must have lo < hi, got {v!r}")
+        raise ConfigError(f"{key} must have lo < hi, got {shorten(repr(v))}")
     return (lo, hi)
 
 
 def identify_config_from_dict(cfg: dict) -> IdentifyConfig:
     """Validate a parsed config for ``tissue-enkf identify``."""
+    _require_laser(cfg)
     model = model_from_config(cfg)
     G = model.G
     try:
@@ -196,7 +209,7 @@ def identify_config_from_dict(cfg: dict) -> IdentifyConfig:
     setup_kw["sensor_positions"] = positions
     setup_kw["sensor_noise_var"] = _num("sensors.noise_var", sens.get("noise_var", 0.01),
                                         positive=True)
-    default_tracked = [[0.0, 0.0, z] for z in (0.0, 0.1, 0.2) if z <= G.Lz]
+    default_tracked = tracked_points(TRACKED_DEPTHS, Lz=G.Lz).tolist()
     setup_kw["tracked_positions"] = _points("sensors.tracked",
                                             sens.get("tracked", default_tracked), G)
     if "camera" in sens:
@@ -208,7 +221,7 @@ def identify_config_from_dict(cfg: dict) -> IdentifyConfig:
                 raise ConfigError(f"sensors.camera.{k} is missing")
         shape = cam["shape"]
         if not (isinstance(shape, list) and len(shape) == 2):
-            raise ConfigError(f"sensors.camera.shape must be [ny, nx], got {shape!r}")
+            raise ConfigError(f"sensors.camera.shape must be [ny, nx], got {shorten(repr(shape))}")
         shape = tuple(_num(f"sensors.camera.shape[{i}]", v, integer=True, lo=1)
                       for i, v in enumerate(shape))
         xr, yr = _pair("sensors.camera.x_range", cam["x_range"]), \
@@ -230,22 +243,22 @@ def identify_config_from_dict(cfg: dict) -> IdentifyConfig:
         setup_kw["n_members"] = _num("filter.n_members", flt["n_members"], integer=True, lo=2)
     if "method" in flt:
         if flt["method"] not in ("enkf", "etkf"):
-            raise ConfigError(f"filter.method must be 'enkf' or 'etkf', got {flt['method']!r}")
+            raise ConfigError(f"filter.method must be 'enkf' or 'etkf', got {shorten(repr(flt['method']))}")
         setup_kw["method"] = flt["method"]
     else:
-        setup_kw["method"] = "etkf"
+        setup_kw["method"] = DEFAULT_METHOD
     if "estimate" in flt:
         est = flt["estimate"]
-        if est not in (["mua", "mus"], ["mua", "mus", "VHC", "TC"]):
-            raise ConfigError(f"filter.estimate must be [\"mua\", \"mus\"] or [\"mua\", \"mus\", "
-                              f"\"VHC\", \"TC\"], got {est!r}")
+        if not isinstance(est, list) or tuple(est) not in ESTIMATES:
+            raise ConfigError(f"filter.estimate must be one of {[list(e) for e in ESTIMATES]}, "
+                              f"got {shorten(repr(est))}")
         setup_kw["estimate"] = tuple(est)
     if "transforms" in flt and flt["transforms"] != "log":
         raise ConfigError(f"filter.transforms must be \"log\" (positive parameters), got "
-                          f"{flt['transforms']!r}")
+                          f"{shorten(repr(flt['transforms']))}")
     grid = flt.get("grid", [20, 20, 10])
     if not (isinstance(grid, list) and len(grid) == 3):
-        raise ConfigError(f"filter.grid must be [nx, ny, nz], got {grid!r}")
+        raise ConfigError(f"filter.grid must be [nx, ny, nz], got {shorten(repr(grid))}")
     grid = tuple(_num(f"filter.grid[{i}]", v, integer=True, lo=1) for i, v in enumerate(grid))
     if "prior_range" in flt:
         setup_kw["prior_range"] = _pair("filter.prior_range", flt["prior_range"], positive=True)
@@ -262,11 +275,11 @@ def identify_config_from_dict(cfg: dict) -> IdentifyConfig:
         setup_kw["seed"] = _num("filter.seed", flt["seed"], integer=True, lo=0)
     if "random_walk_std" in flt:
         rw = flt["random_walk_std"]
-        n = len(setup_kw.get("estimate", ("mua", "mus")))
+        n = len(setup_kw.get("estimate", ESTIMATES[0]))
         if isinstance(rw, list):
             if len(rw) != n:
                 raise ConfigError(f"filter.random_walk_std must be a number or {n} numbers "
-                                  f"(one per estimated parameter), got {rw!r}")
+                                  f"(one per estimated parameter), got {shorten(repr(rw))}")
             setup_kw["random_walk_std"] = [_num(f"filter.random_walk_std[{i}]", v, lo=0)
                                            for i, v in enumerate(rw)]
         else:
@@ -275,7 +288,7 @@ def identify_config_from_dict(cfg: dict) -> IdentifyConfig:
                        ("heat_mass", ("averaged", "lumped"))):
         if k in flt:
             if flt[k] not in allowed:
-                raise ConfigError(f"filter.{k} must be one of {allowed}, got {flt[k]!r}")
+                raise ConfigError(f"filter.{k} must be one of {allowed}, got {shorten(repr(flt[k]))}")
             setup_kw[k] = flt[k]
     emu = check_keys("filter.emulator", flt.get("emulator", {}), _EMULATOR_KEYS)
     emulator_kw = {}
@@ -295,7 +308,12 @@ def identify_config_from_dict(cfg: dict) -> IdentifyConfig:
                 f"[{p_lo:g}, {p_hi:g}] cm^-1 ({where})")
     exact = emu.get("exact", False)
     if not isinstance(exact, bool):
-        raise ConfigError(f"filter.emulator.exact must be true or false, got {exact!r}")
+        raise ConfigError(f"filter.emulator.exact must be true or false, got {shorten(repr(exact))}")
+    if "dt" in cfg.get("HS", {}):
+        setup_kw["max_dt"] = float(model.HS.dt)  # the filter's longest heat step
+        check_steps(model.HS.total_duration / model.HS.dt, "the filter's heat steps (HS.dt = "
+                    f"{model.HS.dt:g} s over {model.HS.total_duration:g} s of laser pulses)",
+                    "HS.dt")
     run_table(cfg)
     bounds = _bounds(flt.get("bounds", {}), setup_kw, m)
     data = _data_spec(cfg.get("data", {}), len(positions) + (
@@ -303,6 +321,9 @@ def identify_config_from_dict(cfg: dict) -> IdentifyConfig:
     try:
         out = IdentifyConfig(model, setup_kw, grid, emulator_kw, exact, cfg, bounds, data, rate)
         out.setup(absorption=lambda mua, mus: None)  # validates the filter settings
+        n_nodes = int(np.prod([n + 1 for n in grid]))
+        table = 0 if exact else emulator_kw.get("n_mua", 12) * emulator_kw.get("n_mus", 12)
+        check_filter(setup_kw.get("n_members", 50), n_nodes, table)
     except ConfigError:
         raise
     except ValueError as err:
@@ -310,10 +331,22 @@ def identify_config_from_dict(cfg: dict) -> IdentifyConfig:
     return out
 
 
+def _require_laser(cfg: dict) -> None:
+    """identify needs the laser: no silent defaults for what heats the tissue."""
+    hs = cfg.get("HS")
+    if not isinstance(hs, dict):
+        raise ConfigError("[HS] is missing: identify needs the laser and the start temperature "
+                          "(HS.P in W, HS.duration_on in s, HS.T_initial in deg C)")
+    missing = [k for k in _LASER_KEYS if k not in hs]
+    if missing:
+        raise ConfigError(f"HS.{missing[0]} is missing: identify needs the laser and the start "
+                          f"temperature ({', '.join('HS.' + k for k in _LASER_KEYS)})")
+
+
 def _prior(table, setup_kw: dict) -> dict:
     """``[filter.prior]``: a uniform prior [lo, hi] in physical units per parameter."""
-    names = setup_kw.get("estimate", ("mua", "mus"))
-    table = check_keys("filter.prior", table, set(_PARAMETERS))
+    names = setup_kw.get("estimate", ESTIMATES[0])
+    table = check_keys("filter.prior", table, set(PARAMETER_NAMES))
     extra = sorted(set(table) - set(names))
     if extra:
         raise ConfigError(f"filter.prior.{extra[0]}: {extra[0]} is not estimated "
@@ -334,8 +367,8 @@ def _bounds(table, setup_kw: dict, medium) -> np.ndarray | None:
     """``[filter.bounds]``: the physical range of each estimated parameter's mean."""
     from ..tissue import default_bounds
 
-    names = setup_kw.get("estimate", ("mua", "mus"))
-    table = check_keys("filter.bounds", table, set(_PARAMETERS))
+    names = setup_kw.get("estimate", ESTIMATES[0])
+    table = check_keys("filter.bounds", table, set(PARAMETER_NAMES))
     if not table:
         return None
     extra = sorted(set(table) - set(names))
@@ -361,17 +394,17 @@ def _data_spec(table, n_obs: int) -> DataSpec:
     spec = DataSpec()
     if "file" in table:
         if not isinstance(table["file"], str) or not table["file"]:
-            raise ConfigError(f"data.file must be a path (a string), got {table['file']!r}")
+            raise ConfigError(f"data.file must be a path (a string), got {shorten(repr(table['file']))}")
         spec.file = Path(table["file"])
     if "columns" in table:
         cols = table["columns"]
         if not (isinstance(cols, list) and all(isinstance(c, str) and c for c in cols)):
-            raise ConfigError(f"data.columns must be a list of column names, got {cols!r}")
+            raise ConfigError(f"data.columns must be a list of column names, got {shorten(repr(cols))}")
         if len(cols) != n_obs:
             raise ConfigError(f"data.columns names {len(cols)} columns, the config observes "
                               f"{n_obs} (sensors.positions, then camera pixels)")
         if len(set(cols)) != len(cols):
-            raise ConfigError(f"data.columns repeats a name: {cols!r}")
+            raise ConfigError(f"data.columns repeats a name: {shorten(repr(cols))}")
         spec.columns = list(cols)
     if "time_offset" in table:
         spec.time_offset = _num("data.time_offset", table["time_offset"])
@@ -388,8 +421,8 @@ def check_identify_keys(cfg: dict) -> None:
         check_keys("sensors.camera", sens["camera"], _CAMERA_KEYS)
     flt = check_keys("filter", cfg.get("filter", {}), _FILTER_KEYS)
     check_keys("filter.emulator", flt.get("emulator", {}), _EMULATOR_KEYS)
-    check_keys("filter.bounds", flt.get("bounds", {}), set(_PARAMETERS))
-    check_keys("filter.prior", flt.get("prior", {}), set(_PARAMETERS))
+    check_keys("filter.bounds", flt.get("bounds", {}), set(PARAMETER_NAMES))
+    check_keys("filter.prior", flt.get("prior", {}), set(PARAMETER_NAMES))
     check_keys("data", cfg.get("data", {}), _DATA_KEYS)
     run_table(cfg)
 
@@ -399,10 +432,10 @@ def run_table(cfg: dict) -> tuple[str | None, int | None]:
     run = check_keys("run", cfg.get("run", {}), {"scheduler", "workers"})
     scheduler, workers = run.get("scheduler"), run.get("workers")
     if scheduler is not None and not isinstance(scheduler, str):
-        raise ConfigError(f"run.scheduler must be an address string, got {scheduler!r}")
+        raise ConfigError(f"run.scheduler must be an address string, got {shorten(repr(scheduler))}")
     if workers is not None and (isinstance(workers, bool) or not isinstance(workers, int)
                                 or workers < 1):
-        raise ConfigError(f"run.workers must be an integer >= 1, got {workers!r}")
+        raise ConfigError(f"run.workers must be an integer >= 1, got {shorten(repr(workers))}")
     return scheduler, workers
 
 

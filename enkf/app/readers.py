@@ -9,12 +9,21 @@ in deg C, as for ``tissue-enkf identify``); the acquisition program appends one 
 per frame. :func:`follow_csv` reads each complete line as soon as it appears, runs one
 filter step (:class:`enkf.tissue.OnlineIdentifier`) and hands the estimate to a
 callback (which writes it) before it looks for the next line. It stops at a line
-``# end``, or when no line has come for ``idle_timeout_s`` seconds.
+``# end``, or when no line has come for ``idle_timeout_s`` seconds. A file that is
+replaced (deleted and written anew, or rotated) or truncated while it is followed is
+read again from its start, header first, after a warning.
+
+Files are UTF-8, with or without a byte-order mark (as spreadsheet programs write them);
+the header and the lines are parsed with the :mod:`csv` module, so quoted names
+(``"time","probe"``) are accepted. Error messages cut long values (:func:`shorten`).
 """
 
 from __future__ import annotations
 
+import csv
 import math
+import os
+import sys
 import time
 import zipfile
 from collections.abc import Callable
@@ -22,9 +31,44 @@ from pathlib import Path
 
 import numpy as np
 
+from mcmatlab_py.messages import shorten
+
 from ..tissue.image import ThermalImage
 
-__all__ = ["apply_time_offset", "follow_csv", "load_frames", "parse_line", "read_sensor_csv"]
+__all__ = ["apply_time_offset", "follow_csv", "load_frames", "parse_header", "parse_line",
+           "read_sensor_csv"]
+
+_BOM = "\ufeff"
+_TIME_NAMES = ("time", "t", "time_s")
+
+
+def _fields(line: str, where: str) -> list[str]:
+    """The comma-separated fields of one line, quotes removed (the csv module's rules)."""
+    try:
+        row = next(csv.reader([line.rstrip("\r\n")], skipinitialspace=True), [])
+    except csv.Error as err:
+        raise ValueError(f"{where}: not a CSV line ({err})") from None
+    return [f.strip() for f in row]
+
+
+def parse_header(line: str, where: str) -> list[str]:
+    """The column names of a header line: ``time`` (s) first, then one or more sensors.
+
+    A leading byte-order mark and quotes around names are removed. Raises ValueError
+    naming ``where`` for a first column that is not the time, no sensor column, or a
+    name given twice.
+    """
+    names = _fields(line.removeprefix(_BOM), where)
+    first = names[0] if names else ""
+    if first.lower() not in _TIME_NAMES:
+        raise ValueError(f"{where}: the first column must be 'time' (s), got "
+                         f"{shorten(repr(first))} (is this a CSV with a header?)")
+    if len(names) < 2:
+        raise ValueError(f"{where}: no sensor columns after 'time'")
+    if len(set(names)) != len(names):
+        dup = next(n for n in names if names.count(n) > 1)
+        raise ValueError(f"{where}: the header names column {shorten(repr(dup))} twice")
+    return names
 
 
 def parse_line(line: str, n_columns: int, where: str) -> tuple[float, np.ndarray]:
@@ -33,7 +77,7 @@ def parse_line(line: str, n_columns: int, where: str) -> tuple[float, np.ndarray
     Raises ValueError naming ``where`` (file and line) for a wrong field count, a field
     that is not a number, or an infinite or missing time.
     """
-    fields = [f.strip() for f in line.rstrip("\r\n").split(",")]
+    fields = _fields(line, where)
     if len(fields) != n_columns:
         raise ValueError(f"{where}: expected {n_columns} comma-separated fields, got {len(fields)}")
     vals = []
@@ -44,10 +88,12 @@ def parse_line(line: str, n_columns: int, where: str) -> tuple[float, np.ndarray
         try:
             vals.append(float(f))
         except ValueError:
-            raise ValueError(f"{where}: field {j + 1} is not a number: {f!r}") from None
+            raise ValueError(f"{where}: field {j + 1} is not a number: "
+                             f"{shorten(repr(f))}") from None
     v = np.array(vals)
     if not np.isfinite(v[0]):
-        raise ValueError(f"{where}: the time must be a finite number, got {fields[0]!r}")
+        raise ValueError(f"{where}: the time must be a finite number, got "
+                         f"{shorten(repr(fields[0]))}")
     if np.any(np.isinf(v[1:])):
         raise ValueError(f"{where}: a temperature is infinite (use an empty field for a gap)")
     return float(v[0]), v[1:]
@@ -55,7 +101,8 @@ def parse_line(line: str, n_columns: int, where: str) -> tuple[float, np.ndarray
 
 def follow_csv(path: str | Path, identifier, on_update: Callable, *, poll_s: float = 0.02,
                idle_timeout_s: float = 10.0, wait_for_file_s: float = 10.0,
-               columns: list[str] | None = None) -> int:
+               columns: list[str] | None = None,
+               warn: Callable[[str], None] | None = None) -> int:
     """Feed the lines of a growing CSV to ``identifier`` as they arrive.
 
     Parameters
@@ -66,15 +113,26 @@ def follow_csv(path: str | Path, identifier, on_update: Callable, *, poll_s: flo
     poll_s : float
         s between looks at the file when no complete line is waiting.
     idle_timeout_s : float
-        Stop after this long without a new line (a ``# end`` line stops at once).
+        s, > 0 and finite: stop after this long without a new line (a ``# end`` line
+        stops at once).
     columns : list of str, optional
         The expected header (``time`` first); default: ``time`` and one column per
         observation of the identifier.
+    warn : callable, optional
+        ``warn(message)`` when the file is replaced (a new file at ``path``: deleted and
+        written anew, or rotated) or truncated; it is then read from its start, header
+        first. Default: a ``warning: ...`` line on stderr.
 
     Returns
     -------
     int, the number of readings assimilated.
     """
+    if not (math.isfinite(idle_timeout_s) and idle_timeout_s > 0):
+        raise ValueError(f"idle_timeout_s must be a finite number of seconds > 0, got "
+                         f"{shorten(idle_timeout_s)}")
+    if warn is None:
+        def warn(message):
+            print(f"warning: {message}", file=sys.stderr)
     path = Path(path)
     deadline = time.monotonic() + wait_for_file_s
     while not path.exists():
@@ -83,8 +141,10 @@ def follow_csv(path: str | Path, identifier, on_update: Callable, *, poll_s: flo
         time.sleep(poll_s)
     n_expected = identifier.n_obs + 1
     count = 0
-    with open(path, encoding="utf-8", newline="") as fh:
-        buf = ""
+    # bytes, not text: the offset is then exact, to tell a truncated file from a read one
+    fh = open(path, "rb")
+    try:
+        buf = b""
         header = None
         line_no = 0
         last = time.monotonic()
@@ -92,11 +152,18 @@ def follow_csv(path: str | Path, identifier, on_update: Callable, *, poll_s: flo
             chunk = fh.readline()
             if chunk:
                 buf += chunk
-                if not buf.endswith("\n"):
+                if not buf.endswith(b"\n"):
                     continue  # the writer has not finished this line yet
-                line, buf = buf, ""
+                raw, buf = buf, b""
                 line_no += 1
                 last = time.monotonic()
+                where = f"{path}:{line_no}"
+                try:
+                    line = raw.decode("utf-8")
+                except UnicodeDecodeError:
+                    raise ValueError(f"{where}: not UTF-8 text") from None
+                if line_no == 1:
+                    line = line.removeprefix(_BOM)
                 text = line.strip()
                 if not text:
                     continue
@@ -104,15 +171,11 @@ def follow_csv(path: str | Path, identifier, on_update: Callable, *, poll_s: flo
                     if text.lower().startswith("# end"):
                         break
                     continue
-                where = f"{path}:{line_no}"
                 if header is None:
-                    header = [h.strip() for h in text.split(",")]
-                    if header[0].lower() not in ("time", "t", "time_s"):
-                        raise ValueError(f"{where}: the first column must be 'time' (s), "
-                                         f"got {header[0]!r}")
+                    header = parse_header(text, where)
                     if columns is not None and header != list(columns):
-                        raise ValueError(f"{where}: columns {header} differ from the expected "
-                                         f"{list(columns)}")
+                        raise ValueError(f"{where}: columns {shorten(header)} differ from the "
+                                         f"expected {list(columns)}")
                     if len(header) != n_expected:
                         raise ValueError(f"{where}: {len(header) - 1} data columns, the setup "
                                          f"observes {identifier.n_obs}")
@@ -122,10 +185,45 @@ def follow_csv(path: str | Path, identifier, on_update: Callable, *, poll_s: flo
                 count += 1
                 on_update(est, line_no)
                 continue
+            change = _replaced_or_truncated(path, fh)
+            if change == "truncated":
+                fh.seek(0)
+            elif change == "replaced":
+                try:
+                    new = open(path, "rb")
+                except FileNotFoundError:  # gone again between two looks: at the next poll
+                    change = None
+                else:
+                    fh.close()
+                    fh = new
+            if change is not None:
+                warn(f"--follow: {path} was {change} after line {line_no}; reading it from "
+                     "its start (header first)")
+                buf, header, line_no, last = b"", None, 0, time.monotonic()
+                continue
             if time.monotonic() - last > idle_timeout_s:
                 break
             time.sleep(poll_s)
+    finally:
+        fh.close()
     return count
+
+
+def _replaced_or_truncated(path: Path, fh) -> str | None:
+    """``"replaced"`` when ``path`` is now another file than the open ``fh`` (another inode:
+    deleted and written anew, or rotated), ``"truncated"`` when it is shorter than what
+    was read of it, else None (also while ``path`` is missing: the writer may be about to
+    create it again)."""
+    try:
+        now = os.stat(path)
+    except FileNotFoundError:
+        return None
+    was = os.fstat(fh.fileno())
+    if (now.st_ino, now.st_dev) != (was.st_ino, was.st_dev):
+        return "replaced"
+    if now.st_size < fh.tell():
+        return "truncated"
+    return None
 
 
 def apply_time_offset(path, times: np.ndarray, values: np.ndarray, offset: float | None):
@@ -165,7 +263,7 @@ def read_sensor_csv(path: str | Path, n_columns: int | None = None, *,
     """
     path = Path(path)
     try:
-        text = path.read_text(encoding="utf-8")
+        text = path.read_text(encoding="utf-8-sig")  # a byte-order mark is dropped
     except FileNotFoundError:
         raise ValueError(f"data file {str(path)!r} does not exist") from None
     except (OSError, UnicodeDecodeError) as err:
@@ -174,21 +272,12 @@ def read_sensor_csv(path: str | Path, n_columns: int | None = None, *,
              if ln.strip() and not ln.lstrip().startswith("#")]
     if not lines:
         raise ValueError(f"data file {str(path)!r} is empty (need a header: time, sensors...)")
-    _, head = lines[0]
-    names = [h.strip() for h in head.split(",")]
-    if names[0].lower() not in ("time", "t", "time_s"):
-        raise ValueError(f"{path}:{lines[0][0]}: the first column must be 'time' (s), got "
-                         f"{names[0]!r} (is this a CSV with a header?)")
-    if len(names) < 2:
-        raise ValueError(f"{path}:{lines[0][0]}: no sensor columns after 'time'")
-    if len(set(names)) != len(names):
-        dup = next(n for n in names if names.count(n) > 1)
-        raise ValueError(f"{path}:{lines[0][0]}: the header names column {dup!r} twice")
+    names = parse_header(lines[0][1], f"{path}:{lines[0][0]}")
     if columns is not None:
         missing = [c for c in columns if c not in names[1:]]
         if missing:
-            raise ValueError(f"{path}:{lines[0][0]}: missing column {missing[0]!r} (data.columns);"
-                             f" the header has {names}")
+            raise ValueError(f"{path}:{lines[0][0]}: missing column {shorten(repr(missing[0]))} "
+                             f"(data.columns); the header has {shorten(names)}")
         pick = [names.index(c) - 1 for c in columns]
     else:
         pick = list(range(len(names) - 1))
@@ -219,19 +308,36 @@ def load_frames(path: str | Path, image: ThermalImage | None = None
     """``(times (n,), frames (n, ny*nx))`` from an NPZ with ``times`` and ``frames``.
 
     Frames are (n, ny, nx) deg C, NaN for dead pixels; ``image`` checks the shape.
-    Raises ValueError naming the problem (missing array, wrong shape, Inf, unsorted or
-    duplicate times, no frames).
+    Raises ValueError naming the problem (not an NPZ (zip) file, missing array, complex
+    or non-numeric array, wrong shape, Inf, unsorted or duplicate times, no frames).
     """
     path = Path(path)
     try:
+        with open(path, "rb") as fh:
+            is_zip = zipfile.is_zipfile(fh)
+    except FileNotFoundError:
+        raise ValueError(f"data file {str(path)!r} does not exist") from None
+    except OSError as err:
+        raise ValueError(f"data file {str(path)!r} cannot be read: {err.strerror}") from None
+    if not is_zip:  # np.load would call it pickled data: e.g. a CSV renamed .npz
+        raise ValueError(f"{path}: not a readable NPZ file: it is not a zip archive (numpy.savez "
+                         "writes NPZ files as zip archives of arrays; is it a CSV or .npy?)")
+    try:
         with np.load(path, allow_pickle=False) as f:
-            arrays = {k: np.asarray(f[k], float) for k in ("times", "frames") if k in f.files}
-    except (OSError, EOFError, ValueError, zipfile.BadZipFile) as exc:
+            arrays = {k: f[k] for k in ("times", "frames") if k in f.files}
+    except (OSError, EOFError, zipfile.BadZipFile) as exc:
         raise ValueError(f"{path}: not a readable NPZ file ({exc})") from exc
+    except ValueError as exc:  # an object array (pickled data), a damaged member
+        raise ValueError(f"{path}: not a readable NPZ file ({shorten(str(exc))})") from exc
     missing = [k for k in ("times", "frames") if k not in arrays]
     if missing:
         raise ValueError(f"{path}: missing array(s) {missing} (need 'times' and 'frames')")
-    times, frames = arrays["times"], arrays["frames"]
+    for k, a in arrays.items():
+        if np.iscomplexobj(a):  # a float cast would drop the imaginary part silently
+            raise ValueError(f"{path}: {k!r} is complex ({a.dtype}); it must hold real numbers")
+        if a.dtype.kind not in "biuf":
+            raise ValueError(f"{path}: {k!r} must hold numbers, got dtype {a.dtype}")
+    times, frames = (np.asarray(arrays[k], float) for k in ("times", "frames"))
     if times.ndim != 1 or times.size == 0:
         raise ValueError(f"{path}: 'times' must be a non-empty 1-D array, got shape {times.shape}")
     if frames.ndim != 3 or frames.shape[0] != times.size:

@@ -44,15 +44,15 @@ def sensitivity_study(grid=(100, 100, 50), n_photons: int = 10**6, *, progress=T
     loads = np.array([L @ na.ravel() for na in maps])
     stepper = fem.HeatStepper(mesh, TABLE["VHC"], TABLE["TC"], HS.dt)
     probe = fem.probe_matrix(mesh, np.zeros((3, 1)))
-    T = np.zeros((len(cases), mesh.p.shape[1]))
-    times = HS.step_times()
-    out = [np.zeros(len(cases))]
-    for t in times:
-        power = HS.laser_power(t - 0.5 * HS.dt)
-        T = stepper.step(T, power * loads if power else None)
-        out.append((probe @ T.T)[0])
-    out = np.array(out)
-    res = {"times": np.r_[0.0, times], "mua": {}, "mus": {}}
+    times = np.r_[0.0, HS.step_times()]
+
+    def step(T, t0, t1):
+        power = HS.laser_power(t1 - 0.5 * HS.dt)
+        return stepper.step(T, power * loads if power else None)
+
+    _, readings = fem.march(step, np.zeros((len(cases), mesh.p.shape[1])), times, probe)
+    out = readings[:, :, 0]  # (n_times, n_cases)
+    res = {"times": times, "mua": {}, "mus": {}}
     for i, (which, v, _, _) in enumerate(cases):
         res[which][v] = out[:, i]
     return res

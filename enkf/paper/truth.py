@@ -115,15 +115,15 @@ def twin_truth(scenario: str, emulator, like: Truth, coarse=(20, 20, 10)) -> Tru
     setup = filter_setup(scenario, emulator, n_members=1, coarse=coarse)  # its laser
     model = TissueForwardModel(setup)
     probes = fem.probe_matrix(model.mesh, setup.tracked_positions.T)
-    T = np.full((1, model.mesh.p.shape[1]), setup.T_initial)
     times = like.times
-    temps = [probes @ T[0]]
-    for t0, t1 in zip(times[:-1], times[1:], strict=True):
+
+    def step(T, t0, t1):
         p = true_parameters(scenario, np.array([0.5 * (t0 + t1)]))
-        theta = np.array([[p[k][0] for k in PARAMETER_NAMES]])
-        T = model(T, theta, float(t0), float(t1))
-        temps.append(probes @ T[0])
-    return Truth(times, np.array(temps), true_parameters(scenario, times), 0.0)
+        return model(T, np.array([[p[k][0] for k in PARAMETER_NAMES]]), t0, t1)
+
+    _, temps = fem.march(step, np.full((1, model.mesh.p.shape[1]), setup.T_initial), times,
+                         probes)
+    return Truth(times, temps[:, 0, :], true_parameters(scenario, times), 0.0)
 
 
 def noisy_sensor(truth: Truth, seed: int, variance: float = 0.01) -> np.ndarray:

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 import warnings
 
 import numpy as np
@@ -88,8 +89,14 @@ class TissueForwardModel:
         return self.stepper(t1 - t0).step(E_state, load, **kw)
 
     def __call__(self, E_state: np.ndarray, theta: np.ndarray, t0: float, t1: float):
-        """The filter's forecast: :meth:`step` at the laser power of the interval's middle."""
-        return self.step(E_state, theta, t0, t1, self.setup.power(0.5 * (t0 + t1)))
+        """The filter's forecast from ``t0`` to ``t1``: :meth:`step` at the laser power of the
+        interval's middle, in equal sub-steps no longer than ``setup.max_dt``."""
+        max_dt = self.setup.max_dt
+        n = 1 if max_dt is None else max(1, math.ceil((t1 - t0) / max_dt - 1e-9))
+        edges = np.linspace(t0, t1, n + 1) if n > 1 else (t0, t1)
+        for a, b in zip(edges[:-1], edges[1:], strict=True):
+            E_state = self.step(E_state, theta, float(a), float(b), self.setup.power(0.5 * (a + b)))
+        return E_state
 
 
 def observation_operator(setup: TissueFilterSetup, mesh):

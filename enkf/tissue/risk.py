@@ -15,7 +15,9 @@ is accumulated per member and node with the trapezoidal rule in the rate,
 .. math::
 
     \Omega_n \mathrel{+}= \tfrac{\Delta t}{2}\,\big(k(T_n^{j}) + k(T_n^{j+1})\big),
-    \qquad k(T) = A\, e^{-E / (R (T + 273.15))}.
+    \qquad k(T) = A\, e^{-E / (R (T + 273.15))}
+
+(:func:`fem.advance_damage` with ``rule="trapezoid"``, the project's one Arrhenius kernel).
 
 From the ensemble, at every node and at the recorded times:
 
@@ -37,49 +39,28 @@ Use it as the callback of :func:`enkf.tissue.identify` (or :func:`enkf.driver.ru
     tracker.write_vtu("risk.pvd", setup.grid.mesh())        # ParaView / pyvista series
     plot_depth_maps("risk.png", tracker.snapshots, setup.grid)
 
-Memory: four ``(N, n_nodes)`` arrays (damage, last rate and state, exceedance so far), plus
-``6 n_nodes`` numbers per recorded snapshot; ``N = 50`` members on 4,851 nodes is 6 MB.
+Memory: three ``(N, n_nodes)`` arrays (damage, last state, exceedance so far), plus
+``6 n_nodes`` numbers per recorded snapshot; ``N = 50`` members on 4,851 nodes is 4 MB.
 """
 
 from __future__ import annotations
 
-import math
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 
-import numba
 import numpy as np
+
+import fem
 
 __all__ = ["MCMATLAB_A", "MCMATLAB_E", "RiskSnapshot", "RiskTracker", "plot_depth_maps",
            "xz_slice"]
 
-GAS_CONSTANT = 8.3144598  #: J mol^-1 K^-1, MCmatlab's value (as fem.damage)
-KELVIN = 273.15
 #: J/mol and 1/s: the Arrhenius parameters MCmatlab's media library gives its tissues
 #: (blood, vessel and example tissues, marked there "PLACEHOLDER DATA ONLY"). At 60 deg C
 #: they give a rate of 3.2 /s, so Omega = 1 is reached in 0.3 s; at 50 deg C in 35 s.
 MCMATLAB_E = 422.5e3
 MCMATLAB_A = 7.6e66
-
-
-# ------------------------------------------------------------------------------ kernel
-@numba.njit(cache=True)
-def _advance(omega, rate, ever, T, log_A, E_over_R, half_dt, T_threshold):  # pragma: no cover
-    """One trapezoid step of the damage integral, in place.
-
-    omega, rate : (N, n) damage so far and the Arrhenius rate (1/s) at the last state;
-    ever : (N, n) bool; T : (N, n) deg C, the new state; log_A, E_over_R : (n,) (K).
-    With ``half_dt = 0`` only the rates and ``ever`` are set (the first state).
-    """
-    N, n = T.shape
-    for m in range(N):
-        for i in range(n):
-            r = math.exp(log_A[i] - E_over_R[i] / (T[m, i] + KELVIN))  # log A = -inf: 0
-            omega[m, i] += half_dt * (rate[m, i] + r)
-            rate[m, i] = r
-            if T[m, i] > T_threshold:
-                ever[m, i] = True
 
 
 # ------------------------------------------------------------------------------ data
@@ -147,7 +128,6 @@ class RiskTracker:
     snapshots: list = field(default_factory=list, init=False)
     omega: np.ndarray | None = field(default=None, init=False)
     time: float | None = field(default=None, init=False)
-    _rate: np.ndarray | None = field(default=None, init=False, repr=False)
     _ever: np.ndarray | None = field(default=None, init=False, repr=False)
     _X: np.ndarray | None = field(default=None, init=False, repr=False)  #: last ensemble
     _pending: list = field(default_factory=list, init=False, repr=False)
@@ -194,7 +174,7 @@ class RiskTracker:
     # -------------------------------------------------------------- following a run
     def _reset(self) -> None:
         self.snapshots = []
-        self.omega = self._rate = self._ever = self._X = None
+        self.omega = self._ever = self._X = None
         self.time = None
         self._step = -1
         self._pending = list(self.record_times) if self.record_times is not None else []
@@ -216,7 +196,7 @@ class RiskTracker:
         if not np.isfinite(time):
             raise ValueError(f"time must be finite (s), got {time!r}")
         lo, hi = float(X.min()), float(X.max())
-        if not (lo > -KELVIN and np.isfinite(hi)):
+        if not (lo > -fem.KELVIN and np.isfinite(hi)):
             raise ValueError(f"state_ensemble must be finite temperatures above -273.15 deg C, "
                              f"got min {lo!r}, max {hi!r}")
         step = self._step + 1 if step is None else int(step)
@@ -229,22 +209,17 @@ class RiskTracker:
                 if v.ndim == 1 and v.shape != (n,):
                     raise ValueError(f"RiskTracker.{name} has shape {v.shape}, the ensemble "
                                      f"has {n} nodes: give a scalar or ({n},)")
-            with np.errstate(divide="ignore"):
-                self._log_A = np.broadcast_to(np.log(self.A), (n,)).astype(float)
-            self._E_over_R = np.broadcast_to(self.E / GAS_CONSTANT, (n,)).astype(float)
             self.omega = np.zeros_like(X)
-            self._rate = np.zeros_like(X)
             self._ever = np.zeros(X.shape, dtype=bool)
-            half_dt = 0.0
         else:
             if X.shape != self.omega.shape:
                 raise ValueError(f"state_ensemble has shape {X.shape}, the run so far "
                                  f"{self.omega.shape}")
             if time <= self.time:
                 raise ValueError(f"time must increase: got {time!r} s after {self.time!r} s")
-            half_dt = 0.5 * (time - self.time)
-        _advance(self.omega, self._rate, self._ever, np.ascontiguousarray(X), self._log_A,
-                 self._E_over_R, half_dt, float(self.T_threshold))
+            fem.advance_damage(self.omega, self._X, X, time - self.time, self.E, self.A,
+                               rule="trapezoid")
+        self._ever |= X > self.T_threshold
         self.time, self._step = time, step
         self._X = X.copy()  # the driver's arrays are views of its working ensemble
         if self._due(step, time):
@@ -286,8 +261,6 @@ class RiskTracker:
     def write_vtu(self, path, mesh, which: int = -1) -> Path:
         """Write the snapshots: a ``.pvd`` path gives the whole series (one VTU per
         snapshot, for ParaView or pyvista), a ``.vtu`` path the snapshot ``which``."""
-        import fem
-
         if not self.snapshots:
             raise ValueError("RiskTracker.write_vtu: no snapshots recorded")
         path = Path(path)

@@ -87,6 +87,9 @@ class TissueFilterSetup:
     mda: int = 1  #: analysis iterations per step (see enkf.driver.FilterConfig.mda)
     seed: int = 0
     theta: float = 1.0  #: time scheme of the heat steps (1: backward Euler)
+    #: s, the longest heat step of the forecast (``[HS] dt`` in a config): an interval between
+    #: readings longer than this is split into equal sub-steps. None: one step per interval
+    max_dt: float | None = None
     #: "kronecker" (default): the tensor-product operator of :class:`fem.HeatStepper`, equal
     #: to P1 away from the box edges, with no per-member cost when VHC and TC are estimated;
     #: "p1": the exact P1 matrices (an edge correction per new pair of member scales)
@@ -135,6 +138,8 @@ class TissueFilterSetup:
         if self.parameter_model not in ("random_walk", "trend"):
             raise ValueError(f"parameter_model must be 'random_walk' or 'trend', got "
                              f"{self.parameter_model!r}")
+        if self.max_dt is not None and not (np.isfinite(self.max_dt) and self.max_dt > 0):
+            raise ValueError(f"max_dt must be > 0 (s) or None, got {self.max_dt!r}")
         for name in ("model_noise_std", "trend_prior_std"):
             if not (np.isfinite(getattr(self, name)) and getattr(self, name) >= 0):
                 raise ValueError(f"{name} must be >= 0, got {getattr(self, name)!r}")
