@@ -25,6 +25,7 @@ import numpy as np
 from skfem import MeshTet
 
 from . import _kernels
+from .checks import check_number
 
 __all__ = [
     "BoxGrid",
@@ -37,16 +38,11 @@ __all__ = [
 
 
 def _positive_int(name: str, value) -> int:
-    if isinstance(value, bool) or not float(value).is_integer() or int(value) < 1:
-        raise ValueError(f"{name} must be a positive integer, got {value!r}")
-    return int(value)
+    return check_number(name, value, integer=True, lo=1)
 
 
 def _positive_float(name: str, value) -> float:
-    v = float(value)
-    if not np.isfinite(v) or v <= 0.0:
-        raise ValueError(f"{name} must be a positive finite number, got {value!r}")
-    return v
+    return check_number(name, value, lo=0.0, lo_open=True)
 
 
 @dataclass(frozen=True)

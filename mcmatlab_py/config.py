@@ -45,6 +45,8 @@ from pathlib import Path
 
 import numpy as np
 
+from fem.checks import check_number
+
 from .media import Medium
 from .messages import shorten
 from .model import Model
@@ -101,9 +103,7 @@ def check_keys(section: str, table, allowed: set[str]) -> dict:
 
 
 def _number(key: str, value) -> float:
-    if isinstance(value, bool) or not isinstance(value, (int, float)):
-        raise ConfigError(f"{key} must be a number, got {shorten(repr(value))}")
-    return float(value)
+    return check_number(key, value, allow_inf=True, error=ConfigError)
 
 
 def _region_map(regions: list) -> callable:

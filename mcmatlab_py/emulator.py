@@ -42,6 +42,7 @@ __all__ = [
     "interpolate_log_na",
     "symmetrize",
     "table_point",
+    "usable_cache_dir",
 ]
 
 CACHE_VERSION = 5
@@ -353,6 +354,8 @@ class AbsorptionEmulator:
         if loaded is not None:
             return cls(spec=spec, log_na=loaded["log_na"], absorbed=loaded["absorbed"],
                        out_of_range=out_of_range, build_seconds=float(loaded["build_seconds"]))
+        cache = usable_cache_dir(cache)  # before minutes of Monte Carlo, not after
+        path = cache / path.name
         # cost grows with mus: do the expensive column first so the ETA is honest
         points = [(a, b) for b in range(spec.n_mus)[::-1] for a in range(spec.n_mua)]
         t0 = time.perf_counter()
@@ -433,6 +436,26 @@ def _checksum(*arrays) -> str:
     for a in arrays:
         h.update(np.ascontiguousarray(a).tobytes())
     return h.hexdigest()
+
+
+def usable_cache_dir(cache: Path) -> Path:
+    """``cache`` if a table can be written there; else a temporary folder, with a warning
+    that says why (the table is then rebuilt by the next run)."""
+    import tempfile
+
+    try:
+        cache.mkdir(parents=True, exist_ok=True)
+        with tempfile.NamedTemporaryFile(dir=cache, prefix=".probe-"):
+            pass
+        return cache
+    except OSError as err:
+        why = err.strerror or type(err).__name__
+        tmp = Path(tempfile.mkdtemp(prefix="tissue-enkf-cache-"))
+        warnings.warn(f"the cache folder {str(cache)!r} cannot be written ({why}); the "
+                      f"emulator table goes to {tmp} and is lost after this run (set "
+                      "TISSUE_ENKF_CACHE or --cache-dir to a writable folder)",
+                      RuntimeWarning, stacklevel=3)
+        return tmp
 
 
 def _store(path: Path, spec: EmulatorSpec, log_na, absorbed, seconds) -> None:

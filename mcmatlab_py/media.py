@@ -12,11 +12,12 @@ sub-media (see :mod:`mcmatlab_py.media_bins`).
 from __future__ import annotations
 
 import inspect
-import math
 from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
+
+from fem.checks import check_number
 
 from ._strict import StrictAttributes
 
@@ -24,6 +25,12 @@ __all__ = ["Medium", "check_positive"]
 
 OPTICAL_FIELDS = ("mua", "mus", "g")  #: may depend on (wavelength, FR, T, FD)
 THERMAL_FIELDS = ("VHC", "TC")  #: may depend on (T, FD)
+#: upper limits of user-given fields, far beyond any tissue or laser but small enough that
+#: no product in the simulations overflows (G.Lz = 1e300 or mua = 1e300 gave tracebacks
+#: and nonsense): cm^-1, J cm^-3 K^-1, W cm^-1 K^-1, J/mol, 1/s, cm, W, s, W cm^-2 K^-1
+LIMITS = {"mua": 1e6, "mus": 1e6, "VHC": 1e3, "TC": 1e3, "E": 1e8, "A": 1e250,
+          "Lx": 1e3, "Ly": 1e3, "Lz": 1e3, "radius": 1e3, "P": 1e6, "duration_on": 1e7,
+          "duration_off": 1e7, "dt": 1e7, "heat_transfer_coefficient": 1e3}
 
 #: field -> (accepted argument counts of a function, what they are)
 _ARITIES = {
@@ -37,17 +44,10 @@ _ARITIES = {
 
 
 def check_positive(owner: str, field: str, value, *, allow_zero: bool = False) -> float:
-    """Return ``value`` as float, or raise ValueError naming ``owner.field`` and the value."""
-    try:
-        v = float(value)
-    except (TypeError, ValueError):
-        raise ValueError(f"{owner}.{field} must be a number, got {value!r}") from None
-    if math.isnan(v) or math.isinf(v):
-        raise ValueError(f"{owner}.{field} must be finite, got {value!r}")
-    if v < 0 or (v == 0 and not allow_zero):
-        bound = ">= 0" if allow_zero else "> 0"
-        raise ValueError(f"{owner}.{field} must be {bound}, got {value!r}")
-    return v
+    """Return ``value`` as float, or raise ValueError naming ``owner.field`` and the value
+    (:func:`fem.checks.check_number` with ``lo = 0``, ``hi``: the field's physical limit)."""
+    return check_number(f"{owner}.{field}", value, lo=0.0, lo_open=not allow_zero,
+                        hi=LIMITS.get(field))
 
 
 def _range_problem(field: str, v: np.ndarray) -> str | None:
@@ -60,6 +60,8 @@ def _range_problem(field: str, v: np.ndarray) -> str | None:
         return "must be finite"
     if field == "g":
         return "must be in [-1, 1]" if (np.abs(v) > 1).any() else None
+    if field in LIMITS and (v > LIMITS[field]).any():
+        return f"must be <= {LIMITS[field]:g}"
     if field in THERMAL_FIELDS:
         return "must be > 0" if (v <= 0).any() else None
     return "must be >= 0" if (v < 0).any() else None  # mua, mus, E, A

@@ -13,6 +13,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from fem.checks import check_number
+
 from ._strict import NotBuiltError, StrictAttributes
 from .light_source import (
     SOURCE_TYPES,  # noqa: F401  (re-exported)
@@ -23,6 +25,9 @@ from .light_source import (
 from .media import Medium, check_positive, n_arguments
 from .media_bins import state_field
 
+#: every launched packet is accounted for in fixed point: the balance is 1 to rounding
+ENERGY_TOLERANCE = 1e-9
+MIN_VOXEL_SIZE = 1e-7  #: cm: smaller voxels make the kernel's face distances underflow
 BOUNDARY_TYPES = {
     0: "no escaping boundaries",
     1: "all cuboid boundaries escape",
@@ -31,15 +36,12 @@ BOUNDARY_TYPES = {
 }
 
 
-def _check_int(owner: str, name: str, value, minimum: int = 1) -> int:
-    if isinstance(value, bool) or not isinstance(value, (int, np.integer)):
-        if isinstance(value, float) and value.is_integer():
-            value = int(value)
-        else:
-            raise ValueError(f"{owner}.{name} must be an integer, got {value!r}")
-    if value < minimum:
-        raise ValueError(f"{owner}.{name} must be >= {minimum}, got {value!r}")
-    return int(value)
+def _check_int(owner: str, name: str, value, minimum: int = 1, maximum: int | None = None) -> int:
+    return check_number(f"{owner}.{name}", value, integer=True, lo=minimum, hi=maximum)
+
+
+class EnergyBalanceError(ValueError):
+    """A Monte Carlo run whose energy balance is not 1: its results are not to be used."""
 
 
 @dataclass
@@ -80,6 +82,10 @@ class Geometry(StrictAttributes):
                              f"hold (limit {self.MAX_VOXELS}: medium map and tallies)")
         for name in ("Lx", "Ly", "Lz"):
             setattr(self, name, check_positive("G", name, getattr(self, name)))
+        for L, n in (("Lx", "nx"), ("Ly", "ny"), ("Lz", "nz")):
+            if getattr(self, L) / getattr(self, n) < MIN_VOXEL_SIZE:
+                raise ValueError(f"G.{L} / G.{n} = {getattr(self, L) / getattr(self, n):.3g} cm is "
+                                 f"below the smallest voxel size {MIN_VOXEL_SIZE:g} cm (1 nm)")
         if not self.media:
             raise ValueError("G.media must hold at least one Medium, got []")
         for i, m in enumerate(self.media):
@@ -364,6 +370,13 @@ class Model(StrictAttributes):
         from .monte_carlo import run_monte_carlo
 
         run_monte_carlo(self, client=client)
+        balance = self.MC.energy_balance
+        if not abs(balance - 1.0) <= ENERGY_TOLERANCE:
+            raise EnergyBalanceError(
+                f"the Monte Carlo lost track of its energy: absorbed + escaped + the rest = "
+                f"{balance!r} of the launched power, not 1 (absorbed fraction "
+                f"{self.MC.absorbed_fraction!r}); the inputs are beyond what the kernel "
+                "resolves: check the media's mua and mus and the geometry")
         return self
 
     def simulate_heat_distribution(self) -> Model:

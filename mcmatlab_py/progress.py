@@ -38,7 +38,7 @@ class Progress:
         interactive = bool(getattr(stream, "isatty", lambda: False)())
         self.total = max(float(total), 1e-300)
         self._bar = tqdm(total=float(total), desc=label, disable=not enabled, delay=delay,
-                         file=stream, leave=False, dynamic_ncols=True,
+                         file=stream, leave=not interactive, dynamic_ncols=True,
                          mininterval=0.2 if interactive else 10.0,
                          bar_format="{desc}: {percentage:5.1f}%|{bar:30}| {elapsed}<{remaining}"
                                     " {postfix}")
@@ -48,10 +48,9 @@ class Progress:
         bar = self._bar
         if bar.disable:
             return
-        bar.n = min(float(done), bar.total)
         if extra:
             bar.set_postfix_str(extra, refresh=False)
-        bar.refresh() if bar.n >= bar.total else bar.update(0)
+        bar.update(min(float(done), bar.total) - bar.n)  # tqdm takes increments
 
     def close(self) -> None:
         self._bar.close()

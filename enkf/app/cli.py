@@ -10,6 +10,7 @@ import argparse
 import signal
 import sys
 import threading
+import warnings
 
 from .. import __version__
 from .cmd_identify import cmd_identify
@@ -180,6 +181,8 @@ def main(argv=None) -> int:
     from . import report
 
     report.command_line = ["tissue-enkf", *(sys.argv[1:] if argv is None else argv)]
+    if not args.debug:  # a warning is one line for the user, not a source excerpt
+        warnings.formatwarning = lambda message, *a, **k: f"warning: {message}\n"
     old = None
     if threading.current_thread() is threading.main_thread():
         old = signal.signal(signal.SIGTERM, _on_sigterm)

@@ -1,0 +1,57 @@
+"""Checks of user-given numbers, shared by every package (fem is the lowest layer).
+
+One implementation: :func:`check_number` refuses what is not a real number (a string
+such as ``"0.5"``, a bool, None), what is not finite, not an integer when one is needed,
+or outside a physically sensible range, with a ``ValueError`` (or the caller's subclass)
+that names the field and shows the value, cut to one short line by :func:`shorten`.
+"""
+
+from __future__ import annotations
+
+import math
+import numbers
+
+__all__ = ["check_number", "shorten"]
+
+
+def shorten(value, limit: int = 80) -> str:
+    """``value`` as text (a ``str`` as it is, anything else as its ``repr``), on one line
+    and cut to ``limit`` characters followed by ``...`` and the full length.
+
+    Pass ``repr(value)`` to keep the quotes of a string: ``shorten(repr("x" * 10**5))``
+    gives ``'xxx...x... (100002 characters)``.
+    """
+    text = value if isinstance(value, str) else repr(value)
+    text = text.replace("\r", " ").replace("\n", " ")
+    return text if len(text) <= limit else f"{text[:limit]}... ({len(text)} characters)"
+
+
+def check_number(name: str, value, *, integer: bool = False, lo: float | None = None,
+                 hi: float | None = None, lo_open: bool = False, allow_inf: bool = False,
+                 error: type[ValueError] = ValueError) -> float | int:
+    """``value`` as a float (or an int with ``integer``), or ``error`` naming ``name``.
+
+    Parameters
+    ----------
+    name : str
+        The field as the user wrote it (``"G.Lx"``, ``"filter.n_members"``).
+    integer : bool
+        Require an integer (a float with no fraction, such as ``3.0``, is accepted).
+    lo, hi : float, optional
+        The allowed range, inclusive (``lo_open``: ``lo`` itself is refused).
+    allow_inf : bool
+        Accept +-inf (a perfect reflector's refractive index); NaN never.
+    """
+    if isinstance(value, bool) or not isinstance(value, numbers.Real):
+        kind = "an integer" if integer else "a number"
+        raise error(f"{name} must be {kind}, got {shorten(repr(value))}")
+    v = float(value)
+    if math.isnan(v) or (math.isinf(v) and not allow_inf):
+        raise error(f"{name} must be finite, got {shorten(repr(value))}")
+    if integer and not (math.isfinite(v) and v.is_integer()):
+        raise error(f"{name} must be an integer, got {shorten(repr(value))}")
+    if lo is not None and (v < lo or (lo_open and v == lo)):
+        raise error(f"{name} must be {'>' if lo_open else '>='} {lo:g}, got {shorten(repr(value))}")
+    if hi is not None and v > hi:
+        raise error(f"{name} must be <= {hi:g}, got {shorten(repr(value))}")
+    return int(value) if integer else v
