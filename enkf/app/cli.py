@@ -12,6 +12,8 @@ import sys
 import threading
 import warnings
 
+from fem.checks import check_number
+
 from .. import __version__
 from .cmd_identify import cmd_identify
 from .cmd_model import cmd_heat, cmd_mc
@@ -188,8 +190,8 @@ def main(argv=None) -> int:
         old = signal.signal(signal.SIGTERM, _on_sigterm)
     try:
         seed = getattr(args, "seed", None)
-        if seed is not None and not 0 <= seed <= MAX_SEED:
-            raise ValueError(f"--seed must be in [0, {MAX_SEED}], got {shorten(seed)}")
+        if seed is not None:
+            check_number("--seed", seed, integer=True, lo=0, hi=MAX_SEED)
         return args.func(args)
     except KeyboardInterrupt as exc:  # `outcome`: what a command kept (identify --follow)
         print(f"interrupted: {getattr(exc, 'outcome', 'nothing written')}", file=sys.stderr)

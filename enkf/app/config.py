@@ -33,12 +33,12 @@ Every key is checked on load: an unknown key, a wrong type or a bad value raises
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
+from fem.checks import check_number
 from mcmatlab_py.budget import check_filter, check_steps
 from mcmatlab_py.config import ConfigError, check_keys, model_from_config, read_toml
 from mcmatlab_py.messages import shorten
@@ -149,20 +149,27 @@ class IdentifyConfig:
             heat_boundary=boundary, **kw)
 
 
+#: upper limits of the config's numbers: far beyond any use, small enough that nothing
+#: overflows (filter.model_noise_std = 1e300 gave a traceback): deg C^2, Hz, deg C, log
+#: units, cm, counts, s
+_LIMITS = {"sensors.noise_var": 1e4, "sensors.camera.noise_var": 1e4, "sensors.rate": 1e6,
+           "sensors.camera.shape": 4096, "sensors.camera.subsamples": 64,
+           "filter.n_members": 100_000, "filter.grid": 1000, "filter.model_noise_std": 100.0,
+           "filter.random_walk_std": 10.0, "filter.random_walk_when_off": 10.0,
+           "filter.inflation": 100.0, "filter.localization_radius": 1e3, "filter.mda": 100,
+           "filter.seed": 2**63 - 1, "filter.emulator.n_photons": 10**11,
+           "filter.emulator.n_mua": 1000, "filter.emulator.n_mus": 1000,
+           "filter.emulator.seed": 2**63 - 1, "data.time_offset": 1e9}
+
+
 def _num(key, v, *, positive=False, integer=False, lo=None, hi=None):
-    if isinstance(v, bool) or not isinstance(v, (int, float)):
-        raise ConfigError(f"{key} must be a number, got {shorten(repr(v))}")
-    if integer and (not isinstance(v, int) and not float(v).is_integer()):
-        raise ConfigError(f"{key} must be an integer, got {shorten(repr(v))}")
-    if not math.isfinite(v):
-        raise ConfigError(f"{key} must be finite, got {shorten(repr(v))}")
-    if positive and v <= 0:
-        raise ConfigError(f"{key} must be > 0, got {shorten(repr(v))}")
-    if lo is not None and v < lo:
-        raise ConfigError(f"{key} must be >= {lo}, got {shorten(repr(v))}")
-    if hi is not None and v > hi:
-        raise ConfigError(f"{key} must be <= {hi}, got {shorten(repr(v))}")
-    return int(v) if integer else float(v)
+    """:func:`fem.checks.check_number` with the key's limit from :data:`_LIMITS`."""
+    if hi is None:
+        hi = _LIMITS.get(key.split("[")[0])
+    if positive:
+        lo = 0.0
+    return check_number(key, v, integer=integer, lo=lo, hi=hi, lo_open=positive,
+                        error=ConfigError)
 
 
 def _points(key, v, G) -> np.ndarray:
