@@ -107,7 +107,7 @@ def _hg_cos(g, xi):
     """Henyey-Greenstein deflection cosine from a uniform ``xi``."""
     if g == 0.0:
         return 2.0 * xi - 1.0
-    if g >= 1.0 or g <= -1.0:  # the limits: no deflection, or straight back
+    if abs(g) >= 1.0:  # the limits: no deflection, or straight back
         return g
     tmp = (1.0 - g * g) / (1.0 - g + 2.0 * g * xi)
     c = (1.0 + g * g - tmp * tmp) / (2.0 * g)
@@ -522,11 +522,14 @@ def transport_batch(
                     break
             s0, s1, s2, s3, r1 = next_double(s0, s1, s2, s3)
             s0, s1, s2, s3, r2 = next_double(s0, s1, s2, s3)
-            row = phase_idx[m]
-            if row < 0:
+            if phase_idx is None:  # no tabulated phase function: pruned at compile time
                 cost = _hg_cos(g[m], r1)
             else:
-                cost = math.cos(math.pi * sample_pwl(phase_tab[row], 0, n_table, r1))
+                row = phase_idx[m]
+                if row < 0:
+                    cost = _hg_cos(g[m], r1)
+                else:
+                    cost = math.cos(math.pi * sample_pwl(phase_tab[row], 0, n_table, r1))
             ux, uy, uz = _spin(ux, uy, uz, cost, 2.0 * math.pi * r2)
             if w < w_thr:
                 if roulette:

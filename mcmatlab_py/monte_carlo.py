@@ -118,6 +118,8 @@ def _kernel_args(G, MC, M, mua, mus, g, nref, seed, n_total):
     source = source_arrays(MC.light_source, G, getattr(MC, "source_distribution", None))
     phase = phase_function_tables(G.media, _parent_media(G, MC, len(mua)),
                                   getattr(MC, "wavelength", None))
+    if np.all(phase[0] < 0):
+        phase = (None, phase[1])  # Henyey-Greenstein only: the kernel is compiled without tables
     Mf = np.ascontiguousarray(M, dtype=np.int32).ravel()
     uniform = int(Mf[0]) if np.all(Mf == Mf[0]) else -1
     normals = np.zeros(3, dtype=np.float32)

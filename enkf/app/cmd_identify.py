@@ -104,16 +104,16 @@ def cmd_identify(args) -> int:
         print(f"error: all {len(rows)} data files failed (see {Path(args.out) / 'batch.csv'})",
               file=sys.stderr)
         return EXIT_BATCH_FAILED
-    if not args.quiet:
-        for r in rows:
-            if "error" in r:
-                print(f"{r['data']}: failed: {r['error']}", file=sys.stderr)
-                continue
-            par = ", ".join(f"{k} {v['estimate_final']:.4g} +- {v['std_final']:.2g}"
-                            for k, v in r["parameters"].items())
-            stop = f" (stopped: {r['stopped']})" if r["stopped"] else ""
-            print(f"{r['data']}: {par}{stop}")
-        print(f"-> {args.out}")
+    # the result, even with --quiet (it hides the progress bars only)
+    for r in rows:
+        if "error" in r:
+            print(f"{r['data']}: failed: {r['error']}", file=sys.stderr)
+            continue
+        par = ", ".join(f"{k} {v['estimate_final']:.4g} +- {v['std_final']:.2g}"
+                        for k, v in r["parameters"].items())
+        stop = f" (stopped: {r['stopped']})" if r["stopped"] else ""
+        print(f"{r['data']}: {par}{stop}")
+    print(f"-> {args.out}")
     return 0
 
 
@@ -251,8 +251,8 @@ def _follow(args, cfg, absorption, seed, t_emu) -> int:
         fh.close()
     _live_figure(out, ident, setup)
     run_json(n)
-    if not args.quiet:
-        print(f"{n} readings assimilated -> {out}")
+    # the result, even with --quiet (it hides the progress bars only)
+    print(f"{n} readings assimilated -> {out}")
     return 0
 
 

@@ -82,10 +82,10 @@ def cmd_mc(args) -> int:
             "seed": MC.seed_used,
             "grid": {"nx": G.nx, "ny": G.ny, "nz": G.nz, "Lx": G.Lx, "Ly": G.Ly, "Lz": G.Lz},
         })
-    if not args.quiet:
-        print(f"absorbed {MC.absorbed_fraction:.4f}, escaped top {MC.escaped['top']:.4f} "
-              f"bottom {MC.escaped['bottom']:.4f} sides {MC.escaped['sides']:.4f}; "
-              f"{MC.n_photons} photons at {MC.photons_per_second:.3g}/s -> {args.out}")
+    # the result, even with --quiet (it hides the progress bars only)
+    print(f"absorbed {MC.absorbed_fraction:.4f}, escaped top {MC.escaped['top']:.4f} "
+          f"bottom {MC.escaped['bottom']:.4f} sides {MC.escaped['sides']:.4f}; "
+          f"{MC.n_photons} photons at {MC.photons_per_second:.3g}/s -> {args.out}")
     return 0
 
 
@@ -127,9 +127,9 @@ def cmd_heat(args) -> int:
         write_json(tmp / "summary.json", summary)
         manifest(tmp / "run.json", command="heat", config=read_toml(args.config),
                  seed=MC.seed_used, timings={"monte_carlo": t_mc, "heat": t_heat})
-    if not args.quiet:
-        print(f"max temperature {summary['T_max']:.2f} deg C, max damage "
-              f"{summary['damage_max']:.3g} -> {args.out}")
+    # the result, even with --quiet (it hides the progress bars only)
+    print(f"max temperature {summary['T_max']:.2f} deg C, max damage "
+          f"{summary['damage_max']:.3g} -> {args.out}")
     return 0
 
 

@@ -67,17 +67,17 @@ def _paper(args, paper, client, verbose) -> int:
                                                     **{k: v for k, v in
                                                        run.summary["timing"].items()
                                                        if k.endswith("_s")}})
-    if verbose:
-        summary = run.summary
-        for name, p in summary["parameters"].items():
-            print(f"{name}: final {p['estimate_final']:.4g} +- {p['std_final']:.2g} "
-                  f"(truth {p['truth_final']:.4g}, rel. error {p['relative_error_final']:.3f})")
-        for name, p in summary["temperatures"].items():
-            print(f"T at {name}: rmse {p['rmse']:.3f} deg C, coverage {p['coverage_2sd']:.2f}")
-        tm = summary["timing"]
-        print(f"filter {tm['filter_wall_s']:.2f} s for {tm['steps']} steps, median step "
-              f"{1e3 * tm['step_latency_median_s']:.1f} ms, max "
-              f"{1e3 * tm['step_latency_max_s']:.1f} ms -> {args.out}")
-        if summary["diverged"]:
-            print(f"warning: {summary['diverged']}", file=sys.stderr)
+    # the result, even with --quiet (it hides the progress bars only)
+    summary = run.summary
+    for name, p in summary["parameters"].items():
+        print(f"{name}: final {p['estimate_final']:.4g} +- {p['std_final']:.2g} "
+              f"(truth {p['truth_final']:.4g}, rel. error {p['relative_error_final']:.3f})")
+    for name, p in summary["temperatures"].items():
+        print(f"T at {name}: rmse {p['rmse']:.3f} deg C, coverage {p['coverage_2sd']:.2f}")
+    tm = summary["timing"]
+    print(f"filter {tm['filter_wall_s']:.2f} s for {tm['steps']} steps, median step "
+          f"{1e3 * tm['step_latency_median_s']:.1f} ms, max "
+          f"{1e3 * tm['step_latency_max_s']:.1f} ms -> {args.out}")
+    if summary["diverged"]:
+        print(f"warning: {summary['diverged']}", file=sys.stderr)
     return 0

@@ -30,7 +30,6 @@ def cmd_validate(args) -> int:
                           **{n: r["seconds"] for n, r in res.items()}},
                  extra={"status": {n: r["status"] for n, r in res.items()}})
     failed = [n for n, r in res.items() if r["status"] != "ok"]
-    if not args.quiet or failed:
-        print(f"report -> {Path(args.out) / 'report.md'}"
+    print(f"report -> {Path(args.out) / 'report.md'}"
               + (f"; failed: {', '.join(failed)}" if failed else ""), file=sys.stderr)
     return EXIT_CHECK_FAILED if failed else 0
