@@ -21,13 +21,18 @@ E, A : Arrhenius activation energy (J/mol) and frequency factor (1/s)
 wavelength : nm (``MC.wavelength``), selects media given as functions of wavelength
 FR, T, FD : fluence rate (W cm^-2), temperature (deg C), fractional damage (0..1)
 n_bins : sub-media a FR-, T- or FD-dependent medium is split into
+theta, phi : polar angle and azimuth of a light source's axis, rad (theta = 0: along +z)
+psi : rotation of an X/Y beam about its axis, rad
+FPID, AID : focal-plane and angular intensity distributions of a beam (MCmatlab's
+    abbreviations; ``focal_plane_intensity_distribution``, ``angular_intensity_distribution``)
 """
 
 from ._strict import NotBuiltError
+from .light_source import IntensityDistribution
 from .media import Medium
 from .model import Geometry, LightSource, Model, MonteCarloSimulation
 from .spectra import calc_mua, calc_mus
 from .stl import find_inside_voxels
 
-__all__ = ["Geometry", "LightSource", "Medium", "Model", "MonteCarloSimulation", "NotBuiltError",
-           "calc_mua", "calc_mus", "find_inside_voxels"]
+__all__ = ["Geometry", "IntensityDistribution", "LightSource", "Medium", "Model",
+           "MonteCarloSimulation", "NotBuiltError", "calc_mua", "calc_mus", "find_inside_voxels"]

@@ -121,6 +121,11 @@ class Medium(StrictAttributes):
     n_bins : int
         Sub-media that a medium with FR-, T- or FD-dependent properties is split into
         (MCmatlab's ``nBins``); 1 for others.
+    custom_phase_func : callable or array, optional
+        Phase function of the scattering angle theta (rad) per solid angle, not
+        necessarily normalised (MCmatlab's ``customPhaseFunc``): ``f(theta)``,
+        ``f(wavelength, theta)`` or values at equispaced angles over [0, pi]. Used
+        instead of Henyey-Greenstein (``g`` is then ignored); see :mod:`mcmatlab_py.optics`.
     """
 
     name: str

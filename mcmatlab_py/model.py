@@ -208,8 +208,9 @@ class MonteCarloSimulation(StrictAttributes):
     * ``absorbed_fraction``: absorbed inside the cuboid, fraction of the incident power.
     * ``specular_reflectance``: reflected at entry (0 with matched interfaces).
     * ``escaped``: ``{"top", "bottom", "sides"}``, fractions of the incident power.
-    * ``absorbed_outside_fraction``, ``killed_fraction``, ``missed_fraction`` (beam
-      outside the top face), ``roulette_gain_fraction`` (net weight created by Russian
+    * ``absorbed_outside_fraction``, ``killed_fraction``, ``missed_fraction`` (packets
+      that never entered: off the top face, emitted outside the cuboid or inside a
+      perfect reflector), ``roulette_gain_fraction`` (net weight created by Russian
       roulette; zero in expectation): with these, every launched packet is accounted
       for exactly (``energy_balance`` is 1 up to rounding).
     * ``n_photons``, ``photons_per_second``, ``simulation_time`` (s, kernel only),
