@@ -30,6 +30,7 @@ from pathlib import Path
 import numba
 import numpy as np
 
+from ._strict import NotBuiltError
 from .media import Medium
 from .model import Geometry, MonteCarloSimulation
 
@@ -184,6 +185,24 @@ class EmulatorSpec:
             raise ValueError("the emulator needs a homogeneous block: G.media must have one "
                              f"medium, got {len(G.media)}")
         src = MC.light_source
+        unsupported = [f"MC.light_source.{k}" for k in ("theta", "phi", "psi", "emitter_length")
+                       if getattr(src, k)]
+        if src.source_type not in ("pencil", "tophat", "gaussian", "plane_wave",
+                                   "isotropic_point"):
+            unsupported.append(f"MC.light_source.source_type = {src.source_type!r}")
+        if MC.source_distribution is not None:
+            unsupported.append("MC.source_distribution")
+        m = G.media[0]
+        for k in ("mua", "mus", "g", "n"):
+            if callable(getattr(m, k)):
+                unsupported.append(f"G.media[0].{k} as a function")
+        if getattr(m, "custom_phase_func", None) is not None:
+            unsupported.append("G.media[0].custom_phase_func")
+        if unsupported:
+            # the table would silently be that of a straight, plain beam in a plain medium
+            raise NotBuiltError(f"the absorption emulator supports straight pencil, top-hat, "
+                                f"Gaussian, plane-wave and point sources in a plain medium; "
+                                f"not built for {', '.join(unsupported)}")
         return cls(nx=G.nx, ny=G.ny, nz=G.nz, Lx=G.Lx, Ly=G.Ly, Lz=G.Lz, g=G.media[0].g,
                    n=G.media[0].n, source_type=src.source_type, radius=src.radius,
                    x_focus=src.x_focus, y_focus=src.y_focus, z_focus=src.z_focus,

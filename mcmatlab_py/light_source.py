@@ -51,6 +51,17 @@ from . import _sources as S
 from ._strict import StrictAttributes
 from .media import check_positive
 
+__all__ = [
+    "IntensityDistribution",
+    "beam_axes",
+    "check_source_distribution",
+    "pwl_table",
+    "sample_light_source",
+    "source_arrays",
+    "source_kind",
+    "validate_light_source",
+]
+
 #: MCmatlab's source type codes and our names for them
 SOURCE_TYPE_NAMES = ("pencil", "isotropic", "plane_wave", "lg01", "radial", "xy")
 #: every accepted string: the names above and this port's earlier names

@@ -1,5 +1,7 @@
 """The MCmatlab-style model: ``model.G`` (geometry), ``model.MC`` (Monte Carlo), ``model.HS`` (heat).
 
+__all__ = ["EnergyBalanceError", "Geometry", "LightSource", "Model", "MonteCarloSimulation"]
+
 Names follow MCmatlab in snake_case (``nPhotonsRequested`` -> ``n_photons_requested``).
 Users set attributes, then call ``model = model.run_monte_carlo()`` as in MCmatlab;
 everything is validated when a simulation starts, and a bad value raises a

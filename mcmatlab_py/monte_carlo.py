@@ -13,6 +13,15 @@ from ._strict import NotBuiltError
 from .media_bins import optical_media_properties
 from .progress import Progress
 
+__all__ = [
+    "MCResult",
+    "batch_range",
+    "optical_arrays",
+    "run_monte_carlo",
+    "simulate",
+    "store_results",
+]
+
 
 @dataclass
 class MCResult:

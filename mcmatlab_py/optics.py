@@ -19,6 +19,8 @@ import numpy as np
 
 from .media import n_arguments
 
+__all__ = ["interface_normals", "phase_function_table", "phase_function_tables", "smoothn_filter"]
+
 #: nodes of a tabulated phase function (the kernel bisects it: ~12 steps per scattering)
 PHASE_TABLE_SIZE = 4001
 
