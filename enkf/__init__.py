@@ -36,6 +36,7 @@ variances; ``E_rw`` random-walk covariance. See docs/enkf.md.
 
 from importlib.metadata import PackageNotFoundError, version
 
+from .adaptive import AdaptiveInflation, InflationEstimator
 from .analysis import enkf_perturbed_obs, etkf, inflate, random_rotation
 from .health import HealthCheck
 from .loop import run_filter
@@ -56,12 +57,14 @@ except PackageNotFoundError:  # pragma: no cover - running from a source tree
     __version__ = "0+unknown"
 
 __all__ = [
+    "AdaptiveInflation",
     "DEFAULT_METHOD",
     "FilterConfig",
     "FilterDivergence",
     "FilterProblem",
     "FilterResult",
     "HealthCheck",
+    "InflationEstimator",
     "IdentityTransform",
     "LogTransform",
     "LogitTransform",

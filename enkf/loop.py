@@ -43,6 +43,7 @@ from collections.abc import Callable
 
 import numpy as np
 
+from .adaptive import InflationEstimator
 from .analysis import analysis, enkf_localized, inflate, random_rotation
 from .checks import as_generator, cov_sqrt, covariance, float_array, variances
 from .health import HealthCheck
@@ -72,6 +73,7 @@ class _Record:
         self.analysed = np.zeros(M, dtype=bool)
         self.latency = np.full(M, np.nan)
         self.analysis_latency = np.zeros(M)
+        self.inflation = np.ones(M)
 
     def result(self, k: int, X: np.ndarray, theta: np.ndarray) -> FilterResult:
         """Steps ``0..k`` with the ensemble ``(X, theta)``."""
@@ -79,14 +81,16 @@ class _Record:
             self.times[: k + 1].copy(), self.param_mean[: k + 1].copy(),
             self.param_std[: k + 1].copy(), self.tracked_mean[: k + 1].copy(),
             self.tracked_std[: k + 1].copy(), self.analysed[:k].copy(),
-            self.latency[:k].copy(), self.analysis_latency[:k].copy(), X, theta)
+            self.latency[:k].copy(), self.analysis_latency[:k].copy(), X, theta,
+            self.inflation[:k].copy())
 
 
 class _Filter:
     """One run of the augmented filter: the ensemble and the steps that move it."""
 
     def __init__(self, problem: FilterProblem, config: FilterConfig, health: Health,
-                 callback: Callable[[StepReport], None] | None):
+                 callback: Callable[[StepReport], None] | None,
+                 inflation_state: InflationEstimator | None = None):
         self.P, self.config, self.health, self.callback = problem, config, health, callback
         self.rng = as_generator(config.seed, "seed")
         self.N = N = config.n_members
@@ -102,9 +106,17 @@ class _Filter:
         self.n_state, self.n_par = X.shape[1], theta.shape[1]
         self.transforms = as_transforms(problem.transforms, self.n_par)
         self.U = to_filter_space(self.transforms, theta)
-        sd_model = np.sqrt(variances(problem.model_noise, "model_noise", self.n_state))
-        self.noisy = np.flatnonzero(sd_model)  # draw only where there is noise
-        self.sd_noisy = sd_model[self.noisy]
+        # a structured model error is drawn after the forecast (it may depend on it)
+        self.noise_fn = problem.model_noise if callable(problem.model_noise) else None
+        if self.noise_fn is None:
+            sd_model = np.sqrt(variances(problem.model_noise, "model_noise", self.n_state))
+            self.noisy = np.flatnonzero(sd_model)  # draw only where there is noise
+            self.sd_noisy = sd_model[self.noisy]
+        else:
+            self.noisy, self.sd_noisy = np.arange(self.n_state), None
+        ai = config.adaptive_inflation
+        self.adaptive = None if ai is None else (
+            inflation_state if inflation_state is not None else InflationEstimator(ai))
         rw = covariance(problem.param_noise, "param_noise", self.n_par)
         self.rw_root = cov_sqrt(rw)
         self.rw_on = bool(self.n_par) and bool(np.any(rw != 0))
@@ -137,7 +149,9 @@ class _Filter:
         """This step's model noise ``v`` (N, n_noisy) and parameter walk ``dU`` (N, n_par),
         drawn once: they belong to the step, not to an iteration of it."""
         N, rng = self.N, self.rng
-        v = self.sd_noisy * rng.standard_normal((N, self.noisy.size)) if self.noisy.size else None
+        v = None
+        if self.noise_fn is None and self.noisy.size:
+            v = self.sd_noisy * rng.standard_normal((N, self.noisy.size))
         if not self.rw_on:
             return v, None
         xi = rng.standard_normal((N, self.n_par))
@@ -154,11 +168,18 @@ class _Filter:
             return to_physical(self.transforms, U)
 
     def advance(self, X0, U0, theta0, t_a, t_b, v, dU):
-        """Members from t_a to t_b: forecast, model noise, parameter dynamics and walk."""
+        """Members from t_a to t_b: forecast, model noise, parameter dynamics and walk.
+
+        Returns ``(X1, U1, v)``: ``v`` is the model noise added (drawn here from a
+        structured model error when ``v`` is None and the problem has one)."""
         N, n_state, n_par, P = self.N, self.n_state, self.n_par, self.P
         X1 = np.asarray(P.forecast(X0, theta0, t_a, t_b), dtype=float)
         if X1.shape != (N, n_state):
             raise ValueError(f"forecast must return shape ({N}, {n_state}), got {X1.shape}")
+        if v is None and self.noise_fn is not None:
+            v = np.asarray(self.noise_fn(self.rng, X0, X1, theta0, t_a, t_b), dtype=float)
+            if v.shape != (N, n_state):
+                raise ValueError(f"model_noise must return shape ({N}, {n_state}), got {v.shape}")
         if v is not None:
             X1 = X1.copy()  # the forecast may hand back a view of its own buffers
             X1[:, self.noisy] += v
@@ -170,7 +191,7 @@ class _Filter:
                                  f"got {U1.shape}")
         if dU is not None:
             U1 = U1 + dU
-        return X1, U1
+        return X1, U1, v
 
     def observe(self, Xf, Uf, k: int, tic: float) -> np.ndarray:
         """The forecast in observation space; a non-finite forecast stops the run."""
@@ -187,8 +208,28 @@ class _Filter:
                                    self.rec.result(k, self.X, self.theta))
         return Y
 
-    def spread_out(self, Z: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    def adapt(self, k: int, Y: np.ndarray, y: np.ndarray) -> float:
+        """Update the adaptive inflation with this step's forecast innovations; the
+        factor on the covariance (1 without adaptive inflation)."""
+        if self.adaptive is None:
+            return 1.0
+        rho = self.adaptive.update(Y, y, self.P.obs_cov)
+        self.rec.inflation[k - 1] = rho
+        return rho
+
+    def inflate_by(self, Z: np.ndarray, rho: float) -> np.ndarray:
+        """Anomalies of the augmented ensemble times sqrt(rho): the state part, or all."""
+        if rho == 1.0:
+            return Z
+        if self.config.adaptive_inflation.target == "all":
+            return inflate(Z, np.sqrt(rho))
+        Z = Z.copy()
+        Z[:, :self.n_state] = inflate(Z[:, :self.n_state], np.sqrt(rho))
+        return Z
+
+    def spread_out(self, Z: np.ndarray, rho: float = 1.0) -> tuple[np.ndarray, np.ndarray]:
         """Inflation and rotation of an analysed augmented ensemble; (X, U) back."""
+        Z = self.inflate_by(Z, rho)
         if self.config.inflation != 1.0:
             Z = inflate(Z, self.config.inflation)
         if self.config.rotate:
@@ -210,19 +251,24 @@ class _Filter:
         the result has the moments of one analysis; for a nonlinear one each update is a
         small, nearly linear move."""
         mda = self.config.mda
+        X0, U0 = self.X, self.U
+        # a structured model error is drawn with the first forecast, then belongs to the step
+        Xf, Uf, v = self.advance(X0, U0, self.physical(U0), t_a, t_b, v, dU)
+        rho = self.adapt(k, self.observe(Xf, Uf, k, tic), y)
         V = v if v is not None else np.zeros((self.N, 0))
         D = dU if dU is not None else np.zeros((self.N, 0))
         cuts = np.cumsum([self.n_state, self.n_par, V.shape[1]])
-        X0, U0 = self.X, self.U
-        for _ in range(mda):
-            Xf, Uf = self.advance(X0, U0, self.physical(U0), t_a, t_b, V if v is not None else None,
-                                  D if dU is not None else None)
+        for i in range(mda):
+            if i:
+                Xf, Uf, _ = self.advance(X0, U0, self.physical(U0), t_a, t_b,
+                                         V if v is not None else None, D if dU is not None else None)
             Y = self.observe(Xf, Uf, k, tic)
             Z = self.analyse(np.concatenate([X0, U0, V, D], axis=1), Y, y, mda * self.P.obs_cov)
             X0, U0, V, D = np.split(Z, cuts, axis=1)
-        X, U = self.advance(X0, U0, self.physical(U0), t_a, t_b, V if v is not None else None,
-                            D if dU is not None else None)
-        return self.spread_out(np.concatenate([X, U], axis=1))
+        X, U, _ = self.advance(X0, U0, self.physical(U0), t_a, t_b, V if v is not None else None,
+                               D if dU is not None else None)
+        # with ES-MDA the estimated factor widens the analysis (posterior inflation)
+        return self.spread_out(np.concatenate([X, U], axis=1), rho)
 
     def step(self, k: int) -> None:
         """Step ``k - 1 -> k``: noises, forecast, analysis (if any datum), statistics."""
@@ -236,11 +282,15 @@ class _Filter:
             tic_a = time.perf_counter()
             self.X, self.U = self.step_mda(k, t_a, t_b, v, dU, y, tic)
         else:
-            self.X, self.U = self.advance(self.X, self.U, self.theta, t_a, t_b, v, dU)
+            self.X, self.U, _ = self.advance(self.X, self.U, self.theta, t_a, t_b, v, dU)
             if observed:
                 tic_a = time.perf_counter()
                 Y = self.observe(self.X, self.U, k, tic)
                 Z = np.concatenate([self.X, self.U], axis=1)
+                rho = self.adapt(k, Y, y)
+                if rho != 1.0:  # prior inflation: widen the forecast, observe it again
+                    Z = self.inflate_by(Z, rho)
+                    Y = self.observe(Z[:, :self.n_state], Z[:, self.n_state:], k, tic)
                 self.X, self.U = self.spread_out(self.analyse(Z, Y, y, self.P.obs_cov))
         if observed:
             self.rec.analysed[k - 1] = True
@@ -270,6 +320,7 @@ def run_filter(
     *,
     health: Health | None = None,
     callback: Callable[[StepReport], None] | None = None,
+    inflation_state: InflationEstimator | None = None,
 ) -> FilterResult:
     """Run the augmented-state ensemble Kalman filter over all observation times.
 
@@ -286,6 +337,9 @@ def run_filter(
     callback : callable, optional
         Called with a :class:`~enkf.problem.StepReport` after the prior draw and every
         step (progress bars, streaming to a plot or a socket).
+    inflation_state : enkf.adaptive.InflationEstimator, optional
+        The running estimate of ``config.adaptive_inflation`` to continue (a filter run
+        one reading at a time); default: a fresh one.
 
     Returns
     -------
@@ -300,7 +354,7 @@ def run_filter(
         of the wrong shape, or sizes disagree with the problem's noise settings.
     """
     run = _Filter(problem, FilterConfig() if config is None else config,
-                  HealthCheck() if health is None else health, callback)
+                  HealthCheck() if health is None else health, callback, inflation_state)
     run.record(0)
     M = problem.obs_data.shape[0]
     for k in range(1, M + 1):

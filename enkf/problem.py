@@ -11,6 +11,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from .adaptive import AdaptiveInflation
 from .analysis import METHODS
 from .checks import as_generator, covariance, float_array, variances
 from .transforms import IdentityTransform, Transform
@@ -72,6 +73,10 @@ class FilterConfig:
         ``mda + 1`` forecasts per step. Equal to one analysis for a linear model;
         for a strongly nonlinear one (a parameter that acts only through a
         saturating map) it replaces one large linear jump by several small ones.
+    adaptive_inflation : AdaptiveInflation, optional
+        Estimate a factor on the forecast covariance from the innovations
+        (:mod:`enkf.adaptive`) and apply it before each analysis (after it with
+        ``mda > 1``), on top of ``inflation``. Default: none.
     """
 
     n_members: int = 50
@@ -81,6 +86,7 @@ class FilterConfig:
     seed: int = 0
     rotate: bool = False
     mda: int = 1
+    adaptive_inflation: AdaptiveInflation | None = None
 
     def __post_init__(self):
         if (
@@ -98,6 +104,10 @@ class FilterConfig:
         if not isinstance(self.mda, numbers.Integral) or isinstance(self.mda, bool) or self.mda < 1:
             raise ValueError(f"mda must be an int >= 1, got {self.mda!r}")
         as_generator(self.seed, "seed")
+        if self.adaptive_inflation is not None and not isinstance(self.adaptive_inflation,
+                                                                  AdaptiveInflation):
+            raise ValueError("adaptive_inflation must be an enkf.AdaptiveInflation or None, got "
+                             f"{type(self.adaptive_inflation).__name__}")
 
 
 @dataclass(frozen=True)
@@ -123,9 +133,13 @@ class FilterProblem:
     prior : callable
         ``prior(rng, N) -> (E_state (N, n_state), theta (N, n_par))``, theta in
         physical units (see :func:`uniform_prior`).
-    model_noise : float or ndarray, shape (n_state,)
+    model_noise : float or ndarray, shape (n_state,), or callable
         Diagonal of :math:`C`: variances of the additive state noise, per filter
-        step, in state units squared. Zero entries get no noise.
+        step, in state units squared. Zero entries get no noise. Or a structured
+        model error ``noise(rng, X0, X1, theta, t0, t1) -> v (N, n_state)`` drawn
+        from the loop's Generator after the forecast ``X1`` of the start ``X0``
+        (e.g. time-correlated, proportional to the step's tendency
+        ``X1 - X0``; :class:`enkf.tissue.StructuredModelError`), added to ``X1``.
     param_noise : float or ndarray, shape (n_par,) or (n_par, n_par)
         Random-walk covariance :math:`E_\\mathrm{rw}` per step, in *transformed*
         units, diagonal or full (positive semi-definite).
@@ -158,7 +172,7 @@ class FilterProblem:
     obs_data: np.ndarray
     obs_cov: np.ndarray
     prior: Prior
-    model_noise: float | np.ndarray = 0.0
+    model_noise: float | np.ndarray | Callable = 0.0
     param_noise: float | np.ndarray = 0.0
     transforms: Transform | Sequence[Transform] = field(default_factory=IdentityTransform)
     t0: float = 0.0
@@ -214,7 +228,8 @@ class FilterProblem:
                     f"observation must have shape ({p}, n_state) to match "
                     f"obs_data, got {self.observation.shape}"
                 )
-        set_(self, "model_noise", variances(self.model_noise, "model_noise"))
+        if not callable(self.model_noise):
+            set_(self, "model_noise", variances(self.model_noise, "model_noise"))
         pn = float_array(self.param_noise, "param_noise", (0, 1, 2))
         if pn.ndim < 2 and np.any(pn < 0):
             raise ValueError(f"param_noise must be non-negative, got min {pn.min()!r}")
@@ -293,6 +308,9 @@ class FilterResult:
         Last ensemble, state part.
     param_ensemble : ndarray, shape (N, n_par)
         Last ensemble, parameters in physical units.
+    inflation : ndarray, shape (M,)
+        Factor on the forecast covariance of each step from
+        ``FilterConfig.adaptive_inflation`` (1 without it).
     """
 
     times: np.ndarray
@@ -305,6 +323,7 @@ class FilterResult:
     analysis_latency_s: np.ndarray
     state_ensemble: np.ndarray
     param_ensemble: np.ndarray
+    inflation: np.ndarray | None = None
 
 
 @dataclass(frozen=True)

@@ -37,7 +37,19 @@ import math
 import numba
 import numpy as np
 
+from . import _mc_outputs as O
 from ._atomic import fetch_add
+from ._mc_steps import (
+    _clamp,
+    _fresnel,
+    _hg_cos,
+    _interface_normal,
+    _mirror,
+    _plane_distance,
+    _refract_face,
+    _spin,
+    _turn_smooth,
+)
 from ._rng import next_double, seed_stream
 from ._sources import (  # noqa: F401  (the source kinds, re-exported)
     SI_SURFACE,
@@ -64,7 +76,8 @@ T_OUTSIDE_ABSORBED = 5
 T_KILLED = 6
 T_MISSED = 7
 T_ROULETTE = 8  # weight created by roulette survivors minus weight of packets killed
-N_TALLY = 9
+T_ABSORBED_EXCLUDED = 9  # absorbed inside by packets that failed the deposition criteria
+N_TALLY = 10
 
 SRC_ISOTROPIC_POINT = SRC_ISOTROPIC
 
@@ -74,141 +87,12 @@ _INF = np.inf
 # fast-math without 'nnan'/'ninf': the kernel relies on inf distances
 _FASTMATH = {"nsz", "arcp", "contract", "afn", "reassoc"}
 
-
-@numba.njit(cache=True, inline="always", fastmath=_FASTMATH)
-def _fresnel(n1, n2, ca1):
-    """Fresnel reflectance for unpolarised light; returns (R, cos of transmitted angle).
-
-    ``ca1`` is the cosine of the angle of incidence (>= 0). ``n = inf`` on either side
-    is a perfect reflector.
-    """
-    if n1 == n2:
-        return 0.0, ca1
-    if n2 == _INF or n1 == _INF:
-        return 1.0, 0.0
-    if ca1 > 1.0 - 1e-12:
-        r = (n2 - n1) / (n2 + n1)
-        return r * r, ca1
-    sa1 = math.sqrt(max(0.0, 1.0 - ca1 * ca1))
-    sa2 = n1 * sa1 / n2
-    if sa2 >= 1.0:
-        return 1.0, 0.0  # total internal reflection
-    ca2 = math.sqrt(1.0 - sa2 * sa2)
-    cap = ca1 * ca2 - sa1 * sa2  # cos(a1 + a2)
-    cam = ca1 * ca2 + sa1 * sa2  # cos(a1 - a2)
-    sap = sa1 * ca2 + ca1 * sa2
-    sam = sa1 * ca2 - ca1 * sa2
-    r = 0.5 * sam * sam * (cam * cam + cap * cap) / (sap * sap * cam * cam)
-    return r, ca2
-
-
-@numba.njit(cache=True, inline="always", fastmath=_FASTMATH)
-def _hg_cos(g, xi):
-    """Henyey-Greenstein deflection cosine from a uniform ``xi``."""
-    if g == 0.0:
-        return 2.0 * xi - 1.0
-    if abs(g) >= 1.0:  # the limits: no deflection, or straight back
-        return g
-    tmp = (1.0 - g * g) / (1.0 - g + 2.0 * g * xi)
-    c = (1.0 + g * g - tmp * tmp) / (2.0 * g)
-    return min(1.0, max(-1.0, c))
-
-
-@numba.njit(cache=True, inline="always", fastmath=_FASTMATH)
-def _spin(ux, uy, uz, cost, psi):
-    """Rotate direction (ux, uy, uz) by polar cos ``cost`` and azimuth ``psi`` (MCML)."""
-    sint = math.sqrt(max(0.0, 1.0 - cost * cost))
-    cosp = math.cos(psi)
-    # sin from cos (one transcendental fewer): psi in [0, 2 pi)
-    sinp = math.sqrt(max(0.0, 1.0 - cosp * cosp))
-    if psi > math.pi:
-        sinp = -sinp
-    if abs(uz) > 0.99999:
-        return sint * cosp, sint * sinp, cost * (1.0 if uz > 0.0 else -1.0)
-    temp = math.sqrt(1.0 - uz * uz)
-    nux = sint * (ux * uz * cosp - uy * sinp) / temp + ux * cost
-    nuy = sint * (uy * uz * cosp + ux * sinp) / temp + uy * cost
-    nuz = -sint * cosp * temp + uz * cost
-    return nux, nuy, nuz
-
-
-@numba.njit(cache=True, inline="always", fastmath=_FASTMATH)
-def _plane_distance(p, u, i, n, d):
-    """Distance along direction component ``u`` to the next voxel plane of one axis.
-
-    ``i`` may be -1 or ``n`` for a photon outside the cuboid on that axis, where
-    the only plane ahead is the cuboid face it moves towards.
-    """
-    if u > 0.0:
-        if i >= n:
-            return _INF
-        return max(0.0, ((i + 1) * d - p) / u)
-    if u < 0.0:
-        if i < 0:
-            return _INF
-        return max(0.0, (i * d - p) / u)
-    return _INF
-
-
-@numba.njit(cache=True, inline="always")
-def _clamp(i, n):
-    if i < 0:
-        return 0
-    if i >= n:
-        return n - 1
-    return i
-
-
-@numba.njit(cache=True, fastmath=_FASTMATH)
-def _interface_normal(normals, M, nref, n_new, px, py, pz, nx, ny, nz, dx, dy, dz):
-    """Smoothed interface normal at a point, pointing into the medium of index ``n_new``.
-
-    Trilinear interpolation between the 8 voxel centres around the point, over those
-    whose refractive index is ``n_new`` (as MCmatlab); not normalised. ``normals`` is
-    (nx*ny*nz*3,) float32.
-    """
-    fx = px / dx - 0.5
-    fy = py / dy - 0.5
-    fz = pz / dz - 0.5
-    i0 = int(math.floor(fx))
-    j0 = int(math.floor(fy))
-    k0 = int(math.floor(fz))
-    tx = fx - i0
-    ty = fy - j0
-    tz = fz - k0
-    gx = 0.0
-    gy = 0.0
-    gz = 0.0
-    for ci in range(2):
-        i = i0 + ci
-        if i < 0 or i >= nx:
-            continue
-        wi = tx if ci == 1 else 1.0 - tx
-        for cj in range(2):
-            j = j0 + cj
-            if j < 0 or j >= ny:
-                continue
-            wj = wi * (ty if cj == 1 else 1.0 - ty)
-            for ck in range(2):
-                k = k0 + ck
-                if k < 0 or k >= nz:
-                    continue
-                v = (i * ny + j) * nz + k
-                if nref[M[v]] != n_new:
-                    continue
-                wk = wj * (tz if ck == 1 else 1.0 - tz)
-                gx += wk * normals[3 * v]
-                gy += wk * normals[3 * v + 1]
-                gz += wk * normals[3 * v + 2]
-    return gx, gy, gz
-
-
 @numba.njit(cache=True, fastmath=_FASTMATH)
 def transport_batch(
     b, M, mua, mus, g, nref, uniform_medium, nx, ny, nz, dx, dy, dz,
     boundary_type, n_out, matched, roulette, weight_threshold, chance,
     si, sf, stab, svox, phase_idx, phase_tab, normals, use_normals,
-    seed, batch_size, n_total, acc, tally,
+    seed, batch_size, n_total, acc, tally, oi, of, consider, ext, paths, path_n,
 ):  # fmt: skip
     """Run the photons of batch ``b`` and add their weights into ``acc`` and ``tally``.
 
@@ -225,6 +109,8 @@ def transport_batch(
     normals : (nx*ny*nz*3,) float32 smoothed interface normals, used if ``use_normals``.
     acc : (nx*ny*nz,) int64 absorbed fixed-point weight, updated in place.
     tally : (N_TALLY,) int64, updated in place.
+    oi, of, consider, ext, paths, path_n : the optional outputs (:mod:`mcmatlab_py._mc_outputs`);
+        ``oi = None`` compiles them out.
     """
     Lx = nx * dx
     Ly = ny * dy
@@ -236,7 +122,17 @@ def transport_batch(
     n_table = phase_tab.shape[1] // 2
     first = b * batch_size
     last = min(first + batch_size, n_total)
-    for _ in range(first, last):
+    # per-packet state of the optional outputs (unused, and optimised away, when oi is None)
+    cnt = np.zeros(4, dtype=np.int64)  # scatterings, reflections, refractions, transitions
+    rec = np.empty((1, 2), dtype=np.int64)  # deposits awaiting the end-of-life criteria
+    if oi is not None:
+        rec = np.empty((256, 2), dtype=np.int64)
+    n_paths = 0
+    dc_end = False
+    if oi is not None:
+        n_paths = oi[O.OI_N_PATHS]
+        dc_end = oi[O.OI_DC] == 1 and oi[O.OI_DC_END] == 1
+    for ip in range(first, last):
         # ---------------------------------------------------------------- launch
         st[0] = s0
         st[1] = s1
@@ -255,6 +151,15 @@ def transport_batch(
         if not (ok and 0.0 <= px <= Lx and 0.0 <= py <= Ly and 0.0 <= pz <= Lz):
             tally[T_MISSED] += w
             continue
+        t_opl = 0.0  # optical path (cm): time of flight times c
+        wrap_x = 0  # cyclic wraps, to unfold the exit point for the radial tallies
+        wrap_y = 0
+        n_rec = 0
+        fate = O.FATE_KILLED
+        record_path = False
+        if oi is not None:
+            cnt[:] = 0
+            record_path = ip < n_paths
         ix = _clamp(int(math.floor(px / dx)), nx)
         iy = _clamp(int(math.floor(py / dy)), ny)
         iz = _clamp(int(math.floor(pz / dz)), nz)
@@ -278,6 +183,9 @@ def transport_batch(
                 continue
         inside = True
         alive = True
+        if oi is not None:
+            if record_path:
+                O.path_point(paths, path_n, ip, px, py, pz, w / W_ONE)
         # ------------------------------------------------------------- hop loop
         while alive:
             s0, s1, s2, s3, r1 = next_double(s0, s1, s2, s3)
@@ -311,6 +219,8 @@ def transport_batch(
                     dmin = d2
                 if tau < mut * dmin:  # interaction before the plane
                     s = tau / mut
+                    if oi is not None:
+                        t_opl += s * (1.0 if matched else nref[m])
                     px += s * ux
                     py += s * uy
                     pz += s * uz
@@ -324,6 +234,8 @@ def transport_batch(
                     alive = False
                     break
                 tau -= mut * dmin
+                if oi is not None:
+                    t_opl += dmin * (1.0 if matched else nref[m])
                 px += dmin * ux
                 py += dmin * uy
                 pz += dmin * uz
@@ -378,7 +290,11 @@ def transport_batch(
                         mnew = M[(ix * ny + inew) * nz + iz]
                     else:
                         mnew = M[(ix * ny + iy) * nz + inew]
-                    if not matched and nref[mnew] != nref[m]:
+                    refracting = not matched and nref[mnew] != nref[m]
+                    if oi is not None:
+                        if mnew != m and not refracting and consider[mnew]:
+                            cnt[3] += 1
+                    if refracting:
                         ua = ux if axis == 0 else (uy if axis == 1 else uz)
                         cin = abs(ua)
                         smooth = False
@@ -397,51 +313,26 @@ def transport_batch(
                                     cin = min(1.0, c)
                         rf, cat = _fresnel(nref[m], nref[mnew], cin)
                         s0, s1, s2, s3, r1 = next_double(s0, s1, s2, s3)
-                        if smooth:
-                            if r1 < rf:  # reflect about the smoothed normal
-                                ux -= 2.0 * cin * gx
-                                uy -= 2.0 * cin * gy
-                                uz -= 2.0 * cin * gz
-                            else:  # Snell's law in vector form
-                                mu_ = nref[m] / nref[mnew]
-                                k_ = cat - mu_ * cin
-                                ux = mu_ * ux + k_ * gx
-                                uy = mu_ * uy + k_ * gy
-                                uz = mu_ * uz + k_ * gz
-                                un = math.sqrt(ux * ux + uy * uy + uz * uz)
-                                ux /= un
-                                uy /= un
-                                uz /= un
-                            # keep the voxel walk consistent with the outcome (module docstring)
-                            ua = ux if axis == 0 else (uy if axis == 1 else uz)
-                            if (r1 < rf) == (ua * sgn > 0.0):
-                                if axis == 0:
-                                    ux = -ux
-                                elif axis == 1:
-                                    uy = -uy
+                        if oi is not None:
+                            if consider[mnew]:
+                                if r1 < rf:
+                                    cnt[1] += 1
                                 else:
-                                    uz = -uz
+                                    cnt[2] += 1
+                                    cnt[3] += 1
+                            if record_path:
+                                O.path_point(paths, path_n, ip, px, py, pz, w / W_ONE)
+                        if smooth:
+                            ux, uy, uz = _turn_smooth(ux, uy, uz, gx, gy, gz, cin, cat,
+                                                      nref[m] / nref[mnew], r1 < rf, axis, sgn)
                             if r1 < rf:
                                 continue
                         else:
                             if r1 < rf:  # reflect
-                                if axis == 0:
-                                    ux = -ux
-                                elif axis == 1:
-                                    uy = -uy
-                                else:
-                                    uz = -uz
+                                ux, uy, uz = _mirror(ux, uy, uz, axis)
                                 continue
-                            ratio = nref[m] / nref[mnew]
-                            ux *= ratio
-                            uy *= ratio
-                            uz *= ratio
-                            if axis == 0:
-                                ux = sgn * cat
-                            elif axis == 1:
-                                uy = sgn * cat
-                            else:
-                                uz = sgn * cat
+                            ux, uy, uz = _refract_face(ux, uy, uz, nref[m] / nref[mnew], cat,
+                                                       axis, sgn)
                     if axis == 0:
                         ix = inew
                     elif axis == 1:
@@ -468,6 +359,14 @@ def transport_batch(
                     else:
                         iy = 0 if sgn > 0 else ny - 1
                         py = 0.0 if sgn > 0 else Ly
+                    if oi is not None:
+                        if axis == 0:
+                            wrap_x += sgn
+                        else:
+                            wrap_y += sgn
+                        if record_path:  # a NaN vertex breaks the polyline at the jump
+                            O.path_point(paths, path_n, ip, np.nan, np.nan, np.nan, np.nan)
+                            O.path_point(paths, path_n, ip, px, py, pz, w / W_ONE)
                     continue
                 if escaping:
                     if not matched:
@@ -475,13 +374,20 @@ def transport_batch(
                         rf, cat = _fresnel(nref[m], n_out, abs(ua))
                         s0, s1, s2, s3, r1 = next_double(s0, s1, s2, s3)
                         if r1 < rf:
-                            if axis == 0:
-                                ux = -ux
-                            elif axis == 1:
-                                uy = -uy
-                            else:
-                                uz = -uz
+                            ux, uy, uz = _mirror(ux, uy, uz, axis)
+                            if oi is not None:
+                                if record_path:
+                                    O.path_point(paths, path_n, ip, px, py, pz, w / W_ONE)
                             continue
+                        if oi is not None:  # the direction outside, refracted into n_out
+                            ux, uy, uz = _refract_face(ux, uy, uz, nref[m] / n_out, cat, axis, sgn)
+                    if oi is not None:
+                        if record_path:
+                            O.path_point(paths, path_n, ip, px, py, pz, w / W_ONE)
+                        fate = O.record_escape(
+                            oi, of, ext, cnt, px, py, pz, ux, uy, uz, w, t_opl,
+                            1.0 if matched else n_out, axis, sgn, ix, iy, iz, nx, ny, nz,
+                            px + wrap_x * Lx - of[O.OF_X0], py + wrap_y * Ly - of[O.OF_Y0])
                     if top:
                         tally[T_TOP] += w
                     elif bottom:
@@ -510,7 +416,15 @@ def transport_batch(
             dep = np.int64(w * (mua[m] / mut))
             w -= dep
             if inside:
-                acc[j] += dep
+                if oi is None:
+                    acc[j] += dep
+                elif dc_end:
+                    rec = O.push_record(rec, n_rec, j, dep)
+                    n_rec += 1
+                elif O.criteria_met(oi, cnt, fate, False):
+                    acc[j] += dep
+                else:
+                    tally[T_ABSORBED_EXCLUDED] += dep
             else:
                 tally[T_OUTSIDE_ABSORBED] += dep
                 if (
@@ -520,6 +434,11 @@ def transport_batch(
                 ):
                     tally[T_KILLED] += w
                     break
+            if oi is not None:
+                if consider[m]:
+                    cnt[0] += 1
+                if record_path:
+                    O.path_point(paths, path_n, ip, px, py, pz, w / W_ONE)
             s0, s1, s2, s3, r1 = next_double(s0, s1, s2, s3)
             s0, s1, s2, s3, r2 = next_double(s0, s1, s2, s3)
             if phase_idx is None:  # no tabulated phase function: pruned at compile time
@@ -544,10 +463,22 @@ def transport_batch(
                 else:
                     # no roulette: the last bit of weight is absorbed where it is
                     if inside:
-                        acc[j] += w
+                        if oi is None:
+                            acc[j] += w
+                        elif dc_end:
+                            rec = O.push_record(rec, n_rec, j, w)
+                            n_rec += 1
+                        elif O.criteria_met(oi, cnt, fate, False):
+                            acc[j] += w
+                        else:
+                            tally[T_ABSORBED_EXCLUDED] += w
                     else:
                         tally[T_OUTSIDE_ABSORBED] += w
                     break
+        if oi is not None:
+            if dc_end:  # MCmatlab's evaluateOnlyAtEndOfLife: the whole path, or nothing
+                met = O.criteria_met(oi, cnt, fate, True)
+                tally[T_ABSORBED_EXCLUDED] += O.flush_record(rec, n_rec, acc, met)
 
 
 @numba.njit(cache=True, parallel=True)
@@ -556,11 +487,12 @@ def run_batches(
     boundary_type, n_out, matched, roulette, weight_threshold, chance,
     si, sf, stab, svox, phase_idx, phase_tab, normals, use_normals,
     seed, batch_size, n_total, batch_start, batch_stop, acc, tally,
+    oi, of, consider, ext, paths, path_n,
 ):  # fmt: skip
     """Run batches ``[batch_start, batch_stop)`` on ``acc.shape[0]`` workers in parallel.
 
-    ``acc`` is (n_workers, nvox) and ``tally`` (n_workers, N_TALLY or more), one row
-    per worker; the workers (one per thread) claim batches one at a time from a
+    ``acc`` is (n_workers, nvox), ``tally`` (n_workers, N_TALLY or more) and ``ext``
+    (n_workers, n_ext), one row per worker; the workers (one per thread) claim batches one at a time from a
     shared atomic counter, so a thread on a slower core runs fewer batches instead
     of holding up the others. The result of a batch depends only on
     ``(seed, batch)`` and integer sums are exact, so the reduced totals do not
@@ -578,4 +510,5 @@ def run_batches(
                 boundary_type, n_out, matched, roulette, weight_threshold, chance,
                 si, sf, stab, svox, phase_idx, phase_tab, normals, use_normals,
                 seed, batch_size, n_total, acc[k], tally[k],
+                oi, of, consider, ext[k], paths, path_n,
             )  # fmt: skip

@@ -72,11 +72,21 @@ def check_heat(G, HS) -> None:
     """Refuse a heat simulation of ``(model.G, model.HS)`` that cannot fit or finish: more
     than :data:`MAX_STEPS` steps (``HS.dt``, the durations) or more memory than the machine
     has (``HS.mesh_divisions``, the voxel grid)."""
-    n_steps = HS.total_duration / HS.dt
-    check_steps(n_steps, f"HS (n_pulses * (duration_on + duration_off) = "
-                         f"{HS.total_duration:g} s in steps of HS.dt = {HS.dt:g} s)",
-                "HS.dt, HS.duration_on, HS.duration_off or HS.n_pulses")
     div = HS.mesh_divisions if HS.mesh_divisions is not None else (G.nx, G.ny, G.nz)
+    dt = HS.dt
+    if dt is None:  # the automatic step, from the media given as numbers
+        from .heat import auto_dt
+
+        const = [m for m in G.media if isinstance(m.VHC, float) and isinstance(m.TC, float)]
+        if not const:
+            return
+        dt = auto_dt([L / n for L, n in zip((G.Lx, G.Ly, G.Lz), div, strict=True)],
+                     [m.VHC for m in const], [m.TC for m in const], HS.theta,
+                     HS.large_time_steps)
+    duration = HS.total_duration + HS.duration_end
+    check_steps(duration / dt, f"HS (n_pulses * (duration_on + duration_off) + duration_end = "
+                               f"{duration:g} s in steps of {dt:g} s)",
+                "HS.dt, HS.duration_on, HS.duration_off, HS.duration_end or HS.n_pulses")
     n_nodes = 1.0
     for d in div:
         n_nodes *= float(d) + 1

@@ -8,6 +8,16 @@ default with its nodes at the voxel corners) and the heat equation
 
 (Arnold & Fichera, eq. 1-2) is stepped with an implicit theta-scheme.
 
+A run is MCmatlab's: ``n_pulses`` pulses of ``duration_on`` (laser on) and
+``duration_off`` (off), then ``duration_end`` of cooling; ``n_updates`` times per pulse
+the state is reported (slice plots, movie frames) and, every
+``media_prop_recalc_period`` updates, media that depend on fluence rate, temperature
+or damage are re-evaluated (the Monte Carlo re-run when their optics change, see
+:mod:`mcmatlab_py.frt`). A second call continues from where the first ended (the
+final temperatures, damage and clock; MCmatlab's Example 11); :meth:`HeatSimulation.reset`
+starts afresh. The time step is ``dt`` when given, else chosen from the mesh and media
+(:func:`auto_dt`, see ``docs/heat.md``).
+
 Beyond MCmatlab, the tissue may change while it is heated: ``HS.mua_t``,
 ``HS.mus_t``, ``HS.VHC_t`` and ``HS.TC_t`` are functions of time (s) that replace the
 properties of medium ``HS.varying_medium``. The absorbed power map then follows
@@ -23,39 +33,118 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ._strict import NotBuiltError, StrictAttributes
+from ._strict import StrictAttributes
 from .media import check_positive
-from .progress import Progress
 
-__all__ = ["HeatSimulation", "simulate_heat_distribution"]
+__all__ = ["HeatSimulation", "Schedule", "auto_dt", "simulate_heat_distribution"]
+
+#: MCmatlab's step is 1.5 times the explicit (forward Euler) stability limit 2 / lambda_max
+#: of its voxel scheme, 15 times with ``largeTimeSteps``: lambda_max dt = 3 (or 30)
+MCMATLAB_STEP_FACTOR = 3.0
+LARGE_STEP_FACTOR = 10.0  #: ``large_time_steps``: MCmatlab's 15 / 1.5
+
+
+def auto_dt(spacing, vhc, tc, theta: float = 1.0, large_time_steps: bool = False) -> float:
+    r"""The automatic time step (s) of the theta scheme on a box mesh.
+
+    The stiffest mode of the lumped P1 (Kuhn mesh: the 7-point) operator decays at
+
+    .. math:: \lambda_{max} = 4 \max(k / c_v) \sum_i h_i^{-2},
+
+    and one theta step multiplies a mode by :math:`R(z) = (1 - (1-\theta) z)/(1 + \theta z)`,
+    :math:`z = \lambda \Delta t`. The step is the largest with :math:`R(z) \ge 0` for every
+    mode (no spurious oscillation: :math:`z \le 1/(1-\theta)`, 2 for Crank-Nicolson) and
+    at most MCmatlab's step, :math:`z = 3` (1.5 times the explicit limit; 30 with
+    ``large_time_steps``, MCmatlab's ``largeTimeSteps``). See ``docs/heat.md``.
+
+    Parameters
+    ----------
+    spacing : (3,) cm
+        Mesh spacing ``(hx, hy, hz)``.
+    vhc, tc : arrays (n,)
+        J cm^-3 K^-1 and W cm^-1 K^-1, of the elements or media (NaN entries ignored).
+    theta : float
+        The scheme's implicitness, in [0.5, 1].
+    large_time_steps : bool
+        Ten times longer steps (less accurate on the voxel scale).
+    """
+    alpha = np.asarray(tc, float) / np.asarray(vhc, float)
+    alpha = alpha[np.isfinite(alpha)]
+    if alpha.size == 0 or alpha.max() <= 0:
+        raise ValueError("auto_dt needs media with VHC > 0 and TC > 0")
+    lam = 4.0 * float(alpha.max()) * sum(1.0 / float(h) ** 2 for h in spacing)
+    z = MCMATLAB_STEP_FACTOR
+    if theta < 1.0:
+        z = min(z, 1.0 / (1.0 - theta))
+    if large_time_steps:
+        z *= LARGE_STEP_FACTOR
+    return z / lam
+
+
+@dataclass
+class Schedule:
+    """The steps of one heat run, in the run's own clock (0 at its start).
+
+    ``times`` (n_steps + 1,) s; ``updates`` (n_updates,) int: the steps (1-based) after
+    which the state is reported (plots, movie, media recalculation); ``dt`` (n_steps,) s.
+    """
+
+    times: np.ndarray
+    updates: np.ndarray
+
+    @property
+    def dt(self) -> np.ndarray:
+        return np.diff(self.times)
 
 
 @dataclass
 class HeatSimulation(StrictAttributes):
     """Heat simulation settings and results (MCmatlab's ``model.HS``).
 
-    Results (filled by :meth:`Model.simulate_heat_distribution`):
+    Results (filled by :meth:`Model.simulate_heat_distribution`; a later call appends):
 
-    * ``sensor_times``: (n_times,) s, 0 and the end of every step.
+    * ``sensor_times``: (n_times,) s, 0 and the end of every step (of all chained runs).
     * ``sensor_temps``: (n_times, n_sensors) deg C at ``temp_sensor_positions``.
     * ``T``: final temperature, deg C, on the mesh nodes: (nx+1, ny+1, nz+1) for the
       default mesh whose nodes are the voxel corners (``T_nodes`` is the flat (npoints,)).
     * ``Omega``: Arrhenius damage integral, same shape as ``T`` (0 where E, A not given).
+    * ``T_voxels``, ``Omega_voxels``: the same at the voxel centres, (nx, ny, nz)
+      (MCmatlab's ``HS.T`` and ``HS.Omega``): ``T_voxels`` the P1 field evaluated there;
+      ``Omega_voxels`` integrated at every step from those temperatures with the voxel's
+      own medium's E and A (a node on an interface takes the most damageable medium, so
+      interpolating ``Omega`` would spread damage into the neighbouring voxels).
+    * ``max_media_temps``: (n_media,) deg C, the highest temperature each medium of
+      ``G.media`` reached at a node of its elements (``-inf`` for a medium on no voxel).
+    * ``media_properties``, ``M``: the thermal sub-media and their voxel map
+      (:class:`mcmatlab_py.media_bins.ThermalMediaProperties`) at the end of the run.
     * ``mesh``: the scikit-fem ``MeshTet`` used; ``snapshots``: list of (t, T_nodes).
+    * ``movie_frames``: (n, h, w, 3) uint8 frames kept by ``defer_movie_write``.
     """
 
     P: float | Callable = 1.0  #: W, laser power, or a function P(t) of time (s)
     duration_on: float = 0.1  #: s, laser on in each pulse
     duration_off: float = 0.0  #: s, then off
+    duration_end: float = 0.0  #: s, cooling after the last pulse (MCmatlab's durationEnd)
     n_pulses: int = 1
-    dt: float = 0.01  #: s, time step
-    T_initial: float = 37.0  #: deg C
+    dt: float | None = None  #: s, time step; None: :func:`auto_dt` from mesh and media
+    large_time_steps: bool = False  #: with ``dt = None``: ten times longer automatic steps
+    #: deg C: a number, or an (nx, ny, nz) array on the voxels (MCmatlab's 3-D ``HS.T``)
+    T_initial: float | np.ndarray = 37.0
     heat_boundary_type: int = 0  #: 0 insulating, 1 constant temperature, 2 convective
     heat_transfer_coefficient: float = 1e-3  #: W cm^-2 K^-1 (type 2)
     T_ambient: float = 20.0  #: deg C (type 2)
     temp_sensor_positions: list = field(default_factory=list)  #: [(x, y, z)] cm
     theta: float = 1.0  #: 1 backward Euler, 0.5 Crank-Nicolson
     mesh_divisions: tuple | None = None  #: (nx, ny, nz) of the FEM mesh; None: the voxels
+    n_updates: int = 10  #: reports (plots, frames) per pulse; at least one per phase
+    #: every this many updates, re-evaluate FR-, T-, FD-dependent media (0: never)
+    media_prop_recalc_period: int = 0
+    slice_positions: tuple = (0.5, 1.0, 1.0)  #: relative (x, y, z) of the slices, 0..1
+    plot_temp_limits: tuple = (math.nan, math.nan)  #: deg C colour range (NaN: the data's)
+    live_plot: bool = False  #: draw the temperature slices at every update (this port's)
+    make_movie: bool = False  #: write the update frames as an MP4 (imageio-ffmpeg)
+    movie_path: str = "heat_simulation.mp4"  #: where ``make_movie`` writes
+    defer_movie_write: bool = False  #: keep the frames in ``movie_frames``, write later
     # time-varying tissue (beyond MCmatlab)
     mua_t: Callable | None = None  #: mua(t), cm^-1
     mus_t: Callable | None = None  #: mus(t), cm^-1
@@ -73,37 +162,43 @@ class HeatSimulation(StrictAttributes):
     T: np.ndarray | None = None
     T_nodes: np.ndarray | None = None
     Omega: np.ndarray | None = None
+    T_voxels: np.ndarray | None = None
+    Omega_voxels: np.ndarray | None = None
+    max_media_temps: np.ndarray | None = None
+    media_properties: object = None
+    M: np.ndarray | None = None
     mesh: object = None
     snapshots: list | None = None
+    movie_frames: np.ndarray | None = None
     mc_runs: int = 0
+    dt_used: np.ndarray | None = None  #: s, the distinct step lengths of the last run
 
     _owner_label = "HS"
     _renamed = {"Tinitial": "T_initial", "sensorsTimeVector": "sensor_times",
                 "silentMode": "progress (= not silentMode)"}
-    _not_built = ("useGPU", "useAllCPUs", "makeMovie", "deferMovieWrite", "largeTimeSteps",
-                  "durationEnd", "plotTempLimits", "nUpdates", "mediaPropRecalcPeriod",
-                  "slicePositions", "maxMediaTemps", "movieFrames", "mediaProperties", "M")
+    _not_built = ("useGPU", "useAllCPUs")
 
     def validate(self, G) -> None:
         if not callable(self.P):
             self.P = check_positive("HS", "P", self.P, allow_zero=True)
-        self.duration_on = check_positive("HS", "duration_on", self.duration_on, allow_zero=True)
-        self.duration_off = check_positive("HS", "duration_off", self.duration_off,
-                                           allow_zero=True)
+        for name in ("duration_on", "duration_off", "duration_end"):
+            setattr(self, name, check_positive("HS", name, getattr(self, name), allow_zero=True))
         if self.duration_on + self.duration_off <= 0:
             raise ValueError("HS.duration_on + HS.duration_off must be > 0, got "
                              f"{self.duration_on} + {self.duration_off}")
-        if isinstance(self.n_pulses, bool) or not isinstance(self.n_pulses, (int, np.integer)) \
-                or self.n_pulses < 1:
-            raise ValueError(f"HS.n_pulses must be an integer >= 1, got {self.n_pulses!r}")
-        self.dt = check_positive("HS", "dt", self.dt)
-        if self.dt > self.total_duration:
-            raise ValueError(f"HS.dt = {self.dt!r} s is longer than the whole run "
-                             f"(n_pulses * (duration_on + duration_off) = {self.total_duration} s)")
-        if isinstance(self.T_initial, bool) or not isinstance(self.T_initial, (int, float)) \
-                or not math.isfinite(self.T_initial):
-            raise ValueError(f"HS.T_initial must be a finite number (deg C), got "
-                             f"{self.T_initial!r}")
+        for name in ("n_pulses", "n_updates"):
+            v = getattr(self, name)
+            if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or v < 1:
+                raise ValueError(f"HS.{name} must be an integer >= 1, got {v!r}")
+        p = self.media_prop_recalc_period
+        if isinstance(p, bool) or not isinstance(p, (int, np.integer)) or p < 0:
+            raise ValueError(f"HS.media_prop_recalc_period must be an integer >= 0, got {p!r}")
+        if self.dt is not None:
+            self.dt = check_positive("HS", "dt", self.dt)
+            if self.dt > self.total_duration:
+                raise ValueError(f"HS.dt = {self.dt!r} s is longer than the whole run (n_pulses "
+                                 f"* (duration_on + duration_off) = {self.total_duration} s)")
+        self._validate_initial(G)
         if self.heat_boundary_type not in (0, 1, 2):
             raise ValueError(f"HS.heat_boundary_type must be 0, 1 or 2, got "
                              f"{self.heat_boundary_type!r}")
@@ -112,6 +207,27 @@ class HeatSimulation(StrictAttributes):
         if isinstance(self.theta, bool) or not isinstance(self.theta, (int, float)) \
                 or not (0.5 <= float(self.theta) <= 1.0):
             raise ValueError(f"HS.theta must be in [0.5, 1] (implicit), got {self.theta!r}")
+        self._validate_sensors(G)
+        self._validate_plotting()
+        for name in ("VHC", "TC"):
+            for i, m in enumerate(G.media):
+                if getattr(m, name) is None and getattr(self, f"{name}_t") is None:
+                    raise ValueError(f"G.media[{i}].{name} is needed by the heat simulation, "
+                                     "got None")
+        if not (self.absorption == "monte_carlo" or callable(self.absorption)):
+            raise ValueError("HS.absorption must be 'monte_carlo' or a callable (mua, mus) -> "
+                             f"NA, got {self.absorption!r}")
+
+    def _validate_initial(self, G) -> None:
+        from .media_bins import state_field
+
+        T0 = self.T_initial
+        if np.ndim(T0) == 0 and (isinstance(T0, bool) or not isinstance(T0, (int, float, np.number))
+                                 or not math.isfinite(T0)):
+            raise ValueError(f"HS.T_initial must be a finite number (deg C), got {T0!r}")
+        self.T_initial = state_field("HS.T_initial", T0, (G.nx, G.ny, G.nz))
+
+    def _validate_sensors(self, G) -> None:
         if not isinstance(self.temp_sensor_positions, (list, tuple, np.ndarray)):
             raise ValueError(f"HS.temp_sensor_positions must be a list of (x, y, z), got "
                              f"{self.temp_sensor_positions!r}")
@@ -128,29 +244,85 @@ class HeatSimulation(StrictAttributes):
                 raise ValueError(f"HS.temp_sensor_positions[{i}] = {tuple(pos)} cm is outside "
                                  f"the tissue [-{G.Lx / 2}, {G.Lx / 2}] x [-{G.Ly / 2}, "
                                  f"{G.Ly / 2}] x [0, {G.Lz}]")
-        for name in ("VHC", "TC"):
-            for i, m in enumerate(G.media):
-                if getattr(m, name) is None and getattr(self, f"{name}_t") is None:
-                    raise ValueError(f"G.media[{i}].{name} is needed by the heat simulation, "
-                                     "got None")
-                if callable(getattr(m, name)):
-                    raise NotBuiltError(
-                        f"G.media[{i}].{name} is a function of (T, FD): MCmatlab's heat "
-                        "simulation with temperature- or damage-dependent media is not built "
-                        "yet (mcmatlab_py.media_bins.thermal_media_properties evaluates them)")
-        if not (self.absorption == "monte_carlo" or callable(self.absorption)):
-            raise ValueError("HS.absorption must be 'monte_carlo' or a callable (mua, mus) -> "
-                             f"NA, got {self.absorption!r}")
+
+    def _validate_plotting(self) -> None:
+        s = np.asarray(self.slice_positions, dtype=float)
+        if s.shape != (3,) or not np.all((s >= 0) & (s <= 1)):
+            raise ValueError(f"HS.slice_positions must be three numbers in [0, 1], got "
+                             f"{self.slice_positions!r}")
+        lim = np.asarray(self.plot_temp_limits, dtype=float)
+        if lim.shape != (2,) or np.any(np.isinf(lim)) or (
+                not np.isnan(lim).any() and lim[1] <= lim[0]):
+            raise ValueError("HS.plot_temp_limits must be (low, high) deg C with high > low "
+                             f"(NaN: from the data), got {self.plot_temp_limits!r}")
 
     @property
     def total_duration(self) -> float:
-        """s: ``n_pulses * (duration_on + duration_off)``."""
+        """s: ``n_pulses * (duration_on + duration_off)`` (the pulse train, without the end)."""
         return self.n_pulses * (self.duration_on + self.duration_off)
 
-    def step_times(self) -> np.ndarray:
-        """(n_steps,) s: the end time of every step."""
-        n = int(round(self.total_duration / self.dt))
-        return self.dt * np.arange(1, n + 1)
+    def reset(self) -> None:
+        """Forget the results, so that the next run starts at ``T_initial`` at t = 0."""
+        for name in ("sensor_times", "sensor_temps", "T", "T_nodes", "Omega", "T_voxels",
+                     "Omega_voxels", "max_media_temps", "media_properties", "M", "mesh",
+                     "snapshots", "movie_frames", "dt_used"):
+            setattr(self, name, None)
+        self.mc_runs = 0
+
+    def phases(self) -> list[tuple[float, float, int]]:
+        """MCmatlab's phases of a run: ``(start s, duration s, n_updates)``, in order.
+
+        Each pulse has an illumination phase of ``round(n_updates * on / (on + off))``
+        updates (at least 1) and a diffusion phase with the rest (at least 1); the end
+        phase has ``round(n_updates * end / (on + off))`` (at least 1). Phases of zero
+        duration are left out.
+        """
+        on, off, end = self.duration_on, self.duration_off, self.duration_end
+        period = on + off
+        n_on = max(1, round(self.n_updates * on / period)) if on > 0 else 0
+        n_off = max(1, self.n_updates - n_on) if off > 0 else 0
+        out = []
+        for i in range(self.n_pulses):
+            if on > 0:
+                out.append((i * period, on, n_on))
+            if off > 0:
+                out.append((i * period + on, off, n_off))
+        if end > 0:
+            out.append((self.n_pulses * period, end, max(1, round(self.n_updates * end / period))))
+        return out
+
+    def schedule(self, dt_max: float | None = None) -> Schedule:
+        """The steps of a run (its own clock).
+
+        With ``dt`` given, steps of ``dt`` over the pulse train and over the end phase (as
+        before ``duration_end`` existed), and the updates at the steps nearest MCmatlab's
+        update times. Without, MCmatlab's: every update of a phase is split into
+        ``ceil(length / dt_max)`` equal steps, so that each phase ends on a step.
+        """
+        phases = self.phases()
+        if self.dt is not None:
+            n_train = int(round(self.total_duration / self.dt))
+            n_end = int(round(self.duration_end / self.dt))
+            times = self.dt * np.arange(n_train + n_end + 1)
+            marks = [start + length * (j + 1) / n for start, length, n in phases
+                     for j in range(n)]
+            updates = np.unique(np.clip(np.round(np.array(marks) / self.dt).astype(int),
+                                        1, times.size - 1))
+            return Schedule(times, updates)
+        if dt_max is None or not dt_max > 0:
+            raise ValueError("HS.schedule needs dt_max (s) when HS.dt is None")
+        pieces, updates, n_done = [np.zeros(1)], [], 0
+        for start, length, n in phases:
+            per = max(1, math.ceil(length / n / dt_max - 1e-9))
+            k = np.arange(1, n * per + 1)
+            pieces.append(start + length * k / (n * per))
+            updates.extend(n_done + per * np.arange(1, n + 1))
+            n_done += n * per
+        return Schedule(np.concatenate(pieces), np.asarray(updates, dtype=int))
+
+    def step_times(self, dt_max: float | None = None) -> np.ndarray:
+        """(n_steps,) s: the end time of every step of a run."""
+        return self.schedule(dt_max).times[1:]
 
     def laser_power(self, t: float) -> float:
         """W delivered at time ``t`` (s): ``P`` (or ``P(t)``) while a pulse is on, else 0.
@@ -163,152 +335,13 @@ class HeatSimulation(StrictAttributes):
             return 0.0
         return float(self.P(t)) if callable(self.P) else float(self.P)
 
-
-def _value(f, t):
-    v = float(f(t))
-    if not math.isfinite(v) or v < 0:
-        raise ValueError(f"a time-varying property returned {v!r} at t = {t} s")
-    return v
+    def peak_power(self, t: float) -> float:
+        """W of the laser when on at ``t`` (s): what FR-dependent media see (MCmatlab's MC.P)."""
+        return float(self.P(t)) if callable(self.P) else float(self.P)
 
 
 def simulate_heat_distribution(model) -> None:
     """Run ``model.HS`` on ``model.G`` with the absorption of ``model.MC`` (see module doc)."""
-    import fem
+    from .heat_run import run_heat
 
-    from .monte_carlo import optical_arrays, simulate, store_results
-
-    G, MC, HS = model.G, model.MC, model.HS
-    M = G.medium_map()
-    HS.validate(G)
-    varying_optics = HS.mua_t is not None or HS.mus_t is not None
-    if MC.NA is None and not varying_optics and not callable(HS.absorption):
-        raise ValueError("MC.NA is empty: run model.run_monte_carlo() before the heat "
-                         "simulation (or give time-varying optics)")
-    media = G.media
-    vm = HS.varying_medium
-    if not 0 <= vm < len(media):
-        raise ValueError(f"HS.varying_medium must index G.media, got {vm!r}")
-
-    grid = fem.BoxGrid(G.nx, G.ny, G.nz, G.Lx, G.Ly, G.Lz)
-    if HS.mesh_divisions is None:
-        mesh_grid = grid
-    else:
-        nxm, nym, nzm = HS.mesh_divisions
-        mesh_grid = fem.BoxGrid(nxm, nym, nzm, G.Lx, G.Ly, G.Lz)
-    mesh = mesh_grid.mesh()
-    L = fem.voxel_load_matrix(mesh, grid)  # (npoints, nvox): W per node from W/cm^3
-    # media per element: the voxel that holds the element's centroid
-    elem_medium = M.ravel()[fem.element_voxel_index(mesh, grid)]
-
-    def props(t):
-        vhc = np.array([m.VHC if m.VHC is not None else np.nan for m in media], float)
-        tc = np.array([m.TC if m.TC is not None else np.nan for m in media], float)
-        if HS.VHC_t is not None:
-            vhc[vm] = _value(HS.VHC_t, t)
-        if HS.TC_t is not None:
-            tc[vm] = _value(HS.TC_t, t)
-        return vhc, tc
-
-    vhc0, tc0 = props(0.0)
-    boundary = fem.HeatBoundary.from_mcmatlab(
-        HS.heat_boundary_type,
-        temperature=None if HS.heat_boundary_type != 2 else HS.T_ambient,
-        h=HS.heat_transfer_coefficient if HS.heat_boundary_type == 2 else 0.0)
-    stepper = fem.HeatStepper(mesh, vhc0[elem_medium], tc0[elem_medium], HS.dt,
-                              theta=HS.theta, boundary=boundary)
-    probes = fem.probe_matrix(mesh, np.asarray(HS.temp_sensor_positions, float)
-                              .reshape(-1, 3).T) if len(HS.temp_sensor_positions) else None
-    single_thermal = len(media) == 1
-
-    mua, mus, g, nref = optical_arrays(media, MC.wavelength)
-    current_optics = None
-    NA = MC.NA
-
-    def absorption_at(t):
-        nonlocal current_optics, NA
-        if not varying_optics:
-            if callable(HS.absorption) and NA is None:
-                NA = HS.absorption(np.array([mua[vm]]), np.array([mus[vm]]))[0]
-            return NA
-        a = _value(HS.mua_t, t) if HS.mua_t is not None else mua[vm]
-        s = _value(HS.mus_t, t) if HS.mus_t is not None else mus[vm]
-        if current_optics == (a, s):
-            return NA
-        current_optics = (a, s)
-        if callable(HS.absorption):
-            NA = HS.absorption(np.array([a]), np.array([s]))[0]
-        else:
-            mua_now, mus_now = mua.copy(), mus.copy()
-            mua_now[vm], mus_now[vm] = a, s
-            res = simulate(G, MC, M, mua_now, mus_now, g, nref,
-                           seed=(MC.seed or 0) + HS.mc_runs, n_photons=MC.n_photons_requested
-                           or 10**6)
-            HS.mc_runs += 1
-            store_results(MC, res, M, mua_now, G.dx * G.dy * G.dz)
-            NA = MC.NA
-        return NA
-
-    times = np.r_[0.0, HS.step_times()]
-    T0 = np.full(mesh.p.shape[1], float(HS.T_initial))
-    Omega = np.zeros_like(T0)
-    E_node, A_node = _damage_parameters(mesh, elem_medium, media)
-    snap_every = max(1, (len(times) - 1) // HS.n_snapshots) if HS.n_snapshots else 0
-    HS.snapshots = [(0.0, T0.copy())] if snap_every else []
-    HS.mc_runs = 0
-    bar = Progress(len(times) - 1, "heat", enabled=HS.progress)
-
-    def step(T, t0, t1):
-        nonlocal stepper
-        t_mid = t1 - 0.5 * HS.dt  # sources and properties at mid-step
-        scales = {}
-        if HS.VHC_t is not None or HS.TC_t is not None:
-            vhc, tc = props(t_mid)
-            if single_thermal:
-                scales = dict(vhc_scale=np.array([vhc[0] / vhc0[0]]),
-                              tc_scale=np.array([tc[0] / tc0[0]]))
-            else:
-                stepper = fem.HeatStepper(mesh, vhc[elem_medium], tc[elem_medium], HS.dt,
-                                          theta=HS.theta, boundary=boundary)
-        power = HS.laser_power(t_mid)
-        load = L @ (power * absorption_at(t_mid)).ravel() if power != 0 else None  # W
-        if scales:
-            return stepper.step(T[None, :], None if load is None else load[None, :],
-                                **scales)[0]
-        return stepper.step(T, load)
-
-    def on_step(k, t1, T_old, T_new):
-        if E_node is not None:
-            fem.advance_damage(Omega, T_old, T_new, HS.dt, E_node, A_node)
-        if snap_every and k % snap_every == 0:
-            HS.snapshots.append((t1, T_new.copy()))
-        bar.update(k)
-
-    T, sensor = fem.march(step, T0, times, probes, on_step)
-    bar.close()
-    HS.sensor_times = times
-    HS.sensor_temps = sensor if sensor is not None else np.empty((len(times), 0))
-    HS.mesh = mesh
-    HS.T_nodes = T
-    shape = tuple(n + 1 for n in mesh_grid.shape)
-    HS.T = T.reshape(shape)
-    HS.Omega = Omega.reshape(shape)
-
-
-def _damage_parameters(mesh, elem_medium, media):
-    """Per-node Arrhenius E (J/mol) and A (1/s), from the media of the elements around it.
-
-    A node between media takes the most damageable of them (the largest ``A``, then ``E``),
-    as ``fem.element_to_node(..., how="max")``, so that a node touching damageable tissue
-    can be damaged; E and A come from that one medium, never a mix of two.
-    """
-    import fem
-
-    if all(m.E is None or m.A is None for m in media):
-        return None, None
-    E = np.array([m.E if m.E is not None else 0.0 for m in media])
-    A = np.array([m.A if m.A is not None else 0.0 for m in media])
-    order = np.lexsort((E, A))  # media from the least to the most damageable
-    rank = np.empty_like(order)
-    rank[order] = np.arange(order.size)
-    node_medium = order[fem.element_to_node(mesh, rank[elem_medium], "max").astype(int)]
-    return E[node_medium], A[node_medium]
+    run_heat(model)

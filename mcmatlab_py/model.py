@@ -18,6 +18,7 @@ import numpy as np
 from fem.checks import check_number
 
 from ._strict import NotBuiltError, StrictAttributes
+from .light_collector import DepositionCriteria, LightCollector
 from .light_source import (
     SOURCE_TYPES,  # noqa: F401  (re-exported)
     IntensityDistribution,
@@ -218,6 +219,23 @@ class MonteCarloSimulation(StrictAttributes):
     * ``n_photons``, ``photons_per_second``, ``simulation_time`` (s, kernel only),
       ``cores_used`` (kernel CPU time over wall time: below ``n_threads`` when other
       programs took the cores).
+
+    Optional outputs (:mod:`mcmatlab_py.mc_outputs`; the plain run computes none of them):
+
+    * ``NI_xpos``, ``NI_xneg``, ``NI_ypos``, ``NI_yneg``, ``NI_zpos``, ``NI_zneg`` (with
+      ``calc_normalized_irradiance``): the power leaving through each face pixel per area
+      per W incident, W/cm^2/W; shapes (ny, nz), (nx, nz), (nx, ny). ``NI_zneg`` is the
+      top face. Faces that cannot escape (``boundary_type``) stay zero.
+    * ``far_field`` (res, res) over (theta, phi), the escaping power per bin, W/W (as
+      MCmatlab), with bin centres ``far_field_theta`` (0..pi, from +z) and
+      ``far_field_phi`` (-pi..pi); directions are those after refraction into ``n_outside``.
+    * ``light_collector.image`` (with ``use_light_collector``) and ``n_photons_collected``.
+    * ``Rd_r``, ``Tt_r`` (cm^-2) and ``Rd_a``, ``Tt_a`` (sr^-1): MCML's radial and
+      exit-angle reflectance and transmittance about the source's focus (with
+      ``n_radial_bins``), at ``radial_r`` (cm) and ``exit_angle`` (rad); the last bins
+      also hold what lies beyond, as in MCML.
+    * ``example_paths`` (4, k): x, y, z (cm) and weight of the first ``n_example_paths``
+      packets, each path preceded by a NaN column (MCmatlab's layout).
     """
 
     n_photons_requested: int | None = None
@@ -248,6 +266,17 @@ class MonteCarloSimulation(StrictAttributes):
     #: for Fresnel reflection and refraction when ``matched_interfaces`` is False; 0: Sobel
     #: normals unsmoothed; None: the voxel faces (this port's extra: exact for planar layers)
     smoothing_length_scale: float | None = 0.1
+    use_light_collector: bool = False
+    light_collector: LightCollector = field(default_factory=LightCollector)
+    #: n_photons_requested counts collected packets, not launched ones
+    request_collected_photons: bool = False
+    deposition_criteria: DepositionCriteria = field(default_factory=DepositionCriteria)
+    far_field_res: int = 0  #: 0: no far field
+    n_example_paths: int = 0
+    calc_normalized_irradiance: bool = False  #: the NI_* maps (MCmatlab computes them always)
+    n_radial_bins: int = 0  #: MCML's nr; 0: no radial and angular tallies
+    radial_bin_size: float = 0.01  #: cm, MCML's dr
+    n_angle_bins: int = 30  #: MCML's na, over exit angles 0..pi/2
 
     # results
     NA: np.ndarray | None = None
@@ -268,19 +297,34 @@ class MonteCarloSimulation(StrictAttributes):
     M: np.ndarray | None = None
     #: the sub-media's mua, mus, g, n (:class:`mcmatlab_py.media_bins.OpticalMediaProperties`)
     media_properties: object = None
+    NI_xpos: np.ndarray | None = None
+    NI_xneg: np.ndarray | None = None
+    NI_ypos: np.ndarray | None = None
+    NI_yneg: np.ndarray | None = None
+    NI_zpos: np.ndarray | None = None
+    NI_zneg: np.ndarray | None = None
+    far_field: np.ndarray | None = None
+    far_field_theta: np.ndarray | None = None
+    far_field_phi: np.ndarray | None = None
+    n_photons_collected: int | None = None
+    Rd_r: np.ndarray | None = None
+    Tt_r: np.ndarray | None = None
+    Rd_a: np.ndarray | None = None
+    Tt_a: np.ndarray | None = None
+    radial_r: np.ndarray | None = None
+    exit_angle: np.ndarray | None = None
+    example_paths: np.ndarray | None = None
 
     _owner_label = "MC"
     _renamed = {"LS": "light_source", "normalizedAbsorption": "NA",
                 "normalizedFluenceRate": "NFR", "silentMode": "progress (= not silentMode)",
-                "useAllCPUs": "n_threads"}
+                "useAllCPUs": "n_threads", "LC": "light_collector",
+                **{f"normalizedIrradiance_{s}": f"NI_{s}"
+                   for s in ("xpos", "xneg", "ypos", "yneg", "zpos", "zneg")}}
     _not_built = (
-        "useGPU", "GPUdevice", "requestCollectedPhotons", "calcNormalizedFluenceRate", "calcNFR",
-        "nExamplePaths", "examplePaths", "farFieldRes", "farField", "farFieldTheta",
-        "farFieldPhi", "interfaceNormals", "P", "spectrumFunc",
-        "spectrum", "FRinitial", "FRdepIterations", "useLightCollector", "lightCollector", "LC",
-        "depositionCriteria", "nPhotonsCollected", "CDFs",
-        *(f"{pre}_{side}" for pre in ("normalizedIrradiance", "NI")
-          for side in ("xpos", "xneg", "ypos", "yneg", "zpos", "zneg")),
+        "useGPU", "GPUdevice", "calcNormalizedFluenceRate", "calcNFR",
+        "interfaceNormals", "P", "spectrumFunc",
+        "spectrum", "FRinitial", "FRdepIterations", "CDFs",
     )
 
     @property
@@ -328,10 +372,40 @@ class MonteCarloSimulation(StrictAttributes):
                 raise NotBuiltError("MCmatlab's broadband MC.wavelength (an array of wavelengths) "
                                     "is not built yet")
             self.wavelength = check_positive("MC", "wavelength", self.wavelength)
+        self._validate_outputs(G)
         shape = (G.nx, G.ny, G.nz)
         self.FR = state_field("MC.FR", self.FR, shape, lower=0.0)
         self.T = state_field("MC.T", self.T, shape)
         self.FD = state_field("MC.FD", self.FD, shape, lower=0.0, upper=1.0)
+
+
+    def _validate_outputs(self, G: Geometry) -> None:
+        for name in ("far_field_res", "n_example_paths", "n_radial_bins"):
+            setattr(self, name, _check_int("MC", name, getattr(self, name), minimum=0))
+        if self.n_radial_bins:
+            self.n_angle_bins = _check_int("MC", "n_angle_bins", self.n_angle_bins)
+            self.radial_bin_size = check_positive("MC", "radial_bin_size", self.radial_bin_size)
+        if self.boundary_type == 0:
+            for name in ("far_field_res", "use_light_collector", "calc_normalized_irradiance",
+                         "n_radial_bins"):
+                if getattr(self, name):
+                    raise ValueError(f"MC.{name} is set but MC.boundary_type = 0 lets no light "
+                                     "escape: change one of them")
+        if not isinstance(self.light_collector, LightCollector):
+            raise ValueError(f"MC.light_collector must be a LightCollector, got "
+                             f"{self.light_collector!r}")
+        if not isinstance(self.deposition_criteria, DepositionCriteria):
+            raise ValueError(f"MC.deposition_criteria must be a DepositionCriteria, got "
+                             f"{self.deposition_criteria!r}")
+        if self.use_light_collector:
+            self.light_collector.validate(G)
+        if self.request_collected_photons and not self.use_light_collector:
+            raise ValueError("MC.request_collected_photons is True but MC.use_light_collector "
+                             "is False")
+        if self.request_collected_photons and self.n_photons_requested is None:
+            raise ValueError("MC.request_collected_photons needs MC.n_photons_requested (the "
+                             "number of packets to collect)")
+        self.deposition_criteria.validate(self.use_light_collector)
 
 
 class Model(StrictAttributes):
@@ -388,3 +462,11 @@ class Model(StrictAttributes):
 
         simulate_heat_distribution(self)
         return self
+
+    def plot(self, what: str, path=None, *, interactive: bool = False) -> dict:
+        """MCmatlab's ``plot(model, what)`` for ``what`` in "G", "MC", "HS": returns
+        ``{name: Figure}``, saved as ``<stem>_<name>.png`` next to ``path`` when given
+        (:func:`mcmatlab_py.plotting.plot_model`)."""
+        from .plotting import plot_model
+
+        return plot_model(self, what, path, interactive=interactive)

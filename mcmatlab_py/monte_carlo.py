@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 import time
 from dataclasses import dataclass
 
@@ -9,7 +10,9 @@ import numba
 import numpy as np
 
 from . import _mc_kernel as K
+from . import _mc_outputs as KO
 from ._strict import NotBuiltError
+from .mc_outputs import OutputSpec, output_spec, store_outputs
 from .media_bins import optical_media_properties
 from .progress import Progress
 
@@ -36,6 +39,10 @@ class MCResult:
     n_photons: int
     kernel_seconds: float
     kernel_cpu_seconds: float = 0.0  #: process CPU time spent in the kernel (all threads)
+    spec: OutputSpec | None = None  #: the optional outputs requested
+    ext: np.ndarray | None = None  #: (n_ext,) their fixed-point tallies, summed over workers
+    paths: np.ndarray | None = None  #: example paths (n_paths, PATH_LEN, 4), local cm
+    path_n: np.ndarray | None = None  #: vertices per example path
 
 
 def optical_arrays(media, wavelength: float | None = None
@@ -69,6 +76,12 @@ def simulate(G, MC, M: np.ndarray, mua, mus, g, nref, *, seed: int, n_photons: i
     n_threads = min(MC.n_threads or numba.get_num_threads(), numba.config.NUMBA_NUM_THREADS)
     n_slots = n_threads  # one worker per thread, each with its own tally rows
     bs = MC.batch_size
+    spec = output_spec(G, MC, len(mua), _parent_media(G, MC, len(mua)))
+    collect_target = n_photons if getattr(MC, "request_collected_photons", False) else None
+    if collect_target is not None:
+        n_photons = None  # run until enough packets are collected
+        time_limit_s = 60.0 * MC.simulation_time_requested if MC.simulation_time_requested \
+            else None
     n_total = n_photons if n_photons is not None else np.iinfo(np.int64).max // 4
     n_batches = -(-n_total // bs) if n_photons is not None else None
     args = _kernel_args(G, MC, M, mua, mus, g, nref, seed, n_total)
@@ -76,22 +89,29 @@ def simulate(G, MC, M: np.ndarray, mua, mus, g, nref, *, seed: int, n_photons: i
     acc = np.zeros((n_slots, args[0].size), dtype=np.int64)
     # rows padded to 512 bytes so that threads do not share cache lines
     tally = np.zeros((n_slots, 64), dtype=np.int64)
+    out = spec.arrays(n_slots)
 
     old_threads = numba.get_num_threads()
     numba.set_num_threads(n_threads)
     try:
-        K.run_batches(*args, 0, 0, acc, tally)  # compile (or load from cache) outside timing
+        K.run_batches(*args, 0, 0, acc, tally, *out)  # compile (or load) outside timing
+        if collect_target is not None:
+            done, kernel_s, kernel_cpu = _run_until_collected(
+                args, acc, tally, out, collect_target, time_limit_s, bs)
+            n_photons = done * bs
+            n_batches = done
         total = n_batches if n_batches is not None else time_limit_s
-        bar = Progress(total, label, enabled=MC.progress)
-        done = 0
-        kernel_s = 0.0
-        kernel_cpu = 0.0
+        bar = Progress(total, label, enabled=MC.progress and collect_target is None)
+        done = 0 if collect_target is None else n_batches
+        if collect_target is None:
+            kernel_s = 0.0
+            kernel_cpu = 0.0
         per_round = 8 * n_slots
-        while True:
+        while done < (n_batches if n_batches is not None else np.inf):
             stop = done + per_round if n_batches is None else min(done + per_round, n_batches)
             t0 = time.perf_counter()
             c0 = time.process_time()
-            K.run_batches(*args, done, stop, acc, tally)
+            K.run_batches(*args, done, stop, acc, tally, *out)
             dt = time.perf_counter() - t0
             kernel_cpu += time.process_time() - c0
             kernel_s += dt
@@ -116,7 +136,35 @@ def simulate(G, MC, M: np.ndarray, mua, mus, g, nref, *, seed: int, n_photons: i
     n_done = n_photons if n_photons is not None else done * bs
     absorbed = acc.sum(axis=0).reshape(nx, ny, nz) / K.W_ONE
     return MCResult(absorbed=absorbed, tally=tally.sum(axis=0)[: K.N_TALLY], n_photons=int(n_done),
-                    kernel_seconds=kernel_s, kernel_cpu_seconds=kernel_cpu)
+                    kernel_seconds=kernel_s, kernel_cpu_seconds=kernel_cpu, spec=spec,
+                    ext=out[3].sum(axis=0), paths=out[4], path_n=out[5])
+
+
+def _run_until_collected(args, acc, tally, out, target: int, time_limit_s, bs: int):
+    """MCmatlab's requestCollectedPhotons: run batches until ``target`` packets are collected.
+
+    The size of each round depends only on the counts collected so far, never on the
+    clock or the thread count, so a seed still gives the same result on any machine
+    (unless ``time_limit_s`` stops the run first). Returns (batches, seconds, CPU seconds).
+    """
+    done, per_round = 0, 16
+    kernel_s = kernel_cpu = 0.0
+    while True:
+        t0, c0 = time.perf_counter(), time.process_time()
+        K.run_batches(*args, done, done + per_round, acc, tally, *out)
+        kernel_s += time.perf_counter() - t0
+        kernel_cpu += time.process_time() - c0
+        done += per_round
+        got = int(out[3][:, KO.EXT_COLLECTED].sum())
+        if got >= target or (time_limit_s is not None and kernel_s >= time_limit_s):
+            return done, kernel_s, kernel_cpu
+        # aim 10% past the target at the rate seen so far; at most 4x the batches done
+        rate = got / done
+        need = (target - got) / rate * 1.1 if got else 4 * done
+        per_round = int(min(max(math.ceil(need), 1), 4 * done))
+        if done * bs > 10**12:
+            raise RuntimeError(f"MC.request_collected_photons: {got} of {target} packets "
+                               f"collected after {done * bs} launched; check the collector")
 
 
 def _kernel_args(G, MC, M, mua, mus, g, nref, seed, n_total):
@@ -157,16 +205,21 @@ def _parent_media(G, MC, n_sub: int) -> np.ndarray:
     return np.zeros(n_sub, dtype=np.int64)  # Henyey-Greenstein everywhere: parents unused
 
 
-def batch_range(args: tuple, batches: tuple[int, int]) -> tuple[np.ndarray, np.ndarray, float]:
+def batch_range(args: tuple, batches: tuple[int, int], spec: OutputSpec | None = None) -> tuple:
     """Batches ``[start, stop)`` of a run on this machine's threads: summed absorbed weights
-    (nvox,) and tallies (64,), int64 fixed point, and the kernel seconds (a task body)."""
+    (nvox,) and tallies (64,), int64 fixed point, the kernel seconds (a task body), and the
+    optional outputs' tallies (n_ext,) and example paths."""
     n_threads = numba.get_num_threads()
     acc = np.zeros((n_threads, args[0].size), dtype=np.int64)
     tally = np.zeros((n_threads, 64), dtype=np.int64)
-    K.run_batches(*args, 0, 0, acc, tally)  # compile or load from the cache first
+    if spec is None:
+        spec = OutputSpec(None, np.zeros(KO.OF_SIZE), np.zeros(1, dtype=np.bool_), 1, 0)
+    out = spec.arrays(n_threads)
+    K.run_batches(*args, 0, 0, acc, tally, *out)  # compile or load from the cache first
     t0 = time.perf_counter()
-    K.run_batches(*args, batches[0], batches[1], acc, tally)
-    return acc.sum(axis=0), tally.sum(axis=0), time.perf_counter() - t0
+    K.run_batches(*args, batches[0], batches[1], acc, tally, *out)
+    return (acc.sum(axis=0), tally.sum(axis=0), time.perf_counter() - t0, out[3].sum(axis=0),
+            out[4], out[5])
 
 
 def _simulate_distributed(G, MC, M, mua, mus, g, nref, *, seed, n_photons, client,
@@ -181,16 +234,26 @@ def _simulate_distributed(G, MC, M, mua, mus, g, nref, *, seed, n_photons, clien
     n_batches = -(-n_photons // MC.batch_size)
     workers = max(1, len(client.scheduler_info().get("workers", {})))
     ranges = split_range(n_batches, 4 * workers)  # a few tasks per worker: load balance
+    if getattr(MC, "request_collected_photons", False):
+        raise NotBuiltError("MC.request_collected_photons is not built for runs on a cluster")
     args = _kernel_args(G, MC, M, mua, mus, g, nref, seed, n_photons)
+    spec = output_spec(G, MC, len(mua), _parent_media(G, MC, len(mua)))
     t0 = time.perf_counter()
-    parts = run_tasks(functools.partial(batch_range, args), ranges, client=client,
+    parts = run_tasks(functools.partial(batch_range, args, spec=spec), ranges, client=client,
                       progress=MC.progress, label=label)
     wall = time.perf_counter() - t0
     acc = np.sum([p[0] for p in parts], axis=0)
     tally = np.sum([p[1] for p in parts], axis=0)
+    # each example path was written by the one task that ran its packet
+    path_n = np.max([p[5] for p in parts], axis=0)
+    paths = parts[0][4].copy()
+    for p in parts[1:]:
+        rows = p[5] > 0
+        paths[rows] = p[4][rows]
     return MCResult(absorbed=acc.reshape(M.shape) / K.W_ONE, tally=tally[: K.N_TALLY],
                     n_photons=int(n_photons), kernel_seconds=wall,
-                    kernel_cpu_seconds=float(sum(p[2] for p in parts)))
+                    kernel_cpu_seconds=float(sum(p[2] for p in parts)), spec=spec,
+                    ext=np.sum([p[3] for p in parts], axis=0), paths=paths, path_n=path_n)
 
 
 def run_monte_carlo(model, client=None) -> None:
@@ -211,6 +274,9 @@ def run_monte_carlo(model, client=None) -> None:
     res = simulate(G, MC, M, mua, mus, g, nref, seed=seed, n_photons=n_photons,
                    time_limit_s=time_limit, client=client)
     store_results(MC, res, M, mua, G.dx * G.dy * G.dz)
+    if res.spec is not None and res.spec.active:
+        store_outputs(G, MC, res.spec, res.ext, res.paths, res.path_n,
+                      res.tally[K.T_LAUNCHED] / K.W_ONE)
     MC.seed_used = seed
     MC.M = M
 
@@ -226,7 +292,9 @@ def store_results(MC, res: MCResult, M: np.ndarray, mua: np.ndarray, dV: float) 
     mua_map = mua[M]
     with np.errstate(divide="ignore", invalid="ignore"):
         MC.NFR = np.where(mua_map > 0, MC.NA / mua_map, 0.0)
-    MC.absorbed_fraction = float(res.absorbed.sum() / launched)
+    # with deposition criteria NA holds only what met them; the balance counts all
+    MC.absorbed_fraction = float((res.absorbed.sum() + frac(K.T_ABSORBED_EXCLUDED) * launched)
+                                 / launched)
     MC.specular_reflectance = frac(K.T_SPECULAR)
     MC.escaped = {"top": frac(K.T_TOP), "bottom": frac(K.T_BOTTOM), "sides": frac(K.T_SIDES)}
     MC.absorbed_outside_fraction = frac(K.T_OUTSIDE_ABSORBED)

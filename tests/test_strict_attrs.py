@@ -58,11 +58,8 @@ def test_mcmatlab_methods_point_to_ours():
 
 
 @pytest.mark.parametrize("label, name", [
-    ("MC", "nExamplePaths"),
     ("MC", "useGPU"),
-    ("MC", "farFieldRes"),
-    ("MC", "depositionCriteria"),
-    ("MC", "useLightCollector"),
+    ("MC", "calcNormalizedFluenceRate"),
     ("HS", "makeMovie"),
     ("HS", "durationEnd"),
     ("Medium", "ES"),

@@ -65,7 +65,10 @@ _FILTER_KEYS = {
     "n_members", "method", "estimate", "grid", "prior_range", "model_noise_std",
     "random_walk_std", "random_walk_when_off", "inflation", "mda", "seed", "parameter_model",
     "localization_radius", "heat_mass", "transforms", "emulator", "bounds", "prior",
+    "model_error", "adaptive_inflation",
 }
+_MODEL_ERROR_KEYS = {"kind", "rel_std", "time_scale", "length_xy", "length_z"}
+_ADAPTIVE_KEYS = {"enabled", "bounds", "time_scale"}
 _LASER_KEYS = ("P", "duration_on", "T_initial")
 _DATA_KEYS = {"file", "columns", "time_offset"}
 _EMULATOR_KEYS = {"n_photons", "n_mua", "n_mus", "mua_range", "mus_range", "seed", "exact"}
@@ -291,6 +294,7 @@ def identify_config_from_dict(cfg: dict) -> IdentifyConfig:
                                            for i, v in enumerate(rw)]
         else:
             setup_kw["random_walk_std"] = _num("filter.random_walk_std", rw, lo=0)
+    _model_error(flt, setup_kw)
     for k, allowed in (("parameter_model", ("random_walk", "trend")),
                        ("heat_mass", ("averaged", "lumped"))):
         if k in flt:
@@ -418,6 +422,35 @@ def _data_spec(table, n_obs: int) -> DataSpec:
     return spec
 
 
+def _model_error(flt: dict, setup_kw: dict) -> None:
+    """[filter.model_error] and [filter.adaptive_inflation] into TissueFilterSetup arguments."""
+    me = check_keys("filter.model_error", flt.get("model_error", {}), _MODEL_ERROR_KEYS)
+    if "kind" in me:
+        if me["kind"] not in ("structured", "white"):
+            raise ConfigError(f"filter.model_error.kind must be \"structured\" or \"white\", got "
+                              f"{shorten(repr(me['kind']))}")
+        setup_kw["model_error"] = me["kind"]
+    for k, hi in (("rel_std", 10.0), ("time_scale", 1e6), ("length_xy", 1e3), ("length_z", 1e3)):
+        if k in me:
+            setup_kw[f"model_error_{k}"] = _num(f"filter.model_error.{k}", me[k], lo=0, hi=hi)
+    ai = check_keys("filter.adaptive_inflation", flt.get("adaptive_inflation", {}),
+                    _ADAPTIVE_KEYS)
+    if "enabled" in ai:
+        if not isinstance(ai["enabled"], bool):
+            raise ConfigError(f"filter.adaptive_inflation.enabled must be true or false, got "
+                              f"{shorten(repr(ai['enabled']))}")
+        setup_kw["adaptive_inflation"] = ai["enabled"]
+    if "bounds" in ai:
+        lo, hi = _pair("filter.adaptive_inflation.bounds", ai["bounds"], positive=True)
+        if not (lo <= hi <= 1e4):
+            raise ConfigError(f"filter.adaptive_inflation.bounds must be [lo, hi] with "
+                              f"0 < lo <= hi <= 1e4, got {[lo, hi]}")
+        setup_kw["adaptive_inflation_bounds"] = (lo, hi)
+    if "time_scale" in ai:
+        setup_kw["adaptive_inflation_time_scale"] = _num(
+            "filter.adaptive_inflation.time_scale", ai["time_scale"], lo=1, hi=1e9)
+
+
 def check_identify_keys(cfg: dict) -> None:
     """Check the key names of [sensors], [filter], [data] and [run] (for ``mc``, ``heat``).
 
@@ -430,6 +463,8 @@ def check_identify_keys(cfg: dict) -> None:
     check_keys("filter.emulator", flt.get("emulator", {}), _EMULATOR_KEYS)
     check_keys("filter.bounds", flt.get("bounds", {}), set(PARAMETER_NAMES))
     check_keys("filter.prior", flt.get("prior", {}), set(PARAMETER_NAMES))
+    check_keys("filter.model_error", flt.get("model_error", {}), _MODEL_ERROR_KEYS)
+    check_keys("filter.adaptive_inflation", flt.get("adaptive_inflation", {}), _ADAPTIVE_KEYS)
     check_keys("data", cfg.get("data", {}), _DATA_KEYS)
     run_table(cfg)
 

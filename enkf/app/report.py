@@ -56,7 +56,11 @@ _UNITS = {"mua": "cm$^{-1}$", "mus": "cm$^{-1}$", "VHC": "J cm$^{-3}$ K$^{-1}$",
 
 
 def plot_identification(path, est, times, data, power, names_obs=None) -> None:
-    """Temperature tracks (top, with the data of the first sensor) and parameters (bottom)."""
+    """Temperature tracks (top, with the data of the first sensor) and parameters (bottom).
+
+    Temperature bands are mean +- 2 sd; parameter bands are the ensemble's 2.3 % and 97.7 %
+    quantiles (positive, like the members: the filter works on log parameters, where a
+    mean +- 2 sd in linear units can reach below zero)."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -65,31 +69,37 @@ def plot_identification(path, est, times, data, power, names_obs=None) -> None:
     t = est.times
     n_tr, n_par = est.tracked_mean.shape[1], len(est.names)
     cols = max(n_tr, n_par)
-    fig, axes = plt.subplots(2, cols, figsize=(4.2 * cols, 7.5), constrained_layout=True,
-                             squeeze=False)
+    fig = plt.figure(figsize=(4.2 * cols, 7.5), constrained_layout=True)
+    top, bottom = fig.subfigures(2, 1)
+    # each row as wide as it needs: no empty panel when there are fewer parameters
+    axes_t = np.atleast_1d(top.subplots(1, n_tr, squeeze=False)[0])
+    axes_p = np.atleast_1d(bottom.subplots(1, n_par, squeeze=False)[0])
+    method = {"etkf": "ETKF", "enkf": "EnKF"}.get(getattr(est, "method", None) or "", "filter")
     on = np.array([power(x) > 0 for x in t])
-    for ax in list(axes[0, :n_tr]) + list(axes[1, :n_par]):  # laser on: shaded
+    for ax in list(axes_t) + list(axes_p):  # laser on: shaded
         for a, b in _runs(t, on):
             ax.axvspan(a, b, color="0.88", lw=0)
     for j in range(n_tr):
-        ax = axes[0, j]
+        ax = axes_t[j]
         m, s = est.tracked_mean[:, j], est.tracked_std[:, j]
         if j == 0 and data is not None and data.shape[1]:
             ax.plot(times, data[:, 0], "k.", ms=2.5, label="data (first column)")
-        ax.plot(t, m, "r-", lw=1.4, label="EnKF mean")
+        ax.plot(t, m, "r-", lw=1.4, label=f"{method} mean")
         ax.fill_between(t, m - 2 * s, m + 2 * s, color="r", alpha=0.15, lw=0, label="$\\pm 2$ sd")
         x, y, z = est.tracked_positions[j]
         ax.set(title=f"T at ({x:g}, {y:g}, {z:g}) cm", xlabel="time [s]", ylabel="T [$^\\circ$C]")
         if j == 0:
             ax.legend(fontsize=8)
     for i, name in enumerate(est.names):
-        ax = axes[1, i]
-        m, s = est.param_mean[:, i], est.param_std[:, i]
-        ax.plot(t, m, "r-", lw=1.4)
-        ax.fill_between(t, m - 2 * s, m + 2 * s, color="r", alpha=0.15, lw=0)
+        ax = axes_p[i]
+        m = est.param_mean[:, i]
+        lo, hi = est.param_band(i) if hasattr(est, "param_band") else (
+            m - 2 * est.param_std[:, i], m + 2 * est.param_std[:, i])
+        ax.plot(t, m, "r-", lw=1.4, label=f"{method} mean")
+        ax.fill_between(t, lo, hi, color="r", alpha=0.15, lw=0, label="2.3-97.7 % of members")
         ax.set(title=f"{name} [{_UNITS.get(name, '')}]", xlabel="time [s]")
-    for ax in list(axes[0, n_tr:]) + list(axes[1, n_par:]):
-        ax.axis("off")
+        if i == 0:
+            ax.legend(fontsize=8)
     fig.savefig(path, dpi=110)
     plt.close(fig)
 
@@ -138,6 +148,8 @@ def write_identify_outputs(out: Path, setup, est, times, data, *, absorption=Non
         "steps": int(len(est.times) - 1), "analysed": int(np.sum(est.analysed)),
         "stopped": _readable_stop(est.diverged, est.names),
         "stopped_at_s": float(est.times[-1]) if est.diverged else None,
+        # members whose optics left the emulator's table (clamped to its edge), and what to do
+        "emulator_clamped": getattr(est, "clamped", None),
         "final_time_s": float(est.times[k]),
         "timing": {"filter_wall_s": float(est.filter_wall_s),
                    "step_latency_median_s": float(np.median(est.step_latency_s))

@@ -33,6 +33,8 @@ SUITE: dict[str, tuple[list | None, list | None]] = {
     "enkf_posterior": (None, []),
     "identifiability": ([], []),
     "paper_runs": (None, ["--twin"]),
+    # builds the emulator of examples/own_data.toml (long on 2 cores): full suite only
+    "model_error_coverage": (None, ["--seeds", "20"]),
     "image_vs_point": (None, []),
     "sensitivity": ([], []),
 }

@@ -33,7 +33,7 @@ def plot_results(path, scenario: str, est, truth: Truth, data: np.ndarray) -> No
         if j == 0:
             ax.plot(truth.times[1:len(data) + 1], data, "k.", ms=2.5, label="sensor data")
         ax.plot(truth.times[: len(t)], truth.temps[: len(t), j], "k--", lw=1.2, label="truth")
-        ax.plot(t, m, "r-", lw=1.4, label="EnKF mean")
+        ax.plot(t, m, "r-", lw=1.4, label=f"{_method(est)} mean")
         ax.plot(t, m + 2 * s, "r--", lw=0.8, label="$\\pm 2$ sd")
         ax.plot(t, m - 2 * s, "r--", lw=0.8)
         ax.set(title=f"temperature at z = {z:g} cm", xlabel="time [s]", ylabel="T [$^\\circ$C]")
@@ -42,18 +42,26 @@ def plot_results(path, scenario: str, est, truth: Truth, data: np.ndarray) -> No
     labels = {"mua": "$\\mu_a$", "mus": "$\\mu_s$", "VHC": "$c_v$", "TC": "$k$"}
     for i, name in enumerate(est.names):
         ax = axes[1, i]
-        m, s = est.param_mean[:, i], est.param_std[:, i]
+        m = est.param_mean[:, i]
+        lo, hi = est.param_band(i)
         _shade_pulses(ax, scenario)
         ax.plot(t, tp[name], "k--", lw=1.2)
         ax.plot(t, m, "r-", lw=1.4)
-        ax.plot(t, m + 2 * s, "r--", lw=0.8)
-        ax.plot(t, m - 2 * s, "r--", lw=0.8)
+        ax.plot(t, lo, "r--", lw=0.8)  # 2.3 % and 97.7 % quantiles of the ensemble
+        ax.plot(t, hi, "r--", lw=0.8)
         ax.set(title=labels[name], xlabel="time [s]", ylabel=f"{labels[name]} [{PARAMETER_LABELS[name]}]")
     for i in range(n_par, axes.shape[1]):
         axes[1, i].axis("off")
-    fig.suptitle(f"EnKF, scenario '{scenario}'")
+    fig.suptitle(f"{_method(est)}, scenario '{scenario}'; parameter bands: 2.3-97.7 % "
+                 "quantiles of the ensemble")
     fig.savefig(path, dpi=110)
     plt.close(fig)
+
+
+def _method(est) -> str:
+    """The analysis's name for a legend (ETKF, EnKF)."""
+    m = getattr(est, "method", None)
+    return {"etkf": "ETKF", "enkf": "EnKF"}.get(m, m or "EnKF")
 
 
 def _shade_pulses(ax, scenario: str) -> None:
@@ -70,17 +78,17 @@ def plot_data(path, scenario: str, truth: Truth, data: np.ndarray) -> None:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    fig, (a, b) = plt.subplots(1, 2, figsize=(10, 3.8), constrained_layout=True)
-    for ax in (a, b):
+    # one panel per property: on a shared (twin) axis two constant lines fall on one
+    fig, (a, b, c) = plt.subplots(1, 3, figsize=(13, 3.8), constrained_layout=True)
+    for ax in (a, b, c):
         _shade_pulses(ax, scenario)
     a.plot(truth.times[1:], data, "k.", ms=3)
     a.set(xlabel="time [s]", ylabel="T [$^\\circ$C]", title="sensor data at (0, 0, 0)")
     tp = true_parameters(scenario, truth.times)
-    b.plot(truth.times, tp["mua"], "b-", label="$\\mu_a$ [cm$^{-1}$]")
-    b2 = b.twinx()
-    b2.plot(truth.times, tp["mus"], "g-", label="$\\mu_s$ [cm$^{-1}$]")
-    b.set(xlabel="time [s]", ylabel="$\\mu_a$ [cm$^{-1}$]", title="true optical properties")
-    b2.set_ylabel("$\\mu_s$ [cm$^{-1}$]")
+    b.plot(truth.times, tp["mua"], "b-")
+    b.set(xlabel="time [s]", ylabel="$\\mu_a$ [cm$^{-1}$]", title="true absorption $\\mu_a$")
+    c.plot(truth.times, tp["mus"], "g-")
+    c.set(xlabel="time [s]", ylabel="$\\mu_s$ [cm$^{-1}$]", title="true scattering $\\mu_s$")
     fig.savefig(path, dpi=110)
     plt.close(fig)
 

@@ -35,6 +35,7 @@ from .absorption import Absorption, FunctionAbsorption, as_absorption
 from .forward import TissueForwardModel, observation_operator
 from .identify import FilterPieces, TissueEstimates, assemble, identify
 from .image import ThermalImage
+from .model_error import StructuredModelError
 from .online import OnlineEstimate, OnlineIdentifier
 from .parameters import (
     ESTIMATES,
@@ -60,6 +61,7 @@ __all__ = [
     "PARAMETER_NAMES",
     "PARAMETER_UNITS",
     "RiskTracker",
+    "StructuredModelError",
     "TRACKED_DEPTHS",
     "ThermalImage",
     "TissueEstimates",

@@ -40,7 +40,7 @@ class TissueForwardModel:
             self.L = (L @ expand).tocsr()  # (npoints, n_unique)
         self.steppers: dict[float, fem.HeatStepper] = {}
         self.col = {name: column(setup.estimate, name) for name in setup.estimate}
-        self._warned = False
+        self._clamp = {"calls": 0, "member_calls": 0, "lo": {}, "hi": {}}
 
     def stepper(self, dt: float) -> fem.HeatStepper:
         key = round(dt, 9)
@@ -63,14 +63,65 @@ class TissueForwardModel:
         npts = self.mesh.p.shape[1]
         self.step(np.zeros((N, npts)), theta, 0.0, dt, 0.0 if self.absorption.exact else 1.0)
 
+    def table_ranges(self) -> dict:
+        """``{"mua": (lo, hi), "mus": (lo, hi)}`` cm^-1 of the emulator's table ({} when the
+        absorption model has no table)."""
+        spec = getattr(self.absorption, "spec", None)
+        if spec is None or not hasattr(spec, "mua_range"):
+            return {}
+        return {"mua": tuple(spec.mua_range), "mus": tuple(spec.mus_range)}
+
+    def clamp_report(self) -> dict | None:
+        """How often the emulator clamped members' optics to its table since the model was
+        built: forecast steps, member-steps, the extreme values asked for, the table and
+        what to do; None when it never did."""
+        c = self._clamp
+        if not c["calls"]:
+            return None
+        rng = self.table_ranges()
+        advice = []
+        for name in ("mua", "mus"):
+            lo, hi = c["lo"].get(name), c["hi"].get(name)
+            if lo is None and hi is None:
+                continue
+            want = [v for v in (lo, hi) if v is not None]
+            advice.append(f"widen filter.emulator.{name}_range (now {list(rng.get(name, ()))}) to "
+                          f"cover {', '.join(f'{v:.4g}' for v in want)} cm^-1, or narrow the "
+                          f"prior and filter.bounds of {name}")
+        return {"forecast_steps": int(c["calls"]), "member_steps": int(c["member_calls"]),
+                "below_table": {k: float(v) for k, v in c["lo"].items()},
+                "above_table": {k: float(v) for k, v in c["hi"].items()},
+                "table": {k: list(v) for k, v in rng.items()},
+                "advice": "; ".join(advice) or "widen filter.emulator's ranges"}
+
+    def _count_clamps(self, mua: np.ndarray, mus: np.ndarray) -> None:
+        self._clamp["calls"] += 1
+        out = np.zeros(mua.shape, bool)
+        for name, v in (("mua", mua), ("mus", mus)):
+            lo, hi = self.table_ranges().get(name, (-np.inf, np.inf))
+            below, above = v < lo, v > hi
+            out |= below | above
+            if below.any():
+                self._clamp["lo"][name] = min(self._clamp["lo"].get(name, np.inf), v[below].min())
+            if above.any():
+                self._clamp["hi"][name] = max(self._clamp["hi"].get(name, -np.inf), v[above].max())
+        self._clamp["member_calls"] += int(out.sum()) if self.table_ranges() else 0
+
     def loads(self, theta: np.ndarray, power: float) -> np.ndarray:
-        """(N, n_nodes) W: nodal heat loads of the members' optics at laser power ``power``."""
+        """(N, n_nodes) W: nodal heat loads of the members' optics at laser power ``power``.
+
+        Members whose optics lie outside the emulator's table are clamped to its edge;
+        they are counted (:meth:`clamp_report`) instead of warned about one by one."""
+        mua, mus = theta[:, self.col["mua"]], theta[:, self.col["mus"]]
         with warnings.catch_warnings(record=True) as caught:
             warnings.simplefilter("always")
-            vals = self.absorption.unique(theta[:, self.col["mua"]], theta[:, self.col["mus"]])
-        if caught and not self._warned:
-            warnings.warn(str(caught[0].message), RuntimeWarning, stacklevel=3)
-            self._warned = True
+            vals = self.absorption.unique(mua, mus)
+        clamps = [w for w in caught if "clamped" in str(w.message)]
+        if clamps:
+            self._count_clamps(mua, mus)
+        for w in caught:
+            if w not in clamps:
+                warnings.warn(str(w.message), w.category, stacklevel=3)
         if self._nodal:
             return power * vals[:, self.absorption.inverse]
         return (self.L @ (power * vals).T).T

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import time
+import warnings
 from collections.abc import Callable
 from dataclasses import dataclass
 
@@ -12,12 +13,14 @@ import scipy.sparse as sp
 import fem
 from fem.threads import blas_threads
 
+from ..adaptive import AdaptiveInflation
 from ..analysis import gaspari_cohn
 from ..health import HealthCheck
 from ..loop import run_filter
 from ..problem import FilterConfig, FilterDivergence, FilterProblem, FilterResult, StepReport, uniform_prior
 from ..transforms import IdentityTransform, LogTransform
 from .forward import TissueForwardModel, observation_operator
+from .model_error import StructuredModelError
 from .setup import TissueFilterSetup
 
 __all__ = ["FilterPieces", "TissueEstimates", "assemble", "identify"]
@@ -30,6 +33,11 @@ class TissueEstimates:
     ``param_mean``/``param_std``: (M+1, n_par) in the order of ``names``;
     ``tracked_mean``/``tracked_std``: (M+1, n_tracked) deg C at ``tracked_positions``.
     ``step_latency_s``: (M,) wall time of each filter step.
+    ``param_q_low``/``param_q_high``: (M+1, n_par) the 2.3 % and 97.7 % quantiles of the
+    ensemble (the +-2 sd points of a normal), positive like the members; None when not
+    recorded (then :meth:`param_band` takes them from a log-normal of the same moments).
+    ``clamped``: how often the absorption model clamped a member's optics to its table
+    (:meth:`TissueForwardModel.clamp_report`), None when never.
     """
 
     times: np.ndarray
@@ -44,6 +52,22 @@ class TissueEstimates:
     filter_wall_s: float
     result: FilterResult | None = None
     diverged: str | None = None  #: message when the filter stopped early
+    param_q_low: np.ndarray | None = None
+    param_q_high: np.ndarray | None = None
+    method: str | None = None  #: "etkf" or "enkf"
+    clamped: dict | None = None
+
+    def param_band(self, i: int) -> tuple[np.ndarray, np.ndarray]:
+        """(low, high) of parameter ``i`` over time: the ensemble's 2.3 % and 97.7 %
+        quantiles, or those of a log-normal with the recorded mean and std (the filter
+        works on log parameters, so the band stays positive; mean +- 2 sd does not)."""
+        if self.param_q_low is not None:
+            return self.param_q_low[:, i], self.param_q_high[:, i]
+        m, s = self.param_mean[:, i], self.param_std[:, i]
+        with np.errstate(invalid="ignore", divide="ignore"):
+            s2 = np.log1p((s / m) ** 2)
+            mu = np.log(m) - 0.5 * s2
+            return np.exp(mu - 2 * np.sqrt(s2)), np.exp(mu + 2 * np.sqrt(s2))
 
 
 @dataclass
@@ -64,12 +88,25 @@ class FilterPieces:
     health: HealthCheck
     n: int
 
-    def problem(self, times, data, prior=None, t0: float = 0.0) -> FilterProblem:
+    def model_noise(self):
+        """The model error of a new run: a :class:`StructuredModelError` on the mesh nodes,
+        or the white variance ``model_noise_std**2``."""
         s = self.model.setup
+        if s.model_error == "white":
+            return s.model_noise_std ** 2
+        p = self.model.mesh.p
+        return StructuredModelError(
+            *(np.unique(p[i]) for i in range(3)), rel_std=s.model_error_rel_std,
+            time_scale=s.model_error_time_scale, length_xy=s.model_error_length_xy,
+            length_z=s.model_error_length_z, floor_std=s.model_noise_std)
+
+    def problem(self, times, data, prior=None, t0: float = 0.0, model_noise=None
+                ) -> FilterProblem:
         return FilterProblem(
             forecast=self.model, observation=self.P_obs, obs_times=times, obs_data=data,
             obs_cov=self.noise_var, prior=prior or self.prior,
-            model_noise=s.model_noise_std ** 2, param_noise=self.rw,
+            model_noise=self.model_noise() if model_noise is None else model_noise,
+            param_noise=self.rw,
             transforms=self.transforms, t0=t0, param_dynamics=self.dynamics,
             localization=self.localization, param_noise_scale=self.walk_scale)
 
@@ -121,8 +158,13 @@ def assemble(setup: TissueFilterSetup, param_bounds=None, warm_dt: float | None 
         n_theta = len(names) * (2 if setup.parameter_model == "trend" else 1)
         rho_xy = np.vstack([gaspari_cohn(d_xy / c), np.ones((n_theta, obs_xyz.shape[0]))])
         localization = (rho_xy, gaspari_cohn(d_yy / c))
+    adaptive = None
+    if setup.adaptive_inflation:
+        adaptive = AdaptiveInflation(bounds=setup.adaptive_inflation_bounds,
+                                     time_scale=setup.adaptive_inflation_time_scale)
     config = FilterConfig(n_members=setup.n_members, method=setup.method,
-                          inflation=setup.inflation, seed=setup.seed, mda=setup.mda)
+                          inflation=setup.inflation, seed=setup.seed, mda=setup.mda,
+                          adaptive_inflation=adaptive)
     if param_bounds is None:
         param_bounds = setup.default_param_bounds()
     # stop on non-finite values, a parameter mean beyond the bounds, or a collapsed
@@ -159,11 +201,16 @@ def identify(setup: TissueFilterSetup, times: np.ndarray, data: np.ndarray, *,
     M = len(times)
     tr_mean = np.full((M + 1, P_track.shape[0]), np.nan)
     tr_std = np.full_like(tr_mean, np.nan)
+    q_lo = np.full((M + 1, n), np.nan)
+    q_hi = np.full_like(q_lo, np.nan)
 
     def record(rep: StepReport):
         Y = (P_track @ rep.state_ensemble.T).T
         tr_mean[rep.step] = Y.mean(axis=0)
         tr_std[rep.step] = Y.std(axis=0, ddof=1)
+        with np.errstate(invalid="ignore"):
+            q_lo[rep.step], q_hi[rep.step] = np.quantile(
+                rep.param_ensemble[:, :n], [0.02275, 0.97725], axis=0)
         if callback is not None:
             callback(rep)
 
@@ -178,10 +225,16 @@ def identify(setup: TissueFilterSetup, times: np.ndarray, data: np.ndarray, *,
         res = err.result
         diverged = str(err)
     wall = time.perf_counter() - t0
+    clamped = pieces.model.clamp_report()
+    if clamped:
+        warnings.warn(f"the absorption emulator clamped members' optics to its table on "
+                      f"{clamped['member_steps']} member-steps over {clamped['forecast_steps']} "
+                      f"forecast steps: {clamped['advice']}", RuntimeWarning, stacklevel=2)
     k = len(res.times)
     return TissueEstimates(
         times=res.times, names=setup.estimate, param_mean=res.param_mean[:, :n],
         param_std=res.param_std[:, :n],
         tracked_positions=setup.tracked_positions, tracked_mean=tr_mean[:k],
         tracked_std=tr_std[:k], analysed=res.analysed, step_latency_s=res.step_latency_s,
-        filter_wall_s=wall, result=res, diverged=diverged)
+        filter_wall_s=wall, result=res, diverged=diverged, param_q_low=q_lo[:k],
+        param_q_high=q_hi[:k], method=setup.method, clamped=clamped)

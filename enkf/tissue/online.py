@@ -9,6 +9,7 @@ import numpy as np
 
 from fem.threads import blas_threads
 
+from ..adaptive import InflationEstimator
 from ..loop import run_filter
 from .identify import assemble
 from .setup import TissueFilterSetup
@@ -51,6 +52,10 @@ class OnlineIdentifier:
         self.history: list[OnlineEstimate] = []
         self.names = setup.estimate
         self.n_obs = self._pieces.P_obs.shape[0]
+        # the time-correlated model error and the inflation estimate run across readings
+        self._noise = self._pieces.model_noise()
+        ai = self._pieces.config.adaptive_inflation
+        self._inflation = InflationEstimator(ai) if ai is not None else None
 
     def update(self, t: float, y) -> OnlineEstimate:
         """Assimilate the reading ``y`` ((p,) deg C, NaN = missing) taken at ``t`` (s)."""
@@ -63,13 +68,15 @@ class OnlineIdentifier:
                              f"got {y.size}")
         X, theta = self._X, self._theta
         problem = self._pieces.problem(np.array([t]), y[None, :],
-                                       prior=lambda rng, N: (X, theta), t0=self.time)
+                                       prior=lambda rng, N: (X, theta), t0=self.time,
+                                       model_noise=self._noise)
         seed = int(np.random.SeedSequence([self.setup.seed, len(self.history) + 1])
                    .generate_state(1)[0])
         config = replace(self._pieces.config, seed=seed)
         tic = time.perf_counter()
         with blas_threads(1):
-            res = run_filter(problem, config, health=self._pieces.health)
+            res = run_filter(problem, config, health=self._pieces.health,
+                             inflation_state=self._inflation)
         self._X, self._theta = res.state_ensemble, res.param_ensemble
         Y = (self._pieces.P_track @ self._X.T).T
         n = self._pieces.n

@@ -1,0 +1,196 @@
+"""Numba kernels of one step of photon transport: Fresnel, scattering angle, voxel planes.
+
+Pure functions of scalars and arrays, used by :mod:`mcmatlab_py._mc_kernel`. They are
+inlined into the transport loop (``inline="always"``), so moving them here costs nothing.
+"""
+
+import math
+
+import numba
+import numpy as np
+
+_INF = np.inf
+# fast-math without 'nnan'/'ninf': the kernel relies on inf distances
+_FASTMATH = {"nsz", "arcp", "contract", "afn", "reassoc"}
+
+
+@numba.njit(cache=True, inline="always", fastmath=_FASTMATH)
+def _fresnel(n1, n2, ca1):
+    """Fresnel reflectance for unpolarised light; returns (R, cos of transmitted angle).
+
+    ``ca1`` is the cosine of the angle of incidence (>= 0). ``n = inf`` on either side
+    is a perfect reflector.
+    """
+    if n1 == n2:
+        return 0.0, ca1
+    if n2 == _INF or n1 == _INF:
+        return 1.0, 0.0
+    if ca1 > 1.0 - 1e-12:
+        r = (n2 - n1) / (n2 + n1)
+        return r * r, ca1
+    sa1 = math.sqrt(max(0.0, 1.0 - ca1 * ca1))
+    sa2 = n1 * sa1 / n2
+    if sa2 >= 1.0:
+        return 1.0, 0.0  # total internal reflection
+    ca2 = math.sqrt(1.0 - sa2 * sa2)
+    cap = ca1 * ca2 - sa1 * sa2  # cos(a1 + a2)
+    cam = ca1 * ca2 + sa1 * sa2  # cos(a1 - a2)
+    sap = sa1 * ca2 + ca1 * sa2
+    sam = sa1 * ca2 - ca1 * sa2
+    r = 0.5 * sam * sam * (cam * cam + cap * cap) / (sap * sap * cam * cam)
+    return r, ca2
+
+
+@numba.njit(cache=True, inline="always", fastmath=_FASTMATH)
+def _hg_cos(g, xi):
+    """Henyey-Greenstein deflection cosine from a uniform ``xi``."""
+    if g == 0.0:
+        return 2.0 * xi - 1.0
+    if abs(g) >= 1.0:  # the limits: no deflection, or straight back
+        return g
+    tmp = (1.0 - g * g) / (1.0 - g + 2.0 * g * xi)
+    c = (1.0 + g * g - tmp * tmp) / (2.0 * g)
+    return min(1.0, max(-1.0, c))
+
+
+@numba.njit(cache=True, inline="always", fastmath=_FASTMATH)
+def _spin(ux, uy, uz, cost, psi):
+    """Rotate direction (ux, uy, uz) by polar cos ``cost`` and azimuth ``psi`` (MCML)."""
+    sint = math.sqrt(max(0.0, 1.0 - cost * cost))
+    cosp = math.cos(psi)
+    # sin from cos (one transcendental fewer): psi in [0, 2 pi)
+    sinp = math.sqrt(max(0.0, 1.0 - cosp * cosp))
+    if psi > math.pi:
+        sinp = -sinp
+    if abs(uz) > 0.99999:
+        return sint * cosp, sint * sinp, cost * (1.0 if uz > 0.0 else -1.0)
+    temp = math.sqrt(1.0 - uz * uz)
+    nux = sint * (ux * uz * cosp - uy * sinp) / temp + ux * cost
+    nuy = sint * (uy * uz * cosp + ux * sinp) / temp + uy * cost
+    nuz = -sint * cosp * temp + uz * cost
+    return nux, nuy, nuz
+
+
+@numba.njit(cache=True, inline="always", fastmath=_FASTMATH)
+def _plane_distance(p, u, i, n, d):
+    """Distance along direction component ``u`` to the next voxel plane of one axis.
+
+    ``i`` may be -1 or ``n`` for a photon outside the cuboid on that axis, where
+    the only plane ahead is the cuboid face it moves towards.
+    """
+    if u > 0.0:
+        if i >= n:
+            return _INF
+        return max(0.0, ((i + 1) * d - p) / u)
+    if u < 0.0:
+        if i < 0:
+            return _INF
+        return max(0.0, (i * d - p) / u)
+    return _INF
+
+
+@numba.njit(cache=True, inline="always")
+def _clamp(i, n):
+    if i < 0:
+        return 0
+    if i >= n:
+        return n - 1
+    return i
+
+
+@numba.njit(cache=True, fastmath=_FASTMATH)
+def _interface_normal(normals, M, nref, n_new, px, py, pz, nx, ny, nz, dx, dy, dz):
+    """Smoothed interface normal at a point, pointing into the medium of index ``n_new``.
+
+    Trilinear interpolation between the 8 voxel centres around the point, over those
+    whose refractive index is ``n_new`` (as MCmatlab); not normalised. ``normals`` is
+    (nx*ny*nz*3,) float32.
+    """
+    fx = px / dx - 0.5
+    fy = py / dy - 0.5
+    fz = pz / dz - 0.5
+    i0 = int(math.floor(fx))
+    j0 = int(math.floor(fy))
+    k0 = int(math.floor(fz))
+    tx = fx - i0
+    ty = fy - j0
+    tz = fz - k0
+    gx = 0.0
+    gy = 0.0
+    gz = 0.0
+    for ci in range(2):
+        i = i0 + ci
+        if i < 0 or i >= nx:
+            continue
+        wi = tx if ci == 1 else 1.0 - tx
+        for cj in range(2):
+            j = j0 + cj
+            if j < 0 or j >= ny:
+                continue
+            wj = wi * (ty if cj == 1 else 1.0 - ty)
+            for ck in range(2):
+                k = k0 + ck
+                if k < 0 or k >= nz:
+                    continue
+                v = (i * ny + j) * nz + k
+                if nref[M[v]] != n_new:
+                    continue
+                wk = wj * (tz if ck == 1 else 1.0 - tz)
+                gx += wk * normals[3 * v]
+                gy += wk * normals[3 * v + 1]
+                gz += wk * normals[3 * v + 2]
+    return gx, gy, gz
+
+
+@numba.njit(cache=True, inline="always")
+def _mirror(ux, uy, uz, axis):
+    """Reverse the direction component along ``axis`` (a reflection off a voxel face)."""
+    if axis == 0:
+        return -ux, uy, uz
+    if axis == 1:
+        return ux, -uy, uz
+    return ux, uy, -uz
+
+
+@numba.njit(cache=True, inline="always", fastmath=_FASTMATH)
+def _refract_face(ux, uy, uz, ratio, cat, axis, sgn):
+    """Snell's law through a voxel face: tangential components times ``n1 / n2`` (``ratio``),
+    the normal one ``cat`` (cosine of the transmitted angle) along the crossing sign."""
+    ux *= ratio
+    uy *= ratio
+    uz *= ratio
+    if axis == 0:
+        ux = sgn * cat
+    elif axis == 1:
+        uy = sgn * cat
+    else:
+        uz = sgn * cat
+    return ux, uy, uz
+
+
+@numba.njit(cache=True, inline="always", fastmath=_FASTMATH)
+def _turn_smooth(ux, uy, uz, gx, gy, gz, cin, cat, mu, reflected, axis, sgn):
+    """Reflect about, or refract through, the smoothed normal g (unit, into the new medium).
+
+    ``cin``: cosine of incidence on g, ``cat`` of transmission, ``mu = n1 / n2``. The
+    component normal to the voxel face crossed is then mirrored where the new direction
+    disagrees with the outcome, so that the voxel walk stays consistent (see
+    :mod:`mcmatlab_py._mc_kernel`).
+    """
+    if reflected:
+        ux -= 2.0 * cin * gx
+        uy -= 2.0 * cin * gy
+        uz -= 2.0 * cin * gz
+    else:  # Snell's law in vector form
+        k_ = cat - mu * cin
+        ux = mu * ux + k_ * gx
+        uy = mu * uy + k_ * gy
+        uz = mu * uz + k_ * gz
+        un = math.sqrt(ux * ux + uy * uy + uz * uz)
+        ux /= un
+        uy /= un
+        uz /= un
+    ua = ux if axis == 0 else (uy if axis == 1 else uz)
+    if reflected == (ua * sgn > 0.0):
+        return _mirror(ux, uy, uz, axis)
+    return ux, uy, uz

@@ -1,0 +1,311 @@
+"""The time loop of the heat simulation (:func:`run_heat`, behind ``model.simulate_heat_distribution``).
+
+One run: set up the mesh, the voxel <-> node operators and the thermal sub-media,
+start from ``HS.T_initial`` (or, chained, from the end of the previous run), and march
+the schedule of :meth:`HeatSimulation.schedule` with :func:`fem.march`. After every
+step the damage integral and the media's highest temperatures advance; at every update
+the state is reported (slice plots, movie frames) and, every
+``HS.media_prop_recalc_period`` updates, FR-, T- and FD-dependent media are
+re-evaluated (:mod:`mcmatlab_py.frt`).
+"""
+
+from __future__ import annotations
+
+import math
+import warnings
+
+import numpy as np
+
+from .progress import Progress
+
+__all__ = ["BOILING_WARNING_C", "run_heat", "voxels_to_nodes"]
+
+BOILING_WARNING_C = 100.0  #: deg C: MCmatlab warns when a medium gets hotter (water boils)
+
+
+def voxels_to_nodes(L, values) -> np.ndarray:
+    """(npoints,) node values from a voxel field (a number or (nx, ny, nz)).
+
+    The weighted mean of the voxels under each node's hat function, ``(L v) / (L 1)``
+    with ``L = fem.voxel_load_matrix``: with uniform heat capacity it keeps the heat
+    content of the voxel field, and a constant stays exactly constant.
+    """
+    v = np.asarray(values, dtype=float)
+    if v.ndim == 0:
+        return np.full(L.shape[0], float(v))
+    return (L @ v.ravel()) / (L @ np.ones(L.shape[1]))
+
+
+def _value(f, t):
+    v = float(f(t))
+    if not math.isfinite(v) or v < 0:
+        raise ValueError(f"a time-varying property returned {v!r} at t = {t} s")
+    return v
+
+
+class _Setup:
+    """Mesh, operators and per-element media of one run."""
+
+    def __init__(self, G, HS, M):
+        import fem
+
+        self.grid = fem.BoxGrid(G.nx, G.ny, G.nz, G.Lx, G.Ly, G.Lz)
+        if HS.mesh_divisions is None:
+            self.mesh_grid = self.grid
+        else:
+            self.mesh_grid = fem.BoxGrid(*HS.mesh_divisions, G.Lx, G.Ly, G.Lz)
+        self.mesh = self.mesh_grid.mesh()
+        self.L = fem.voxel_load_matrix(self.mesh, self.grid)  # (npoints, nvox) cm^3
+        # media per element: the voxel that holds the element's centroid
+        self.elem_voxel = fem.element_voxel_index(self.mesh, self.grid)
+        self.elem_medium = M.ravel()[self.elem_voxel]
+        self._to_voxels = None
+        self.medium_nodes = [np.unique(self.mesh.t[:, self.elem_medium == i])
+                             for i in range(len(G.media))]
+
+    def to_voxels(self, nodal) -> np.ndarray:
+        """(nx, ny, nz): a nodal field evaluated at the voxel centres (P1 interpolation)."""
+        import fem
+
+        if self._to_voxels is None:
+            X, Y, Z = np.meshgrid(self.grid.x, self.grid.y, self.grid.z, indexing="ij")
+            self._to_voxels = fem.probe_matrix(self.mesh, np.vstack([X.ravel(), Y.ravel(),
+                                                                     Z.ravel()]))
+        return (self._to_voxels @ nodal).reshape(self.grid.shape)
+
+
+def run_heat(model) -> None:  # noqa: C901  (one loop with its callbacks)
+    """Run ``model.HS`` (see :mod:`mcmatlab_py.heat`); fills the results of ``model.HS``."""
+    import fem
+
+    from .frt import MediaCoupling
+    from .heat import auto_dt
+    from .monte_carlo import optical_arrays, simulate, store_results
+
+    G, MC, HS = model.G, model.MC, model.HS
+    M = G.medium_map()
+    HS.validate(G)
+    media = G.media
+    varying_optics = HS.mua_t is not None or HS.mus_t is not None
+    if MC.NA is None and not varying_optics and not callable(HS.absorption):
+        raise ValueError("MC.NA is empty: run model.run_monte_carlo() before the heat "
+                         "simulation (or give time-varying optics)")
+    vm = HS.varying_medium
+    if not 0 <= vm < len(media):
+        raise ValueError(f"HS.varying_medium must index G.media, got {vm!r}")
+
+    S = _Setup(G, HS, M)
+    mesh, L = S.mesh, S.L
+    npts = mesh.p.shape[1]
+    chained = HS.max_media_temps is not None
+    if chained and (HS.T_nodes is None or HS.T_nodes.size != npts):
+        raise ValueError("HS holds a previous run on another mesh: call model.HS.reset() to "
+                         "start afresh")
+    if chained:
+        T0 = np.array(HS.T_nodes, dtype=float)
+        Omega = np.array(HS.Omega, dtype=float).ravel()
+        Omega_vox = np.array(HS.Omega_voxels, dtype=float).ravel()
+        t_offset = float(HS.sensor_times[-1])
+    else:
+        T0 = voxels_to_nodes(L, HS.T_initial)
+        Omega = np.zeros(npts)
+        Omega_vox = np.zeros(M.size)
+        t_offset = 0.0
+
+    # thermal media: MCmatlab's sub-media of FR/T/FD-dependent media, then HS.*_t overrides
+    coupling = MediaCoupling(model, M, S)
+    coupling.update_thermal(S.to_voxels(T0) if coupling.thermal_dependent else None,
+                            Omega_vox.reshape(M.shape) if coupling.thermal_dependent else None)
+
+    def element_props(t):
+        vhc, tc = coupling.vhc_e.copy(), coupling.tc_e.copy()
+        in_vm = S.elem_medium == vm
+        if HS.VHC_t is not None:
+            vhc[in_vm] = _value(HS.VHC_t, t)
+        if HS.TC_t is not None:
+            tc[in_vm] = _value(HS.TC_t, t)
+        return vhc, tc
+
+    vhc0, tc0 = element_props(0.0)
+    dt_max = None
+    if HS.dt is None:
+        dt_max = auto_dt(S.mesh_grid.spacing, vhc0, tc0, HS.theta, HS.large_time_steps)
+    sched = HS.schedule(dt_max)
+    times = sched.times
+    boundary = fem.HeatBoundary.from_mcmatlab(
+        HS.heat_boundary_type,
+        temperature=None if HS.heat_boundary_type != 2 else HS.T_ambient,
+        h=HS.heat_transfer_coefficient if HS.heat_boundary_type == 2 else 0.0)
+    single_thermal = len(media) == 1 and not coupling.thermal_dependent
+    steppers: dict = {}
+
+    def stepper_for(dt, vhc, tc):
+        key = (round(dt, 15), coupling.version)
+        if key not in steppers or not single_thermal and (HS.VHC_t or HS.TC_t):
+            steppers[key] = fem.HeatStepper(mesh, vhc, tc, dt, theta=HS.theta,
+                                            boundary=boundary)
+        return steppers[key]
+
+    probes = fem.probe_matrix(mesh, np.asarray(HS.temp_sensor_positions, float)
+                              .reshape(-1, 3).T) if len(HS.temp_sensor_positions) else None
+
+    # absorbed power: MC.NA, the emulator, or Monte Carlo runs for time-varying optics
+    if varying_optics or callable(HS.absorption):
+        mua, mus, g, nref = optical_arrays(media, MC.wavelength)
+    current_optics = None
+    src = {"NA": MC.NA, "f": None}  # the voxel map and its nodal load per W
+
+    def set_absorption(NA):
+        src["NA"], src["f"] = NA, L @ np.asarray(NA, float).ravel()
+
+    if MC.NA is not None:
+        set_absorption(MC.NA)
+    HS.mc_runs = 0 if not chained else HS.mc_runs
+
+    def absorption_load(t):
+        nonlocal current_optics
+        if not varying_optics:
+            if callable(HS.absorption) and src["NA"] is None:
+                set_absorption(HS.absorption(np.array([mua[vm]]), np.array([mus[vm]]))[0])
+            return src["f"]
+        a = _value(HS.mua_t, t) if HS.mua_t is not None else mua[vm]
+        s = _value(HS.mus_t, t) if HS.mus_t is not None else mus[vm]
+        if current_optics == (a, s):
+            return src["f"]
+        current_optics = (a, s)
+        if callable(HS.absorption):
+            set_absorption(HS.absorption(np.array([a]), np.array([s]))[0])
+        else:
+            mua_now, mus_now = mua.copy(), mus.copy()
+            mua_now[vm], mus_now[vm] = a, s
+            res = simulate(G, MC, M, mua_now, mus_now, g, nref,
+                           seed=(MC.seed or 0) + HS.mc_runs, n_photons=MC.n_photons_requested
+                           or 10**6)
+            HS.mc_runs += 1
+            store_results(MC, res, M, mua_now, G.dx * G.dy * G.dz)
+            set_absorption(MC.NA)
+        return src["f"]
+
+    E_node, A_node = _damage_parameters(mesh, S.elem_medium, media)
+    if E_node is not None:  # the voxels' own media, as MCmatlab's voxel damage
+        E_vox = np.array([m.E if m.E is not None else 0.0 for m in media])[M.ravel()]
+        A_vox = np.array([m.A if m.A is not None else 0.0 for m in media])[M.ravel()]
+        T_vox_old = S.to_voxels(T0).ravel()
+    if not chained:
+        HS.max_media_temps = np.array([T0[n].max() if n.size else -np.inf
+                                       for n in S.medium_nodes])
+    snap_every = max(1, (len(times) - 1) // HS.n_snapshots) if HS.n_snapshots else 0
+    if not chained or HS.snapshots is None:
+        HS.snapshots = [(t_offset, T0.copy())] if snap_every else []
+    monitor = _monitor(model, M, S, chained, T0, t_offset)
+    bar = Progress(len(times) - 1, "heat", enabled=HS.progress)
+    updates = set(int(k) for k in sched.updates)
+    n_update = 0
+
+    def step(T, t0, t1):
+        dt = t1 - t0
+        t_mid = t0 + 0.5 * dt  # sources and properties at mid-step
+        if HS.VHC_t is not None or HS.TC_t is not None:
+            vhc, tc = element_props(t_mid)
+            if single_thermal:
+                st = stepper_for(dt, vhc0, tc0)
+                scales = dict(vhc_scale=np.array([vhc[0] / vhc0[0]]),
+                              tc_scale=np.array([tc[0] / tc0[0]]))
+            else:
+                st, scales = stepper_for(dt, vhc, tc), {}
+        else:
+            st, scales = stepper_for(dt, coupling.vhc_e, coupling.tc_e), {}
+        power = HS.laser_power(t_mid)
+        load = power * absorption_load(t_mid) if power != 0 else None  # W
+        if scales:
+            return st.step(T[None, :], None if load is None else load[None, :], **scales)[0]
+        return st.step(T, load)
+
+    def on_step(k, t1, T_old, T_new):
+        nonlocal n_update, T_vox_old
+        if E_node is not None:
+            fem.advance_damage(Omega, T_old, T_new, t1 - times[k - 1], E_node, A_node)
+            T_vox_new = S.to_voxels(T_new).ravel()
+            fem.advance_damage(Omega_vox, T_vox_old, T_vox_new, t1 - times[k - 1], E_vox, A_vox)
+            T_vox_old = T_vox_new
+        for i, nodes in enumerate(S.medium_nodes):
+            if nodes.size:
+                HS.max_media_temps[i] = max(HS.max_media_temps[i], float(T_new[nodes].max()))
+        if snap_every and k % snap_every == 0:
+            HS.snapshots.append((t_offset + t1, T_new.copy()))
+        if k in updates:
+            n_update += 1
+            if monitor is not None:
+                monitor.update(S.to_voxels(T_new), t_offset + t1)
+            period = HS.media_prop_recalc_period
+            if period and n_update % period == 0:
+                T_vox, Om_vox = S.to_voxels(T_new), Omega_vox.reshape(M.shape)
+                if coupling.update_optics(T_vox, Om_vox, HS.peak_power(t1)):
+                    HS.mc_runs += 1
+                    set_absorption(MC.NA)
+                coupling.update_thermal(T_vox, Om_vox)
+        bar.update(k)
+
+    T, sensor = fem.march(step, T0, times, probes, on_step)
+    bar.close()
+    _store(HS, S, T, Omega, times + t_offset, sensor, chained, coupling)
+    HS.Omega_voxels = Omega_vox.reshape(M.shape)
+    HS.dt_used = np.unique(np.round(np.diff(times), 15))
+    if monitor is not None:
+        monitor.finish(HS)
+    for i, m in enumerate(media):
+        if HS.max_media_temps[i] > BOILING_WARNING_C:
+            warnings.warn(f"medium {m.name!r} gets hotter than {BOILING_WARNING_C:g} deg C "
+                          f"({HS.max_media_temps[i]:.4g} deg C): water in it would boil, "
+                          "which this heat model does not include", stacklevel=4)
+
+
+def _store(HS, S, T, Omega, times, sensor, chained, coupling) -> None:
+    n_sensors = len(HS.temp_sensor_positions)
+    sensor = sensor if sensor is not None else np.empty((len(times), 0))
+    if chained and HS.sensor_times is not None and HS.sensor_temps.shape[1] == n_sensors:
+        HS.sensor_times = np.concatenate([HS.sensor_times[:-1], times])
+        HS.sensor_temps = np.concatenate([HS.sensor_temps[:-1], sensor])
+    else:
+        HS.sensor_times, HS.sensor_temps = times, sensor
+    HS.mesh = S.mesh
+    HS.T_nodes = T
+    shape = tuple(n + 1 for n in S.mesh_grid.shape)
+    HS.T = T.reshape(shape)
+    HS.Omega = Omega.reshape(shape)
+    HS.T_voxels = S.to_voxels(T)
+    HS.media_properties, HS.M = coupling.thermal, coupling.thermal.M
+
+
+def _monitor(model, M, S, chained, T0, t_offset):
+    """The live slice figure / movie recorder, or None when neither is asked for."""
+    HS = model.HS
+    if not (HS.live_plot or HS.make_movie):
+        return None
+    from .plotting.movie import TemperatureMonitor
+
+    mon = TemperatureMonitor(model, M, show=HS.live_plot, record=HS.make_movie)
+    if HS.make_movie and not chained:
+        mon.geometry_frame()
+    mon.update(S.to_voxels(T0), t_offset, record=HS.make_movie and not chained)
+    return mon
+
+
+def _damage_parameters(mesh, elem_medium, media):
+    """Per-node Arrhenius E (J/mol) and A (1/s), from the media of the elements around it.
+
+    A node between media takes the most damageable of them (the largest ``A``, then ``E``),
+    as ``fem.element_to_node(..., how="max")``, so that a node touching damageable tissue
+    can be damaged; E and A come from that one medium, never a mix of two.
+    """
+    import fem
+
+    if all(m.E is None or m.A is None for m in media):
+        return None, None
+    E = np.array([m.E if m.E is not None else 0.0 for m in media])
+    A = np.array([m.A if m.A is not None else 0.0 for m in media])
+    order = np.lexsort((E, A))  # media from the least to the most damageable
+    rank = np.empty_like(order)
+    rank[order] = np.arange(order.size)
+    node_medium = order[fem.element_to_node(mesh, rank[elem_medium], "max").astype(int)]
+    return E[node_medium], A[node_medium]

@@ -1,0 +1,172 @@
+"""The figures of ``model.plot("G" | "MC" | "HS")`` (see :mod:`mcmatlab_py.plotting`)."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from .slices import orthogonal_slices
+
+__all__ = ["geometry_figures", "heat_figures", "media_properties_figure", "monte_carlo_figures",
+           "positive_log_norm"]
+
+#: relative slice positions of the G and MC figures: through the middle in x and y, and the
+#: irradiated surface (MCmatlab's NdimSliderPlot default, with y through the middle)
+DEFAULT_SLICES = (0.5, 0.5, 0.0)
+#: a log colour scale spans at most this many decades below the maximum
+LOG_DECADES = 6
+
+
+def _figure(width=12.0, height=4.2, name=""):
+    import matplotlib.pyplot as plt
+
+    fig = plt.figure(figsize=(width, height), layout="constrained")
+    if name and fig.canvas.manager is not None:
+        fig.canvas.manager.set_window_title(name)
+    return fig
+
+
+def positive_log_norm(data: np.ndarray):
+    """A LogNorm over the positive values of ``data`` (at most LOG_DECADES decades), or None."""
+    from matplotlib.colors import LogNorm
+
+    positive = data[data > 0]
+    if positive.size == 0:
+        return None
+    top = float(positive.max())
+    return LogNorm(vmin=max(float(positive.min()), top * 10.0 ** -LOG_DECADES), vmax=top)
+
+
+def _media_names(G) -> list[str]:
+    return [m.name for m in G.media]
+
+
+def geometry_figures(model) -> dict:
+    """``geometry`` (the media on three slices) and ``media_properties``."""
+    G = model.G
+    M = G.medium_map()
+    fig = _figure(name="Geometry illustration")
+    orthogonal_slices(fig, M, G, DEFAULT_SLICES, categories=_media_names(G),
+                      title="Geometry illustration")
+    return {"geometry": fig, "media_properties": media_properties_figure(model, M)}
+
+
+def _ranges(values, parent, n_media):
+    lo = np.full(n_media, np.nan)
+    hi = np.full(n_media, np.nan)
+    for i in range(n_media):
+        v = values[parent == i]
+        v = v[np.isfinite(v)]
+        if v.size:
+            lo[i], hi[i] = v.min(), v.max()
+    return lo, hi
+
+
+def media_properties_figure(model, M=None):
+    """MCmatlab's media-properties figure: each property of each medium at ``MC.wavelength``,
+    a bar to its largest value over the voxels and a tick at its smallest (they differ for
+    FR-, T- or FD-dependent media)."""
+    from ..media_bins import optical_media_properties, thermal_media_properties
+
+    G, MC, HS = model.G, model.MC, model.HS
+    M = G.medium_map() if M is None else M
+    opt = MC.media_properties
+    if opt is None or opt.M.shape != M.shape:
+        opt = optical_media_properties(G.media, M, MC.wavelength, MC.FR, MC.T, MC.FD)
+    props = [("mua", r"absorption $\mu_a$ [cm$^{-1}$]"), ("mus", r"scattering $\mu_s$ [cm$^{-1}$]"),
+             ("g", "anisotropy g"), ("n", "refractive index n")]
+    rows = [(getattr(opt, f), opt.parent, label) for f, label in props]
+    if any(m.VHC is not None for m in G.media) and any(m.TC is not None for m in G.media):
+        T = HS.T_voxels if HS.T_voxels is not None else HS.T_initial
+        FD = 0.0 if HS.Omega_voxels is None else -np.expm1(-HS.Omega_voxels)
+        th = thermal_media_properties(G.media, M, T, FD)
+        rows += [(th.VHC, th.parent, r"VHC [J cm$^{-3}$ K$^{-1}$]"),
+                 (th.TC, th.parent, r"TC [W cm$^{-1}$ K$^{-1}$]")]
+    names = _media_names(G)
+    fig = _figure(width=min(16.0, 2.6 * len(rows) + 1), height=3.8, name="Media properties")
+    axes = fig.subplots(1, len(rows))
+    x = np.arange(len(names))
+    colors = [f"C{i % 10}" for i in x]
+    for ax, (values, parent, label) in zip(axes, rows, strict=True):
+        lo, hi = _ranges(np.asarray(values, float), np.asarray(parent), len(names))
+        ax.bar(x, np.nan_to_num(hi), color=colors)
+        ax.scatter(x, lo, marker="_", s=300, color="k", zorder=3)
+        ax.set_xticks(x, names, rotation=30, ha="right")
+        ax.set_title(label, fontsize=10)
+        if np.nanmax(np.r_[hi, 0.0]) / max(np.nanmin(np.r_[hi[hi > 0], np.inf]), 1e-300) > 1e3:
+            ax.set_yscale("log")
+    wl = "" if MC.wavelength is None else f" at {MC.wavelength:g} nm"
+    fig.suptitle(f"Media properties{wl} (bar: largest, tick: smallest over the voxels)")
+    return fig
+
+
+def monte_carlo_figures(model) -> dict:
+    """``media_properties``, ``NA`` and ``NFR`` (log colour scales) of ``model.MC``."""
+    G, MC = model.G, model.MC
+    if MC.NA is None:
+        raise ValueError("MC.NA is empty: run model.run_monte_carlo() before plot('MC')")
+    figs = {"media_properties": media_properties_figure(model)}
+    for key, data, label in (
+            ("NA", MC.NA, "normalized absorbed power per volume [W/cm$^3$/W incident]"),
+            ("NFR", MC.NFR, "normalized fluence rate [W/cm$^2$/W incident]")):
+        fig = _figure(name=key)
+        shown = np.where(data > 0, data, np.nan)
+        orthogonal_slices(fig, shown, G, DEFAULT_SLICES, cmap="inferno",
+                          norm=positive_log_norm(data), label=label,
+                          title=f"{key}: {label.split(' [')[0]}")
+        figs[key] = fig
+    return figs
+
+
+def heat_figures(model) -> dict:
+    """The figures of MCmatlab's ``plot(model, 'HS')`` (see :mod:`mcmatlab_py.plotting`)."""
+    G, HS = model.G, model.HS
+    if HS.T_voxels is None:
+        raise ValueError("HS holds no results: run model.simulate_heat_distribution() before "
+                         "plot('HS')")
+    M = G.medium_map()
+    names = _media_names(G)
+    pos = HS.slice_positions
+    figs = {}
+    sensors = np.asarray(HS.temp_sensor_positions, float).reshape(-1, 3)
+    if sensors.size:
+        fig = _figure(name="Temperature sensor illustration")
+        axes, _ = orthogonal_slices(fig, M, G, pos, categories=names,
+                                    title="Temperature sensor illustration")
+        for i, (x, y, z) in enumerate(sensors, start=1):
+            for ax, (u, v) in zip(axes, ((x, y), (x, z), (y, z)), strict=True):
+                ax.text(u, v, str(i), ha="center", va="center", fontsize=11, weight="bold")
+        figs["sensor_positions"] = fig
+        fig = _figure(width=8.0, height=4.8, name="Temperature sensor data")
+        ax = fig.subplots()
+        ijk = G.grid.voxel_of_points(sensors.T)  # (3, n_sensors), inside: validated
+        for i in range(sensors.shape[0]):
+            medium = names[int(M[ijk[0, i], ijk[1, i], ijk[2, i]])]
+            ax.plot(HS.sensor_times, HS.sensor_temps[:, i], lw=2, label=f"{i + 1}, {medium}")
+        ax.set(xlabel="time [s]", ylabel="temperature [deg C]", title="Temperature sensor data",
+               xlim=(HS.sensor_times[0], HS.sensor_times[-1]))
+        ax.grid(True, which="both", alpha=0.4)
+        ax.legend(loc="best")
+        figs["sensor_temperatures"] = fig
+    fig = _figure(name="Temperature")
+    lim = np.asarray(HS.plot_temp_limits, float)
+    from matplotlib.colors import Normalize
+
+    T = HS.T_voxels
+    norm = Normalize(vmin=T.min() if np.isnan(lim[0]) else lim[0],
+                     vmax=T.max() if np.isnan(lim[1]) else lim[1])
+    orthogonal_slices(fig, T, G, pos, cmap="hot", norm=norm, label="temperature [deg C]",
+                      title=f"Temperature at t = {HS.sensor_times[-1]:.3g} s")
+    figs["temperature"] = fig
+    if any(m.E is not None and m.A is not None and m.A > 0 for m in G.media):
+        Om = HS.Omega_voxels
+        fig = _figure(name="Thermal damage illustration")
+        orthogonal_slices(fig, np.where(Om > 1, len(names), M), G, pos,
+                          categories=[*names, "damage"],
+                          title=r"Thermal damage illustration ($\Omega > 1$)")
+        figs["damage"] = fig
+        fig = _figure(name="Fractional damage")
+        orthogonal_slices(fig, -np.expm1(-Om), G, pos, cmap="viridis",
+                          norm=Normalize(0.0, max(1e-12, float(-np.expm1(-Om.max())))),
+                          label=r"$1 - e^{-\Omega}$", title=r"Fractional damage $1 - e^{-\Omega}$")
+        figs["fractional_damage"] = fig
+    return figs

@@ -1,0 +1,99 @@
+"""model.plot("G" | "MC" | "HS"): MCmatlab's figures, returned and saved as PNG."""
+
+import matplotlib
+
+matplotlib.use("Agg")
+
+import matplotlib.pyplot as plt  # noqa: E402
+import numpy as np  # noqa: E402
+import pytest  # noqa: E402
+
+from mcmatlab_py import Medium, Model, NotBuiltError  # noqa: E402
+from mcmatlab_py.plotting.slices import slice_indices  # noqa: E402
+
+
+@pytest.fixture(scope="module")
+def model():
+    m = Model()
+    G = m.G
+    G.nx, G.ny, G.nz = 8, 8, 6
+    G.Lx = G.Ly = 0.2
+    G.Lz = 0.15
+    G.media = [Medium("water", 0.1, 10.0, 0.9, 1.33, VHC=4.19, TC=5.8e-3),
+               Medium("blood", 20.0, 100.0, 0.9, 1.33, VHC=3.8, TC=5.2e-3, E=4.48e5, A=7.6e66)]
+    G.geom_func = lambda X, Y, Z: (Z > 0.05).astype(int)
+    MC = m.MC
+    MC.n_photons_requested, MC.seed, MC.progress = 5000, 1, False
+    MC.light_source.source_type, MC.light_source.radius = "tophat", 0.05
+    m.run_monte_carlo()
+    HS = m.HS
+    HS.P, HS.duration_on, HS.duration_off, HS.progress = 3.0, 0.2, 0.2, False
+    HS.temp_sensor_positions = [(0, 0, 0.06), (0, 0, 0.1)]
+    with pytest.warns(UserWarning):  # it boils
+        m.simulate_heat_distribution()
+    yield m
+    plt.close("all")
+
+
+@pytest.mark.parametrize("what, names", [
+    ("G", {"geometry", "media_properties"}),
+    ("MC", {"media_properties", "NA", "NFR"}),
+    ("HS", {"sensor_positions", "sensor_temperatures", "temperature", "damage",
+            "fractional_damage"}),
+])
+def test_figures_are_returned_and_saved(model, tmp_path, what, names):
+    figs = model.plot(what, tmp_path / "fig.png")
+    assert set(figs) == names
+    for name, fig in figs.items():
+        png = tmp_path / f"fig_{name}.png"
+        assert png.stat().st_size > 10_000
+        assert isinstance(fig, matplotlib.figure.Figure)
+    plt.close("all")
+
+
+def test_slices_show_the_data(model):
+    """The panels hold the field's slices: NFR on a log scale, the medium map as categories."""
+    figs = model.plot("MC")
+    G, MC = model.G, model.MC
+    ix, iy, iz = slice_indices(MC.NFR.shape, (0.5, 0.5, 0.0))
+    xy, xz, yz = [ax.images[0] for ax in figs["NFR"].axes[:3]]
+    np.testing.assert_array_equal(xz.get_array().filled(np.nan), MC.NFR[:, iy, :].T)
+    assert isinstance(xz.norm, matplotlib.colors.LogNorm)
+    assert xz.norm.vmax == pytest.approx(MC.NFR.max())
+    geo = model.plot("G")["geometry"]
+    np.testing.assert_array_equal(geo.axes[1].images[0].get_array(),
+                                  G.medium_map()[:, iy, :].T)
+    heat = model.plot("HS")
+    np.testing.assert_allclose(heat["temperature"].axes[0].images[0].get_array(),
+                               model.HS.T_voxels[:, :, slice_indices(
+                                   G.medium_map().shape, model.HS.slice_positions)[2]].T)
+    lines = heat["sensor_temperatures"].axes[0].lines
+    np.testing.assert_array_equal(lines[1].get_ydata(), model.HS.sensor_temps[:, 1])
+    assert lines[0].get_label() == "1, blood"
+    plt.close("all")
+
+
+def test_fmc_is_not_built_and_bad_names_fail(model):
+    with pytest.raises(NotBuiltError, match="fluorescence"):
+        model.plot("FMC")
+    with pytest.raises(ValueError, match="'G', 'MC' or 'HS'"):
+        model.plot("XX")
+    empty = Model()
+    empty.G.media = model.G.media
+    with pytest.raises(ValueError, match="run model.run_monte_carlo"):
+        empty.plot("MC")
+    with pytest.raises(ValueError, match="simulate_heat_distribution"):
+        empty.plot("HS")
+
+
+def test_interactive_slicer_builds_off_screen(model):
+    pytest.importorskip("pyvista")
+    from mcmatlab_py.plotting.slicer import interactive_slicer, voxel_image
+
+    img = voxel_image(model.G, T=model.HS.T_voxels)
+    assert img.n_cells == model.G.nx * model.G.ny * model.G.nz
+    # cell (i, j, k) holds T[i, j, k]
+    c = img.find_containing_cell((model.G.x[2], model.G.y[5], model.G.z[3]))
+    assert img.cell_data["T"][c] == pytest.approx(model.HS.T_voxels[2, 5, 3])
+    plotter = interactive_slicer(model, "HS", show=False)
+    plotter.close()

@@ -1,0 +1,331 @@
+"""Two forward models of the paper's block that share no code with the filter's model.
+
+The filter's model is MCmatlab's Monte Carlo (numba kernel, implicit capture: the packet
+loses ``w mua / mut`` at every interaction, scored on 100 x 100 x 50 voxels), tabulated
+by the emulator and integrated onto the P1 basis of a 20 x 20 x 10 tetrahedral mesh,
+stepped by the FEM heat solver (``fem``). To see how honest its uncertainty is when the
+truth comes from *another* model, this module writes two truths of its own, in plain
+numpy and scipy, importing nothing from ``mcmatlab_py``, ``fem`` or ``enkf``:
+
+``"A"``
+    **Analog Monte Carlo** (each photon is absorbed whole at one interaction, with
+    probability ``mua / mut``; no weights), scored on an axisymmetric ``(r, z)`` grid of
+    0.0125 x 0.00625 cm, and a **cell-centred finite-difference** heat solver on a
+    35 x 35 x 24 Cartesian grid of the box (insulated faces, backward Euler, 0.05 s).
+``"B"``
+    **Attenuation (path-length) Monte Carlo** (packets scatter with ``mus`` only, their
+    weight decays as ``exp(-mua s)`` along each flight; the lost weight is deposited at a
+    point drawn on the flight with density ``mua exp(-mua s')``, an unbiased track
+    estimator; Russian roulette below 1e-3), scored on a 0.01 x 0.005 cm ``(r, z)`` grid,
+    and an **axisymmetric finite-volume** heat solver on a cylinder of the box's
+    cross-section area (radius 0.282 cm, 40 x 40 cells, Crank-Nicolson, 0.1 s). The
+    cylinder for the box is itself a model error, as a real tissue's shape would be.
+
+Both: top-hat beam of radius 0.1 cm, collimated along +z, matched interfaces (no
+reflection), every face of the 0.5 x 0.5 x 0.25 cm block escapes light, Table 1's
+tissue (g 0.9, VHC 3.76, TC 0.0037), 0.5 W for 5 s then 10 s off. The drifting case
+(the paper's ramps, mua 1 -> 4, mus 100 -> 500 over the pulse) runs the Monte Carlo at
+11 instants of the pulse (every 0.5 s) and interpolates the absorbed power linearly in
+time between them.
+
+    python validation/independent_models.py     # writes the cache, prints the traces
+"""
+
+from __future__ import annotations
+
+import hashlib
+from pathlib import Path
+
+import numpy as np
+import scipy.sparse as sp
+import scipy.sparse.linalg as spla
+
+L_XY, L_Z = 0.5, 0.25  # cm
+G_ANISO = 0.9
+VHC, TC = 3.76, 0.0037  # J cm^-3 K^-1, W cm^-1 K^-1
+POWER, T_ON, T_OFF = 0.5, 5.0, 10.0  # W, s, s
+BEAM_RADIUS = 0.1  # cm
+DEPTHS = (0.0, 0.1, 0.2)  # cm, the tracked points below the beam centre
+TIMES = np.round(0.1 * np.arange(151), 10)  # s, the 10 Hz sensor
+KNOTS = np.round(0.5 * np.arange(11), 10)  # s, Monte Carlo instants of the drifting case
+CACHE = Path.home() / ".cache" / "tissue-enkf" / "independent"
+MODELS = ("A", "B")
+
+
+def optics(case: str, t: float) -> tuple[float, float]:
+    """(mua, mus) cm^-1 of the truth at time ``t``: Table 1, or the paper's ramps."""
+    if case == "constant":
+        return 1.0, 100.0
+    tt = min(t, T_ON)
+    return 1.0 + 0.6 * tt, 100.0 + 80.0 * tt
+
+
+# ------------------------------------------------------------------------- Monte Carlo
+
+
+def _hg_scatter(ux, uy, uz, g, rng):
+    """New directions after Henyey-Greenstein scattering (Wang & Jacques 1995, MCML)."""
+    n = ux.size
+    xi = rng.random(n)
+    tmp = (1 - g * g) / (1 - g + 2 * g * xi)
+    cost = np.clip((1 + g * g - tmp * tmp) / (2 * g), -1.0, 1.0)
+    sint = np.sqrt(1 - cost * cost)
+    psi = 2 * np.pi * rng.random(n)
+    cp, sp_ = np.cos(psi), np.sin(psi)
+    vert = np.abs(uz) > 0.99999
+    den = np.sqrt(np.maximum(1 - uz * uz, 1e-300))
+    nx = np.where(vert, sint * cp, sint * (ux * uz * cp - uy * sp_) / den + ux * cost)
+    ny = np.where(vert, sint * sp_, sint * (uy * uz * cp + ux * sp_) / den + uy * cost)
+    nz = np.where(vert, np.sign(uz) * cost, -sint * cp * den + uz * cost)
+    return nx, ny, nz
+
+
+def _exit_distance(x, y, z, ux, uy, uz):
+    """Distance along (ux, uy, uz) to the faces of the block."""
+    big = 1e30
+    with np.errstate(divide="ignore", invalid="ignore"):
+        dx = np.where(ux > 0, (L_XY / 2 - x) / ux, np.where(ux < 0, (-L_XY / 2 - x) / ux, big))
+        dy = np.where(uy > 0, (L_XY / 2 - y) / uy, np.where(uy < 0, (-L_XY / 2 - y) / uy, big))
+        dz = np.where(uz > 0, (L_Z - z) / uz, np.where(uz < 0, -z / uz, big))
+    return np.minimum(np.minimum(dx, dy), dz)
+
+
+def monte_carlo(mua: float, mus: float, n_photons: int, estimator: str, dr: float, dz: float,
+                seed: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Absorbed power per watt on an (r, z) grid: (density (nr, nz) W/cm^3/W, r edges,
+    z edges). ``estimator``: "analog" or "attenuation" (see the module docstring)."""
+    rng = np.random.default_rng(seed)
+    r_max = np.hypot(L_XY / 2, L_XY / 2)
+    nr, nz = int(np.ceil(r_max / dr)), int(round(L_Z / dz))
+    acc = np.zeros(nr * nz)
+    rho = BEAM_RADIUS * np.sqrt(rng.random(n_photons))
+    phi = 2 * np.pi * rng.random(n_photons)
+    x, y, z = rho * np.cos(phi), rho * np.sin(phi), np.zeros(n_photons)
+    ux, uy, uz = np.zeros(n_photons), np.zeros(n_photons), np.ones(n_photons)
+    w = np.ones(n_photons)
+    mut = mua + mus
+
+    def score(px, py, pz, wt):
+        ir = np.minimum((np.hypot(px, py) / dr).astype(int), nr - 1)
+        iz = np.clip((pz / dz).astype(int), 0, nz - 1)
+        acc[:] += np.bincount(ir * nz + iz, weights=wt, minlength=nr * nz)
+
+    while x.size:
+        d_exit = _exit_distance(x, y, z, ux, uy, uz)
+        if estimator == "analog":
+            s = -np.log(rng.random(x.size)) / mut
+            out = s >= d_exit
+            x, y, z = x + s * ux, y + s * uy, z + s * uz
+            absorbed = ~out & (rng.random(x.size) < mua / mut)
+            score(x[absorbed], y[absorbed], z[absorbed], np.ones(absorbed.sum()))
+            keep = ~out & ~absorbed
+        else:  # attenuation: flights drawn with mus, absorption along them
+            s = -np.log(rng.random(x.size)) / mus
+            out = s >= d_exit
+            s_in = np.minimum(s, d_exit)
+            lost = w * (1 - np.exp(-mua * s_in))
+            # a point on the flight with density mua exp(-mua s') on [0, s_in]
+            u = rng.random(x.size)
+            s_abs = -np.log(1 - u * (1 - np.exp(-mua * s_in))) / mua
+            score(x + s_abs * ux, y + s_abs * uy, z + s_abs * uz, lost)
+            w = w - lost
+            x, y, z = x + s * ux, y + s * uy, z + s * uz
+            keep = ~out
+            low = keep & (w < 1e-3)
+            survive = rng.random(x.size) < 0.1
+            # roulette: a low packet dies or carries on with ten times its weight
+            w = np.where(low & survive, 10 * w, w)
+            dead = low & ~survive
+            if dead.any():  # its last weight is absorbed where it stands
+                score(x[dead], y[dead], z[dead], w[dead])
+            keep &= ~dead
+        x, y, z, ux, uy, uz, w = (a[keep] for a in (x, y, z, ux, uy, uz, w))
+        ux, uy, uz = _hg_scatter(ux, uy, uz, G_ANISO, rng)
+    r_edges, z_edges = dr * np.arange(nr + 1), dz * np.arange(nz + 1)
+    vol = np.outer(annulus_area_in_box(r_edges), np.diff(z_edges))
+    return acc.reshape(nr, nz) / n_photons / np.maximum(vol, 1e-300), r_edges, z_edges
+
+
+def annulus_area_in_box(r_edges: np.ndarray, n: int = 2000) -> np.ndarray:
+    """Area (cm^2) of each annulus between ``r_edges`` inside the block's square cross-section
+    (by midpoint sampling of the square; annuli beyond L/2 are cut by its sides)."""
+    c = (np.arange(n) + 0.5) / n * L_XY - L_XY / 2
+    r = np.hypot(c[:, None], c[None, :]).ravel()
+    counts = np.histogram(r, bins=r_edges)[0]
+    return counts * (L_XY / n) ** 2
+
+
+def absorbed_maps(model: str, case: str, n_photons: int) -> tuple[np.ndarray, list, tuple]:
+    """The Monte Carlo maps of ``model`` for ``case``: (times of the maps, [density (nr, nz)],
+    (r edges, z edges)); cached."""
+    estimator, dr, dz, seed = {"A": ("analog", 0.0125, 0.00625, 11),
+                               "B": ("attenuation", 0.01, 0.005, 22)}[model]
+    knots = np.array([0.0]) if case == "constant" else KNOTS
+    tag = hashlib.sha256(f"{model}-{case}-{n_photons}-v1".encode()).hexdigest()[:16]
+    path = CACHE / f"maps-{tag}.npz"
+    if path.exists():
+        with np.load(path) as f:
+            return f["knots"], list(f["maps"]), (f["r_edges"], f["z_edges"])
+    maps = []
+    for i, t in enumerate(knots):
+        mua, mus = optics(case, float(t))
+        m, r_edges, z_edges = monte_carlo(mua, mus, n_photons, estimator, dr, dz, seed + 97 * i)
+        maps.append(m)
+    CACHE.mkdir(parents=True, exist_ok=True)
+    np.savez(path, knots=knots, maps=np.array(maps), r_edges=r_edges, z_edges=z_edges)
+    return knots, maps, (r_edges, z_edges)
+
+
+def _map_at(knots, maps, t):
+    """Absorbed power map at time ``t``, linear between the Monte Carlo instants."""
+    if len(maps) == 1:
+        return maps[0]
+    t = min(max(t, knots[0]), knots[-1])
+    i = min(int(np.searchsorted(knots, t, side="right")) - 1, len(knots) - 2)
+    a = (t - knots[i]) / (knots[i + 1] - knots[i])
+    return (1 - a) * maps[i] + a * maps[i + 1]
+
+
+def _lookup(density, edges, r, z):
+    """Density of the (r, z) bin that holds each point."""
+    r_edges, z_edges = edges
+    ir = np.clip(np.searchsorted(r_edges, r, side="right") - 1, 0, density.shape[0] - 1)
+    iz = np.clip(np.searchsorted(z_edges, z, side="right") - 1, 0, density.shape[1] - 1)
+    return density[ir, iz]
+
+
+# ---------------------------------------------------------------------------- heat solvers
+
+
+def _laplacian_1d(n: int, h: float) -> sp.csr_matrix:
+    """Cell-centred second difference with zero-flux ends (W/(cm^2) per K once times TC)."""
+    main = -2.0 * np.ones(n)
+    main[0] = main[-1] = -1.0
+    return sp.diags([np.ones(n - 1), main, np.ones(n - 1)], [-1, 0, 1]) / h**2
+
+
+class CartesianFD:
+    """Cell-centred finite differences on the box, insulated faces, backward Euler."""
+
+    def __init__(self, shape=(35, 35, 24), dt: float = 0.05):
+        self.shape = nx, ny, nz = shape
+        self.h = (L_XY / nx, L_XY / ny, L_Z / nz)
+        I = [sp.identity(n) for n in shape]
+        Lx, Ly, Lz = (_laplacian_1d(n, h) for n, h in zip(shape, self.h, strict=True))
+        Lap = (sp.kron(sp.kron(Lx, I[1]), I[2]) + sp.kron(sp.kron(I[0], Ly), I[2])
+               + sp.kron(sp.kron(I[0], I[1]), Lz))
+        self.dt = dt
+        self.solve = spla.factorized((sp.identity(nx * ny * nz) - dt * TC / VHC * Lap).tocsc())
+        self.centres = [(np.arange(n) + 0.5) * h - (L_XY / 2 if k < 2 else 0.0)
+                        for k, (n, h) in enumerate(zip(shape, self.h, strict=True))]
+        X, Y, Z = np.meshgrid(*self.centres, indexing="ij")
+        self.r, self.z = np.hypot(X, Y).ravel(), Z.ravel()
+        self.vol = float(np.prod(self.h))
+
+    def source(self, density, edges, total):
+        """Power density per W on the cells, rescaled to the Monte Carlo's absorbed total."""
+        s = _lookup(density, edges, self.r, self.z)
+        return s * (total / max(s.sum() * self.vol, 1e-300))
+
+    def probes(self, T):
+        """T at (0, 0, z) for the tracked depths: the centre column (nx, ny odd), the surface
+        by the zero-flux parabola through the first two cells, depths by linear interpolation."""
+        nx, ny, nz = self.shape
+        col = T.reshape(self.shape)[nx // 2, ny // 2]
+        zc = self.centres[2]
+        out = []
+        for d in DEPTHS:
+            out.append((9 * col[0] - col[1]) / 8 if d <= zc[0] else np.interp(d, zc, col))
+        return np.array(out)
+
+    def step(self, T, q, dt):
+        assert abs(dt - self.dt) < 1e-12
+        return self.solve(T + dt * q / VHC)
+
+
+class AxisymmetricFV:
+    """Finite volumes on a cylinder of the box's cross-section area, Crank-Nicolson."""
+
+    def __init__(self, nr: int = 40, nz: int = 40, dt: float = 0.1):
+        R = L_XY / np.sqrt(np.pi)
+        self.shape = (nr, nz)
+        dr, dz = R / nr, L_Z / nz
+        re = dr * np.arange(nr + 1)
+        rc = 0.5 * (re[1:] + re[:-1])
+        self.centres = (rc, (np.arange(nz) + 0.5) * dz)
+        vol_r = 0.5 * (re[1:] ** 2 - re[:-1] ** 2)  # per radian
+        # radial flux conductance between rings i and i + 1 (per radian): r_face / dr
+        g = re[1:-1] / dr
+        Ar = sp.diags(1 / vol_r) @ sp.diags([g, -(np.r_[g, 0] + np.r_[0, g]), g], [-1, 0, 1])
+        Az = _laplacian_1d(nz, dz)
+        Lap = sp.kron(Ar, sp.identity(nz)) + sp.kron(sp.identity(nr), Az)
+        a = dt * TC / VHC
+        Id = sp.identity(nr * nz)
+        self.rhs = (Id + 0.5 * a * Lap).tocsr()
+        self.solve = spla.factorized((Id - 0.5 * a * Lap).tocsc())
+        self.dt = dt
+        R_, Z_ = np.meshgrid(*self.centres, indexing="ij")
+        self.r, self.z = R_.ravel(), Z_.ravel()
+        self.vol = (2 * np.pi * np.outer(vol_r, np.full(nz, dz))).ravel()
+
+    def source(self, density, edges, total):
+        s = _lookup(density, edges, self.r, self.z)
+        return s * (total / max((s * self.vol).sum(), 1e-300))
+
+    def probes(self, T):
+        nr, nz = self.shape
+        T = T.reshape(nr, nz)
+        col = (9 * T[0] - T[1]) / 8  # the axis, by symmetry (zero radial slope)
+        zc = self.centres[1]
+        return np.array([(9 * col[0] - col[1]) / 8 if d <= zc[0] else np.interp(d, zc, col)
+                         for d in DEPTHS])
+
+    def step(self, T, q, dt):
+        assert abs(dt - self.dt) < 1e-12
+        return self.solve(self.rhs @ T + dt * q / VHC)
+
+
+def independent_truth(model: str, case: str, n_photons: int = 200_000) -> np.ndarray:
+    """Temperatures (151, 3) deg C at z = 0, 0.1, 0.2 cm below the beam centre, every 0.1 s
+    from 0 to 15 s (cached)."""
+    tag = hashlib.sha256(f"truth-{model}-{case}-{n_photons}-v1".encode()).hexdigest()[:16]
+    path = CACHE / f"truth-{tag}.npy"
+    if path.exists():
+        return np.load(path)
+    knots, maps, edges = absorbed_maps(model, case, n_photons)
+    solver = CartesianFD() if model == "A" else AxisymmetricFV()
+    # the heat each map puts into the block: its integral over the annuli inside the box
+    totals = [float((m * np.outer(annulus_area_in_box(edges[0]), np.diff(edges[1]))).sum())
+              for m in maps]
+    T = np.zeros(solver.r.size)
+    out = [solver.probes(T)]
+    dt = solver.dt
+    n_sub = int(round(0.1 / dt))
+    t = 0.0
+    for _ in range(len(TIMES) - 1):
+        for _ in range(n_sub):
+            tm = t + 0.5 * dt
+            if tm < T_ON:
+                m = _map_at(knots, maps, tm)
+                tot = float(np.interp(tm, knots, totals)) if len(totals) > 1 else totals[0]
+                q = POWER * solver.source(m, edges, tot)
+            else:
+                q = 0.0
+            T = solver.step(T, q, dt)
+            t += dt
+        out.append(solver.probes(T))
+    temps = np.array(out)
+    CACHE.mkdir(parents=True, exist_ok=True)
+    np.save(path, temps)
+    return temps
+
+
+if __name__ == "__main__":
+    import time
+
+    for case in ("constant", "time-varying"):
+        for model in MODELS:
+            t0 = time.perf_counter()
+            T = independent_truth(model, case)
+            print(case, model, f"{time.perf_counter() - t0:.1f} s", "T(5 s) =",
+                  np.round(T[50], 3), "T(15 s) =", np.round(T[150], 3), flush=True)
