@@ -25,6 +25,10 @@ theta, phi : polar angle and azimuth of a light source's axis, rad (theta = 0: a
 psi : rotation of an X/Y beam about its axis, rad
 FPID, AID : focal-plane and angular intensity distributions of a beam (MCmatlab's
     abbreviations; ``focal_plane_intensity_distribution``, ``angular_intensity_distribution``)
+NI_xpos .. NI_zneg : normalized irradiance leaving each cuboid face, W cm^-2 W^-1
+LC : light collector (``MC.light_collector``): a lens (focal length f) or a fiber (f = inf)
+DC : deposition criteria (``MC.deposition_criteria``)
+Rd_r, Tt_r, Rd_a, Tt_a : MCML's radial (cm^-2) and exit-angle (sr^-1) reflectance, transmittance
 """
 
 from ._strict import NotBuiltError

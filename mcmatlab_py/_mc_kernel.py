@@ -30,6 +30,14 @@ mirrored, so that a reflected packet stays in its medium and a refracted one ent
 the new one. ``n = inf`` is a perfect reflector; ``g = 1`` (and -1) scatters without
 (with full) deflection; a medium with a tabulated phase function (``phase_idx >= 0``)
 draws the scattering angle from its table.
+
+The optional outputs (boundary maps, far field, light collector, time of flight, MCML
+tallies, deposition criteria, example paths: :mod:`mcmatlab_py._mc_outputs`) are
+compiled in only when ``oi`` is an array; with ``oi = None`` every hook is pruned and the
+plain run is the same code, drawing the same random numbers. The time of flight is the
+optical path from the launch point (n = 1 everywhere with matched interfaces, as in
+MCmatlab) over c; MCmatlab instead starts a focused beam's clock where its wavefront
+crosses the focal plane.
 """
 
 import math
@@ -51,18 +59,7 @@ from ._mc_steps import (
     _turn_smooth,
 )
 from ._rng import next_double, seed_stream
-from ._sources import (  # noqa: F401  (the source kinds, re-exported)
-    SI_SURFACE,
-    SRC_BEAM,
-    SRC_GAUSSIAN,
-    SRC_ISOTROPIC,
-    SRC_PENCIL,
-    SRC_PLANE_WAVE,
-    SRC_TOPHAT,
-    SRC_VOLUME,
-    launch,
-    sample_pwl,
-)
+from ._sources import SI_SURFACE, launch, sample_pwl
 
 W_ONE = 2**36  # fixed-point weight of a launched packet (about 1.5e-11 resolution)
 
@@ -78,8 +75,6 @@ T_MISSED = 7
 T_ROULETTE = 8  # weight created by roulette survivors minus weight of packets killed
 T_ABSORBED_EXCLUDED = 9  # absorbed inside by packets that failed the deposition criteria
 N_TALLY = 10
-
-SRC_ISOTROPIC_POINT = SRC_ISOTROPIC
 
 KILLRANGE = 5.0  # as MCmatlab: photons farther than 2.5 cuboid sizes from the centre die
 
@@ -435,7 +430,7 @@ def transport_batch(
                     tally[T_KILLED] += w
                     break
             if oi is not None:
-                if consider[m]:
+                if consider[m] and mus[m] > 0.0:  # mus = 0: the packet was absorbed, not scattered
                     cnt[0] += 1
                 if record_path:
                     O.path_point(paths, path_n, ip, px, py, pz, w / W_ONE)

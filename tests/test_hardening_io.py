@@ -122,7 +122,7 @@ def test_a_bad_idle_timeout_exits_2_naming_it(tmp_path, capsys, value):
 
 
 def test_follow_csv_refuses_a_bad_idle_timeout(tmp_path, tissue):
-    (tmp_path / "live.csv").write_text("time,sensor_0\n")
+    (tmp_path / "live.csv").write_text("time,sensor_0\n# end\n")
     for v in (float("nan"), float("inf"), -1.0, 0.0):
         with pytest.raises(ValueError, match="idle_timeout_s must be a finite number"):
             follow_csv(tmp_path / "live.csv", OnlineIdentifier(tissue.setup()),

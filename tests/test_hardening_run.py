@@ -189,3 +189,17 @@ def test_warnings_are_one_line(tmp_path):
     assert run("mc", EX / "tiny.toml", "--out", tmp_path / "o", "--photons", "1000") == 0
     line = warnings.formatwarning("something odd", RuntimeWarning, "file.py", 1)
     assert line == "warning: something odd\n"
+
+
+def test_force_never_replaces_the_working_directory_or_a_foreign_folder(tmp_path, monkeypatch,
+                                                                         capsys):
+    foreign = tmp_path / "thesis"
+    foreign.mkdir()
+    (foreign / "chapter1.tex").write_text("years of work")
+    assert run("mc", EX / "tiny.toml", "--out", foreign, "--force", "--photons", "100") == 2
+    one_error_line(capsys, "no run.json")
+    assert (foreign / "chapter1.tex").exists()
+    monkeypatch.chdir(foreign)
+    assert run("mc", EX / "tiny.toml", "--out", ".", "--force", "--photons", "100") == 2
+    one_error_line(capsys, "working directory")
+    assert (foreign / "chapter1.tex").exists()

@@ -291,3 +291,21 @@ def test_bad_output_settings_raise_value_errors_naming_the_field():
     model.MC.deposition_criteria.only_collected = True
     with pytest.raises(ValueError, match="only_collected"):
         model.run_monte_carlo()
+
+
+def test_output_figures_draw():
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from mcmatlab_py.plotting import outputs as P
+
+    model = all_outputs(block(300))
+    model.MC.use_light_collector = True
+    LC = model.MC.light_collector
+    LC.f, LC.res, LC.field_size, LC.z = 1.0, 6, 0.5, 0.0
+    model.run_monte_carlo()
+    for draw in (P.plot_example_paths, P.plot_far_field, P.plot_light_collector,
+                 P.plot_boundary_irradiance, P.plot_az_fz, P.plot_radial_reflectance_transmittance):
+        plt.close(draw(model))

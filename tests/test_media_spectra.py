@@ -267,8 +267,9 @@ def test_state_dependent_media_are_not_silently_flattened():
     model.G.media[0].VHC = lambda T, FD: 3.7 + 0.0 * T
     model.G.media[0].TC = 0.005
     model.MC.NA = np.zeros((12, 12, 8))
-    with pytest.raises(NotImplementedError, match="VHC is a function of \\(T, FD\\)"):
-        model.simulate_heat_distribution()
+    model.HS.progress = False
+    model.simulate_heat_distribution()  # thermal sub-media from (T, FD): mcmatlab_py.frt
+    assert np.allclose(model.HS.media_properties.VHC, 3.7)
 
 
 def test_thermal_media_are_binned_on_temperature():

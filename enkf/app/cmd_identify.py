@@ -57,7 +57,7 @@ def cmd_identify(args) -> int:
     if not (math.isfinite(args.idle_timeout) and args.idle_timeout > 0):
         raise ValueError(f"--idle-timeout must be a finite number of seconds > 0, got "
                          f"{shorten(args.idle_timeout)}")
-    check_out_dir(args.out, args.force)
+    check_out_dir(args.out, args.force, whole=args.follow is None)
     apply_threads(args.threads)
     cfg = load_identify(args.config)
     if args.data is None and args.follow is None and cfg.data.file is not None:

@@ -22,13 +22,27 @@ __all__ = ["atomic_dir", "check_out_dir", "remove_stale_partials", "write_json"]
 _PARTIAL = re.compile(r"^\.(?P<name>.+)\.(?P<pid>\d+)\.partial$")
 
 
-def check_out_dir(out: str | Path, force: bool) -> Path:
-    """Refuse an existing non-empty ``out`` unless ``force``; ValueError names it."""
+def check_out_dir(out: str | Path, force: bool, whole: bool = True) -> Path:
+    """Refuse an existing non-empty ``out`` unless ``force``; ValueError names it.
+
+    With ``force`` the working directory, its parents and the home directory are refused,
+    and, when the whole directory is to be replaced (``whole``), one that holds no
+    ``run.json`` (no output of ours)."""
     out = Path(out)
     if out.exists() and not out.is_dir():
         raise ValueError(f"--out {str(out)!r} exists and is not a directory")
-    if out.is_dir() and any(out.iterdir()) and not force:
-        raise ValueError(f"--out {str(out)!r} exists and is not empty (use --force to replace it)")
+    if out.is_dir() and any(out.iterdir()):
+        if not force:
+            raise ValueError(f"--out {str(out)!r} exists and is not empty (use --force to "
+                             "replace it)")
+        here = Path.cwd().resolve()
+        target = out.resolve()
+        if target == here or target in here.parents or target == Path.home().resolve():
+            raise ValueError(f"--out {str(out)!r} is the working directory, one of its parents "
+                             "or the home directory: --force will not replace it")
+        if whole and not (out / "run.json").exists():
+            raise ValueError(f"--out {str(out)!r} holds no run.json, so it is no output of "
+                             "tissue-enkf: --force replaces only those (choose another --out)")
     return out
 
 

@@ -68,17 +68,21 @@ class TissueFilterSetup:
     prior_range: tuple[float, float] = (0.5, 2.0)
     prior: dict = field(default_factory=dict)  #: {name: (lo, hi)} in physical units
     model_noise_std: float = 0.002  #: deg C per step, C = std^2 I (the white floor)
-    #: "structured" (default): the white floor plus a relative error of each step's tendency,
-    #: correlated over depth and time (enkf.tissue.model_error.StructuredModelError, sized
-    #: from the coarse model against independent models); "white": the floor alone (the paper)
-    model_error: str = "structured"
+    #: "white" (default, the paper): the floor alone. "structured": the white floor plus a
+    #: relative error of each step's tendency, correlated over depth and time
+    #: (enkf.tissue.model_error.StructuredModelError, sized from the coarse model against
+    #: independent models): honest bands for constant tissue on data from another model
+    #: (validation/reports/model_error_coverage.md); not yet validated for drifting optics,
+    #: where it slowed the parameters' drift in the first runs, so it is not the default
+    model_error: str = "white"
     model_error_rel_std: float = 0.05  #: sd of the relative error of a step's tendency
     model_error_time_scale: float = 3.0  #: s, its correlation time
     model_error_length_xy: float = 0.1  #: cm, its correlation length across
     model_error_length_z: float = 0.05  #: cm, its correlation length down
     #: estimate a factor on the forecast's temperature covariance from the innovations
-    #: (enkf.adaptive; default on): the model error's size is then checked against the data
-    adaptive_inflation: bool = True
+    #: (enkf.adaptive): the model error's size is then checked against the data. Off by
+    #: default until validated for drifting optics (on in examples/own_data.toml)
+    adaptive_inflation: bool = False
     adaptive_inflation_bounds: tuple[float, float] = (1.0, 25.0)  #: of the covariance factor
     adaptive_inflation_time_scale: float = 30.0  #: analysed steps averaged over
     random_walk_std: float | Sequence[float] = 0.002  #: log units per step, E = std^2 I

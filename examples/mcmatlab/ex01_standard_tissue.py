@@ -92,27 +92,18 @@ def check(model) -> dict:
     }
 
 
-def figures(model, out: Path) -> list[Path]:
-    """The geometry, NA and NFR (log colour scales) as PNGs in ``out``."""
-    from mcmatlab_py.plotting.gallery import field_figure, geometry_figure, save_figure
-
-    # slices through the beam axis, and the xy slice 0.2 mm below the surface
-    point = (0.0, 0.0, Z_SURFACE + 0.02)
-    return [
-        save_figure(geometry_figure(model, point=point), out / "ex01_geometry.png"),
-        save_figure(field_figure(model, "NFR", point=point), out / "ex01_NFR.png"),
-        save_figure(field_figure(model, "NA", point=point), out / "ex01_NA.png"),
-    ]
-
-
 if __name__ == "__main__":
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--quick", action="store_true", help="small grid, few photons (seconds)")
-    ap.add_argument("--out", type=Path, default=Path(__file__).parent / "out")
+    ap.add_argument("--out", type=Path, default=Path(__file__).parent / "out",
+                    help="folder for the figures (default: examples/mcmatlab/out)")
     args = ap.parse_args()
-    result = run(args.quick)
-    for name, c in check(result).items():
-        print(f"{name}: {c['value']:.4g} ({c['what']})")
-    print(f"absorbed {result.MC.absorbed_fraction:.4f}, escaped {result.MC.escaped}")
-    for path in figures(result, args.out):
-        print(f"wrote {path}")
+    model = run(args.quick)
+    print(f"{100 * model.MC.absorbed_fraction:.3g}% of the incident light was absorbed "
+          "within the cuboid")
+    for name, c in check(model).items():
+        print(f"{name}: {c['value']:.6g} ({c['what']})")
+    args.out.mkdir(parents=True, exist_ok=True)
+    model.plot("G", args.out / "ex01")  # geometry, media properties
+    model.plot("MC", args.out / "ex01")  # NA and NFR on log colour scales
+    print(f"figures in {args.out}")

@@ -159,3 +159,23 @@ def check(model) -> dict:
             "value": heat_balance(model), "expected": 1.0, "tol": 1e-6,
             "what": "heat content gained / energy absorbed (insulating faces: 1)"},
     }
+
+
+if __name__ == "__main__":
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--quick", action="store_true", help="small grid, few photons (seconds)")
+    ap.add_argument("--out", type=Path, default=Path(__file__).parent / "out",
+                    help="folder for the figures (default: examples/mcmatlab/out)")
+    args = ap.parse_args()
+    model = run(args.quick)
+    print(f"{100 * model.MC.absorbed_fraction:.3g}% of the incident light was absorbed "
+          "within the cuboid")
+    names = [m.name for m in model.G.media]
+    for name, T in zip(names, model.HS.max_media_temps, strict=True):
+        print(f"highest temperature in the {name}: {T:.1f} deg C")
+    for name, c in check(model).items():
+        print(f"{name}: {c['value']:.6g} ({c['what']})")
+    args.out.mkdir(parents=True, exist_ok=True)
+    for what in ("G", "MC", "HS"):  # MCmatlab's plot(model, 'G'), 'MC', 'HS'
+        model.plot(what, args.out / "ex04")
+    print(f"figures in {args.out}")

@@ -105,14 +105,14 @@ def monte_carlo_figures(model) -> dict:
     if MC.NA is None:
         raise ValueError("MC.NA is empty: run model.run_monte_carlo() before plot('MC')")
     figs = {"media_properties": media_properties_figure(model)}
-    for key, data, label in (
-            ("NA", MC.NA, "normalized absorbed power per volume [W/cm$^3$/W incident]"),
-            ("NFR", MC.NFR, "normalized fluence rate [W/cm$^2$/W incident]")):
+    for key, data, what, unit in (
+            ("NA", MC.NA, "normalized absorbed power per volume", "W/cm$^3$/W"),
+            ("NFR", MC.NFR, "normalized fluence rate", "W/cm$^2$/W")):
         fig = _figure(name=key)
         shown = np.where(data > 0, data, np.nan)
         orthogonal_slices(fig, shown, G, DEFAULT_SLICES, cmap="inferno",
-                          norm=positive_log_norm(data), label=label,
-                          title=f"{key}: {label.split(' [')[0]}")
+                          norm=positive_log_norm(data), label=f"{key} [{unit}]",
+                          title=f"{key}: {what} [{unit} incident]")
         figs[key] = fig
     return figs
 
