@@ -55,8 +55,9 @@ def optical_arrays(media, wavelength: float | None = None
     for m in media:
         if m.is_state_dependent:
             raise NotBuiltError(
-                f"Medium({m.name!r}) depends on FR, T or FD: only run_monte_carlo splits such "
-                "media into sub-media; MCmatlab's coupled FR/T/FD iteration is not built yet")
+                f"Medium({m.name!r}) depends on FR, T or FD: one value per medium cannot "
+                "hold it; run_monte_carlo splits such media into sub-media (and "
+                "mcmatlab_py.frt couples them with the heat simulation)")
     return tuple(np.array([m.value(f, wavelength) for m in media], dtype=np.float64)
                  for f in ("mua", "mus", "g", "n"))
 

@@ -262,7 +262,7 @@ def test_bad_state_fields_name_the_field(field, value, message):
 
 def test_state_dependent_media_are_not_silently_flattened():
     model, _ = two_state_model(2)
-    with pytest.raises(NotBuiltError, match="coupled FR/T/FD iteration is not built yet"):
+    with pytest.raises(NotBuiltError, match="splits such media into sub-media"):
         optical_arrays(model.G.media)
     model.G.media[0].VHC = lambda T, FD: 3.7 + 0.0 * T
     model.G.media[0].TC = 0.005

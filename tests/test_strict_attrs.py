@@ -60,8 +60,7 @@ def test_mcmatlab_methods_point_to_ours():
 @pytest.mark.parametrize("label, name", [
     ("MC", "useGPU"),
     ("MC", "calcNormalizedFluenceRate"),
-    ("HS", "makeMovie"),
-    ("HS", "durationEnd"),
+    ("HS", "useGPU"),
     ("Medium", "ES"),
     ("Medium", "QY"),
     ("model", "FMC"),
@@ -75,6 +74,13 @@ def test_mcmatlab_features_not_built_say_so(label, name):
     # also an AttributeError: hasattr and getattr with a default keep working
     assert not hasattr(obj, name)
     assert getattr(obj, name, "default") == "default"
+
+
+def test_mcmatlab_camel_case_heat_names_point_to_ours():
+    HS = objects()["HS"]
+    for camel, snake in (("makeMovie", "make_movie"), ("durationEnd", "duration_end")):
+        with pytest.raises(AttributeError, match=snake):
+            setattr(HS, camel, 1)
 
 
 def test_broadband_wavelength_is_not_built():

@@ -92,6 +92,24 @@ def check(model) -> dict:
     }
 
 
+def fluence_figure(model):
+    """NFR (log scale) on slices through the beam, the xy one 0.1 mm below the tissue surface.
+
+    ``model.plot("MC")`` cuts its xy slice at the top face, which here lies in the air.
+    """
+    import matplotlib.pyplot as plt
+
+    from mcmatlab_py.plotting.figures import positive_log_norm
+    from mcmatlab_py.plotting.slices import orthogonal_slices
+
+    G, NFR = model.G, model.MC.NFR
+    fig = plt.figure(figsize=(8, 3.3), layout="constrained")
+    orthogonal_slices(fig, np.where(NFR > 0, NFR, np.nan), G, (0.5, 0.5, (Z_SURFACE + 0.01) / G.Lz),
+                      cmap="inferno", norm=positive_log_norm(NFR), label="NFR [W/cm$^2$/W]",
+                      title=f"Normalized fluence rate, {model.MC.n_photons:.2g} photons")
+    return fig
+
+
 if __name__ == "__main__":
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--quick", action="store_true", help="small grid, few photons (seconds)")
@@ -106,4 +124,5 @@ if __name__ == "__main__":
     args.out.mkdir(parents=True, exist_ok=True)
     model.plot("G", args.out / "ex01")  # geometry, media properties
     model.plot("MC", args.out / "ex01")  # NA and NFR on log colour scales
+    fluence_figure(model).savefig(args.out / "ex01_NFR_tissue.png", dpi=100)
     print(f"figures in {args.out}")

@@ -131,12 +131,16 @@ def mirror_z_score(model) -> float:
     return z
 
 
-def heat_balance(model) -> float:
-    """Heat gained by the tissue over the energy absorbed from the pulses (1 if conserved).
+def heat_balance(model) -> tuple[float, float]:
+    """Heat gained by the tissue over the energy absorbed from the pulses, and its tolerance.
 
     With insulating faces no heat leaves, so the heat content ``sum_i C_i (T_i - T0)``
     (C the lumped P1 heat capacity of node i, J/K) equals ``P x (total on time) x`` the
-    absorbed fraction.
+    absorbed fraction: the ratio is 1. The implicit steps conserve it up to the linear
+    solver: the iterative one (large meshes) stops at a residual of 1e-9 of a right-hand
+    side that holds the heat content ``C T``, so each step may be off by
+    ``1e-9 sum_i C_i |T_i|``; the tolerance adds that over the steps (the sparse LU of
+    small meshes is exact to rounding).
     """
     import fem
 
@@ -146,17 +150,20 @@ def heat_balance(model) -> float:
     capacity = fem.lumped_mass(HS.mesh, vhc[elem_medium])  # J/K per node
     gained = float(capacity @ (HS.T_nodes - np.mean(HS.T_initial)))
     delivered = HS.P * HS.n_pulses * HS.duration_on * MC.absorbed_fraction
-    return gained / delivered
+    n_steps = HS.sensor_times.size - 1
+    tol = 1e-9 * n_steps * float(capacity @ np.abs(HS.T_nodes)) / delivered
+    return gained / delivered, tol
 
 
 def check(model) -> dict:
     """Symmetry of the absorption, and conservation of the absorbed energy as heat."""
+    ratio, tol = heat_balance(model)
     return {
         "mirror_symmetry": {
             "value": mirror_z_score(model), "expected": 0.0, "tol": 4.0,
             "what": "|absorbed power across x = 0 and y = 0| in standard errors (bound sqrt(f/N))"},
         "heat_balance": {
-            "value": heat_balance(model), "expected": 1.0, "tol": 1e-6,
+            "value": ratio, "expected": 1.0, "tol": tol,
             "what": "heat content gained / energy absorbed (insulating faces: 1)"},
     }
 
