@@ -29,14 +29,19 @@ NI_xpos .. NI_zneg : normalized irradiance leaving each cuboid face, W cm^-2 W^-
 LC : light collector (``MC.light_collector``): a lens (focal length f) or a fiber (f = inf)
 DC : deposition criteria (``MC.deposition_criteria``)
 Rd_r, Tt_r, Rd_a, Tt_a : MCML's radial (cm^-2) and exit-angle (sr^-1) reflectance, transmittance
+FMC : fluorescence Monte Carlo (``model.FMC``), run after the excitation ``model.MC``
+QY : fluorescence quantum yield, photons emitted per photon absorbed (``Medium.QY``)
+ES : emission spectrum of a fluorescent medium, not normalised (``Medium.ES``)
 """
 
 from ._strict import NotBuiltError
+from .fluorescence import FluorescenceMonteCarloSimulation
 from .light_source import IntensityDistribution
 from .media import Medium
 from .model import Geometry, LightSource, Model, MonteCarloSimulation
 from .spectra import calc_mua, calc_mus
 from .stl import find_inside_voxels
 
-__all__ = ["Geometry", "IntensityDistribution", "LightSource", "Medium", "Model",
-           "MonteCarloSimulation", "NotBuiltError", "calc_mua", "calc_mus", "find_inside_voxels"]
+__all__ = ["FluorescenceMonteCarloSimulation", "Geometry", "IntensityDistribution",
+           "LightSource", "Medium", "Model", "MonteCarloSimulation", "NotBuiltError", "calc_mua",
+           "calc_mus", "find_inside_voxels"]

@@ -40,7 +40,12 @@ _ARITIES = {
     "n": ((1,), "(wavelength)"),
     "VHC": ((2,), "(T, FD)"),
     "TC": ((2,), "(T, FD)"),
+    "QY": ((1, 4), "(wavelength) or (wavelength, FR, T, FD)"),
+    "ES": ((1, 4), "(wavelength) or (wavelength, FR, T, FD)"),
 }
+#: fluorescence: quantum yield (of the excitation wavelength) and emission spectrum (of the
+#: fluorescence wavelength); ``None``: the medium does not fluoresce
+FLUORESCENCE_FIELDS = ("QY", "ES")
 
 
 def check_positive(owner: str, field: str, value, *, allow_zero: bool = False) -> float:
@@ -142,16 +147,21 @@ class Medium(StrictAttributes):
     #: normalised: ``f(theta)``, ``f(wavelength, theta)`` (MCmatlab's customPhaseFunc) or
     #: values at equispaced angles over [0, pi]; replaces Henyey-Greenstein (``g`` unused)
     custom_phase_func: Callable | np.ndarray | None = None
+    #: fluorescence quantum yield (photons out per photon absorbed), of the excitation
+    #: wavelength: a number, ``QY(wavelength)`` or ``QY(wavelength, FR, T, FD)``; None: none
+    QY: float | Callable | None = None
+    #: emission spectrum of the fluorescence wavelength, not normalised (as ``QY``)
+    ES: float | Callable | None = None
 
     _owner_label = "Medium"
     _renamed = {"nBins": "n_bins"}
-    _not_built = ("QY", "ES", "PY")
+    _not_built = ("PY",)
 
     def __post_init__(self):
         owner = self._label
-        for field in ("mua", "mus", "g", "n", "VHC", "TC"):
+        for field in ("mua", "mus", "g", "n", "VHC", "TC", *FLUORESCENCE_FIELDS):
             value = getattr(self, field)
-            if value is None and field in THERMAL_FIELDS:
+            if value is None and field in (*THERMAL_FIELDS, *FLUORESCENCE_FIELDS):
                 continue
             if callable(value):
                 self._arity(field)

@@ -1,4 +1,5 @@
-"""The MCmatlab-style model: ``model.G`` (geometry), ``model.MC`` (Monte Carlo), ``model.HS`` (heat).
+"""The MCmatlab-style model: ``model.G`` (geometry), ``model.MC`` (Monte Carlo), ``model.HS`` (heat);
+``model.FMC`` (fluorescence Monte Carlo) is in :mod:`mcmatlab_py.fluorescence`.
 
 __all__ = ["EnergyBalanceError", "Geometry", "LightSource", "Model", "MonteCarloSimulation"]
 
@@ -335,75 +336,77 @@ class MonteCarloSimulation(StrictAttributes):
                 - self.roulette_gain_fraction)
 
     def validate(self, G: Geometry) -> None:
+        o = self._owner_label  # "MC", or "FMC" for the fluorescence run
         if self.n_photons_requested is not None:
-            self.n_photons_requested = _check_int("MC", "n_photons_requested",
+            self.n_photons_requested = _check_int(o, "n_photons_requested",
                                                   self.n_photons_requested)
         if self.simulation_time_requested is not None:
             self.simulation_time_requested = check_positive(
-                "MC", "simulation_time_requested", self.simulation_time_requested)
+                o, "simulation_time_requested", self.simulation_time_requested)
         if self.boundary_type not in BOUNDARY_TYPES:
             raise ValueError(
-                f"MC.boundary_type must be one of {sorted(BOUNDARY_TYPES)}, "
+                f"{o}.boundary_type must be one of {sorted(BOUNDARY_TYPES)}, "
                 f"got {self.boundary_type!r}")
-        n_out = check_positive("MC", "n_outside", self.n_outside)
+        n_out = check_positive(o, "n_outside", self.n_outside)
         if n_out < 1:
-            raise ValueError(f"MC.n_outside must be >= 1, got {self.n_outside!r}")
+            raise ValueError(f"{o}.n_outside must be >= 1, got {self.n_outside!r}")
         self.n_outside = n_out
-        self.weight_threshold = check_positive("MC", "weight_threshold", self.weight_threshold)
-        c = check_positive("MC", "roulette_chance", self.roulette_chance)
+        self.weight_threshold = check_positive(o, "weight_threshold", self.weight_threshold)
+        c = check_positive(o, "roulette_chance", self.roulette_chance)
         if c >= 1:
-            raise ValueError(f"MC.roulette_chance must be in (0, 1), got {self.roulette_chance!r}")
-        self.batch_size = _check_int("MC", "batch_size", self.batch_size)
+            raise ValueError(f"{o}.roulette_chance must be in (0, 1), got {self.roulette_chance!r}")
+        self.batch_size = _check_int(o, "batch_size", self.batch_size)
         if self.n_threads is not None:
-            self.n_threads = _check_int("MC", "n_threads", self.n_threads)
+            self.n_threads = _check_int(o, "n_threads", self.n_threads)
         if self.seed is not None:
-            self.seed = _check_int("MC", "seed", self.seed, minimum=0)
+            self.seed = _check_int(o, "seed", self.seed, minimum=0)
         if not isinstance(self.light_source, LightSource):
-            raise ValueError(f"MC.light_source must be a LightSource, got {self.light_source!r}")
+            raise ValueError(f"{o}.light_source must be a LightSource, got {self.light_source!r}")
         self.light_source.validate(G)
         self.source_distribution = check_source_distribution(self.source_distribution,
                                                              (G.nx, G.ny, G.nz))
         if self.smoothing_length_scale is not None:
-            self.smoothing_length_scale = check_positive("MC", "smoothing_length_scale",
+            self.smoothing_length_scale = check_positive(o, "smoothing_length_scale",
                                                          self.smoothing_length_scale,
                                                          allow_zero=True)
         if self.wavelength is not None:
             if np.ndim(self.wavelength) > 0:
-                raise NotBuiltError("MCmatlab's broadband MC.wavelength (an array of wavelengths) "
+                raise NotBuiltError(f"MCmatlab's broadband {o}.wavelength (an array of wavelengths) "
                                     "is not built yet")
-            self.wavelength = check_positive("MC", "wavelength", self.wavelength)
+            self.wavelength = check_positive(o, "wavelength", self.wavelength)
         self._validate_outputs(G)
         shape = (G.nx, G.ny, G.nz)
-        self.FR = state_field("MC.FR", self.FR, shape, lower=0.0)
-        self.T = state_field("MC.T", self.T, shape)
-        self.FD = state_field("MC.FD", self.FD, shape, lower=0.0, upper=1.0)
+        self.FR = state_field(f"{o}.FR", self.FR, shape, lower=0.0)
+        self.T = state_field(f"{o}.T", self.T, shape)
+        self.FD = state_field(f"{o}.FD", self.FD, shape, lower=0.0, upper=1.0)
 
 
     def _validate_outputs(self, G: Geometry) -> None:
+        o = self._owner_label
         for name in ("far_field_res", "n_example_paths", "n_radial_bins"):
-            setattr(self, name, _check_int("MC", name, getattr(self, name), minimum=0))
+            setattr(self, name, _check_int(o, name, getattr(self, name), minimum=0))
         if self.n_radial_bins:
-            self.n_angle_bins = _check_int("MC", "n_angle_bins", self.n_angle_bins)
-            self.radial_bin_size = check_positive("MC", "radial_bin_size", self.radial_bin_size)
+            self.n_angle_bins = _check_int(o, "n_angle_bins", self.n_angle_bins)
+            self.radial_bin_size = check_positive(o, "radial_bin_size", self.radial_bin_size)
         if self.boundary_type == 0:
             for name in ("far_field_res", "use_light_collector", "calc_normalized_irradiance",
                          "n_radial_bins"):
                 if getattr(self, name):
-                    raise ValueError(f"MC.{name} is set but MC.boundary_type = 0 lets no light "
+                    raise ValueError(f"{o}.{name} is set but {o}.boundary_type = 0 lets no light "
                                      "escape: change one of them")
         if not isinstance(self.light_collector, LightCollector):
-            raise ValueError(f"MC.light_collector must be a LightCollector, got "
+            raise ValueError(f"{o}.light_collector must be a LightCollector, got "
                              f"{self.light_collector!r}")
         if not isinstance(self.deposition_criteria, DepositionCriteria):
-            raise ValueError(f"MC.deposition_criteria must be a DepositionCriteria, got "
+            raise ValueError(f"{o}.deposition_criteria must be a DepositionCriteria, got "
                              f"{self.deposition_criteria!r}")
         if self.use_light_collector:
             self.light_collector.validate(G)
         if self.request_collected_photons and not self.use_light_collector:
-            raise ValueError("MC.request_collected_photons is True but MC.use_light_collector "
+            raise ValueError(f"{o}.request_collected_photons is True but {o}.use_light_collector "
                              "is False")
         if self.request_collected_photons and self.n_photons_requested is None:
-            raise ValueError("MC.request_collected_photons needs MC.n_photons_requested (the "
+            raise ValueError(f"{o}.request_collected_photons needs {o}.n_photons_requested (the "
                              "number of packets to collect)")
         self.deposition_criteria.validate(self.use_light_collector)
 
@@ -428,32 +431,45 @@ class Model(StrictAttributes):
     """
 
     _owner_label = "model"
-    _extra_attributes = ("G", "MC", "HS")
-    _not_built = ("FMC",)
+    _extra_attributes = ("G", "MC", "FMC", "HS")
 
     def __init__(self):
+        from .fluorescence import FluorescenceMonteCarloSimulation
         from .heat import HeatSimulation
 
         self.G = Geometry()
         self.MC = MonteCarloSimulation()
+        self.FMC = FluorescenceMonteCarloSimulation()
         self.HS = HeatSimulation()
 
-    def run_monte_carlo(self, client=None) -> Model:
+    def run_monte_carlo(self, kind: str = "excitation", *, client=None) -> Model:
         """Run the Monte Carlo light transport; fills ``self.MC`` and returns ``self``.
 
+        ``kind``: ``"excitation"`` (``self.MC``) or ``"fluorescence"`` (``self.FMC``, from the
+        excitation's absorption in media with ``QY``: MCmatlab's
+        ``runMonteCarlo(model, 'fluorescence')``, :meth:`run_fluorescence_monte_carlo`).
         ``client``: a ``dask.distributed`` client (:func:`mcmatlab_py.distributed.connect`)
         to spread the photon batches over a cluster; the same seed gives the same ``NA``.
         """
+        if kind == "fluorescence":
+            return self.run_fluorescence_monte_carlo(client=client)
+        if kind != "excitation":
+            raise ValueError(f"model.run_monte_carlo takes 'excitation' or 'fluorescence', "
+                             f"got {kind!r}")
         from .monte_carlo import run_monte_carlo
 
         run_monte_carlo(self, client=client)
-        balance = self.MC.energy_balance
-        if not abs(balance - 1.0) <= ENERGY_TOLERANCE:
-            raise EnergyBalanceError(
-                f"the Monte Carlo lost track of its energy: absorbed + escaped + the rest = "
-                f"{balance!r} of the launched power, not 1 (absorbed fraction "
-                f"{self.MC.absorbed_fraction!r}); the inputs are beyond what the kernel "
-                "resolves: check the media's mua and mus and the geometry")
+        _check_energy_balance(self.MC)
+        return self
+
+    def run_fluorescence_monte_carlo(self, *, client=None, emitters=None) -> Model:
+        """Run the fluorescence Monte Carlo (:mod:`mcmatlab_py.fluorescence`) after the
+        excitation; fills ``self.FMC`` and returns ``self``. ``emitters``: the (nx, ny, nz)
+        fluorescence emitted, W/cm^3 per W incident, instead of that of ``self.MC``."""
+        from .fluorescence import run_fluorescence_monte_carlo
+
+        run_fluorescence_monte_carlo(self, client=client, emitters=emitters)
+        _check_energy_balance(self.FMC)
         return self
 
     def simulate_heat_distribution(self) -> Model:
@@ -464,9 +480,19 @@ class Model(StrictAttributes):
         return self
 
     def plot(self, what: str, path=None, *, interactive: bool = False) -> dict:
-        """MCmatlab's ``plot(model, what)`` for ``what`` in "G", "MC", "HS": returns
+        """MCmatlab's ``plot(model, what)`` for ``what`` in "G", "MC", "FMC", "HS": returns
         ``{name: Figure}``, saved as ``<stem>_<name>.png`` next to ``path`` when given
         (:func:`mcmatlab_py.plotting.plot_model`)."""
         from .plotting import plot_model
 
         return plot_model(self, what, path, interactive=interactive)
+
+
+def _check_energy_balance(sim: MonteCarloSimulation) -> None:
+    balance = sim.energy_balance
+    if not abs(balance - 1.0) <= ENERGY_TOLERANCE:
+        raise EnergyBalanceError(
+            f"the Monte Carlo lost track of its energy: absorbed + escaped + the rest = "
+            f"{balance!r} of the launched power, not 1 (absorbed fraction "
+            f"{sim.absorbed_fraction!r}); the inputs are beyond what the kernel "
+            "resolves: check the media's mua and mus and the geometry")

@@ -21,6 +21,7 @@ __all__ = [
     "batch_range",
     "optical_arrays",
     "run_monte_carlo",
+    "run_simulation",
     "simulate",
     "store_results",
 ]
@@ -259,7 +260,19 @@ def _simulate_distributed(G, MC, M, mua, mus, g, nref, *, seed, n_photons, clien
 
 def run_monte_carlo(model, client=None) -> None:
     """Validate ``model.G`` and ``model.MC``, run the Monte Carlo, and fill ``model.MC``."""
-    G, MC = model.G, model.MC
+    run_simulation(model.G, model.MC, client=client)
+
+
+def run_simulation(G, MC, *, client=None, power: float = 1.0) -> None:
+    """Validate ``G`` and ``MC`` (a :class:`~mcmatlab_py.model.MonteCarloSimulation` or its
+    fluorescence subclass), run the Monte Carlo, and fill ``MC``.
+
+    ``power``: W launched per W the outputs are normalised to. The maps (``NA``, ``NFR``,
+    ``NI_*``, far field, collector image, MCML bins) are multiplied by it; the fractions
+    (``absorbed_fraction``, ``escaped``, ...) stay fractions of the launched power. The
+    fluorescence run gives the fluorescence emitted per W of incident excitation, so its maps
+    are per W incident as MCmatlab's.
+    """
     M_raw = G.medium_map()  # validates G
     MC.validate(G)
     # media at MC.wavelength; media depending on FR, T, FD split into sub-media (new M)
@@ -275,9 +288,12 @@ def run_monte_carlo(model, client=None) -> None:
     res = simulate(G, MC, M, mua, mus, g, nref, seed=seed, n_photons=n_photons,
                    time_limit_s=time_limit, client=client)
     store_results(MC, res, M, mua, G.dx * G.dy * G.dz)
+    if power != 1.0:
+        MC.NA = MC.NA * power
+        MC.NFR = MC.NFR * power
     if res.spec is not None and res.spec.active:
         store_outputs(G, MC, res.spec, res.ext, res.paths, res.path_n,
-                      res.tally[K.T_LAUNCHED] / K.W_ONE)
+                      res.tally[K.T_LAUNCHED] / K.W_ONE / power)
     MC.seed_used = seed
     MC.M = M
 

@@ -1,4 +1,4 @@
-"""model.plot("G" | "MC" | "HS"): MCmatlab's figures, returned and saved as PNG."""
+"""model.plot("G" | "MC" | "HS"; "FMC" in test_fluorescence.py): MCmatlab's figures, returned and saved as PNG."""
 
 import matplotlib
 
@@ -8,7 +8,7 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 import pytest  # noqa: E402
 
-from mcmatlab_py import Medium, Model, NotBuiltError  # noqa: E402
+from mcmatlab_py import Medium, Model  # noqa: E402
 from mcmatlab_py.plotting.slices import slice_indices  # noqa: E402
 
 
@@ -73,10 +73,10 @@ def test_slices_show_the_data(model):
     plt.close("all")
 
 
-def test_fmc_is_not_built_and_bad_names_fail(model):
-    with pytest.raises(NotBuiltError, match="fluorescence"):
+def test_fmc_needs_its_run_and_bad_names_fail(model):
+    with pytest.raises(ValueError, match=r"run model.run_monte_carlo\('fluorescence'\)"):
         model.plot("FMC")
-    with pytest.raises(ValueError, match="'G', 'MC' or 'HS'"):
+    with pytest.raises(ValueError, match="'G', 'MC', 'FMC' or 'HS'"):
         model.plot("XX")
     empty = Model()
     empty.G.media = model.G.media

@@ -13,7 +13,7 @@ from mcmatlab_py._strict import camel_to_snake
 def objects():
     model = Model()
     return {"model": model, "G": model.G, "MC": model.MC, "MC.light_source": model.MC.light_source,
-            "HS": model.HS, "Medium": Medium("t", mua=1.0, mus=10.0)}
+            "FMC": model.FMC, "HS": model.HS, "Medium": Medium("t", mua=1.0, mus=10.0)}
 
 
 @pytest.mark.parametrize("label, typo, suggestion", [
@@ -61,9 +61,8 @@ def test_mcmatlab_methods_point_to_ours():
     ("MC", "useGPU"),
     ("MC", "calcNormalizedFluenceRate"),
     ("HS", "useGPU"),
-    ("Medium", "ES"),
-    ("Medium", "QY"),
-    ("model", "FMC"),
+    ("Medium", "PY"),
+    ("FMC", "useGPU"),
 ])
 def test_mcmatlab_features_not_built_say_so(label, name):
     obj = objects()[label]

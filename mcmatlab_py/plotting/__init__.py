@@ -1,10 +1,12 @@
-"""Figures like MCmatlab's ``plot(model, 'G' | 'MC' | 'HS')`` (an edge package: matplotlib
+"""Figures like MCmatlab's ``plot(model, 'G' | 'MC' | 'FMC' | 'HS')`` (an edge package: matplotlib
 is imported only here, pyvista only for the interactive slicer).
 
 ``model.plot(what, path=None, interactive=False)`` returns ``{name: Figure}``:
 
 * ``"G"``: ``geometry`` (the media on three orthogonal slices) and ``media_properties``.
 * ``"MC"``: ``media_properties``, ``NA`` and ``NFR`` (log colour scales).
+* ``"FMC"``: ``emitters``, ``NA`` and ``NFR`` of the fluorescence, and ``light_collector``,
+  ``far_field``, ``NI``, ``example_paths`` when the fluorescence run has them.
 * ``"HS"``: ``sensor_positions`` and ``sensor_temperatures`` (with sensors),
   ``temperature`` (final, on the voxels), and with Arrhenius media ``damage``
   (the media with the voxels where Omega > 1) and ``fractional_damage``.
@@ -25,12 +27,11 @@ __all__ = ["plot_model", "plot_na_slices"]
 
 def plot_model(model, what: str, path: str | Path | None = None, *,
                interactive: bool = False) -> dict:
-    """MCmatlab's ``plot(model, what)``: the figures of ``what`` in ``{"G", "MC", "HS"}``.
+    """MCmatlab's ``plot(model, what)``: the figures of ``what`` in ``{"G", "MC", "FMC", "HS"}``.
 
     Parameters
     ----------
-    what : {"G", "MC", "HS"}
-        ``"FMC"`` raises :class:`NotBuiltError` (fluorescence is not built yet).
+    what : {"G", "MC", "FMC", "HS"}
     path : str or Path, optional
         Save each figure as a PNG: ``<stem>_<name>.png`` next to ``path``.
     interactive : bool
@@ -41,15 +42,12 @@ def plot_model(model, what: str, path: str | Path | None = None, *,
     dict
         ``{name: matplotlib.figure.Figure}``.
     """
-    from .._strict import NotBuiltError
     from . import figures
 
     makers = {"G": figures.geometry_figures, "MC": figures.monte_carlo_figures,
-              "HS": figures.heat_figures}
-    if what == "FMC":
-        raise NotBuiltError("plot(model, 'FMC'): the fluorescence Monte Carlo is not built yet")
+              "FMC": figures.fluorescence_figures, "HS": figures.heat_figures}
     if what not in makers:
-        raise ValueError(f"model.plot takes 'G', 'MC' or 'HS', got {what!r}")
+        raise ValueError(f"model.plot takes 'G', 'MC', 'FMC' or 'HS', got {what!r}")
     figs = makers[what](model)
     if path is not None:
         path = Path(path)

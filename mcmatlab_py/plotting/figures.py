@@ -1,4 +1,4 @@
-"""The figures of ``model.plot("G" | "MC" | "HS")`` (see :mod:`mcmatlab_py.plotting`)."""
+"""The figures of ``model.plot("G" | "MC" | "FMC" | "HS")`` (see :mod:`mcmatlab_py.plotting`)."""
 
 from __future__ import annotations
 
@@ -6,8 +6,8 @@ import numpy as np
 
 from .slices import orthogonal_slices
 
-__all__ = ["geometry_figures", "heat_figures", "media_properties_figure", "monte_carlo_figures",
-           "positive_log_norm"]
+__all__ = ["fluorescence_figures", "geometry_figures", "heat_figures", "media_properties_figure",
+           "monte_carlo_figures", "positive_log_norm"]
 
 #: relative slice positions of the G and MC figures: through the middle in x and y, and the
 #: irradiated surface (MCmatlab's NdimSliderPlot default, with y through the middle)
@@ -105,15 +105,49 @@ def monte_carlo_figures(model) -> dict:
     if MC.NA is None:
         raise ValueError("MC.NA is empty: run model.run_monte_carlo() before plot('MC')")
     figs = {"media_properties": media_properties_figure(model)}
-    for key, data, what, unit in (
-            ("NA", MC.NA, "normalized absorbed power per volume", "W/cm$^3$/W"),
-            ("NFR", MC.NFR, "normalized fluence rate", "W/cm$^2$/W")):
+    figs.update(_log_slice_figures(G, (
+        ("NA", MC.NA, "normalized absorbed power per volume", "W/cm$^3$/W"),
+        ("NFR", MC.NFR, "normalized fluence rate", "W/cm$^2$/W"))))
+    return figs
+
+
+def _log_slice_figures(G, fields) -> dict:
+    """One figure of orthogonal log-scale slices per ``(key, data, what, unit)``."""
+    figs = {}
+    for key, data, what, unit in fields:
         fig = _figure(name=key)
         shown = np.where(data > 0, data, np.nan)
         orthogonal_slices(fig, shown, G, DEFAULT_SLICES, cmap="inferno",
                           norm=positive_log_norm(data), label=f"{key} [{unit}]",
                           title=f"{key}: {what} [{unit} incident]")
         figs[key] = fig
+    return figs
+
+
+def fluorescence_figures(model) -> dict:
+    """MCmatlab's ``plot(model, 'FMC')``: ``emitters`` (the fluorescence emitted), ``NA`` and
+    ``NFR`` of the fluorescence (log colour scales, per W of incident excitation), and the
+    outputs the run has: ``light_collector``, ``far_field``, ``NI`` (boundary irradiance),
+    ``example_paths``."""
+    from . import outputs
+
+    G, FMC = model.G, model.FMC
+    if FMC.NA is None:
+        raise ValueError("FMC.NA is empty: run model.run_monte_carlo('fluorescence') before "
+                         "plot('FMC')")
+    wl = f" at {FMC.wavelength:g} nm"
+    figs = _log_slice_figures(G, (
+        ("emitters", FMC.source_distribution, f"fluorescence emitted{wl}", "W/cm$^3$/W"),
+        ("NA", FMC.NA, f"normalized fluorescence absorbed per volume{wl}", "W/cm$^3$/W"),
+        ("NFR", FMC.NFR, f"normalized fluorescence fluence rate{wl}", "W/cm$^2$/W")))
+    if FMC.use_light_collector:
+        figs["light_collector"] = outputs.plot_light_collector(model, "FMC")
+    if FMC.far_field_res:
+        figs["far_field"] = outputs.plot_far_field(model, "FMC")
+    if FMC.calc_normalized_irradiance:
+        figs["NI"] = outputs.plot_boundary_irradiance(model, "FMC")
+    if FMC.n_example_paths:
+        figs["example_paths"] = outputs.plot_example_paths(model, simulation="FMC")
     return figs
 
 

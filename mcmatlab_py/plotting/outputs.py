@@ -8,7 +8,8 @@
 * :func:`plot_az_fz`, :func:`plot_radial_reflectance_transmittance`: MCmatlab's
   ``plotAzFz`` and ``plotRadialReflectanceTransmittance`` (example 24).
 
-Each returns a matplotlib ``Figure``; nothing is shown or saved unless asked.
+Each returns a matplotlib ``Figure``; nothing is shown or saved unless asked. The first
+four take ``simulation="MC"`` or ``"FMC"`` (the fluorescence run's outputs).
 """
 
 from __future__ import annotations
@@ -27,6 +28,13 @@ def _need(value, what: str):
     return value
 
 
+def _run(model, simulation: str):
+    """``model.MC`` or ``model.FMC``, and a title prefix."""
+    if simulation not in ("MC", "FMC"):
+        raise ValueError(f"simulation must be 'MC' or 'FMC', got {simulation!r}")
+    return getattr(model, simulation), ("Fluorescence: " if simulation == "FMC" else "")
+
+
 def _split_paths(P: np.ndarray) -> list[np.ndarray]:
     """(4, k) paths with NaN columns between them -> list of (4, m) polylines."""
     breaks = np.flatnonzero(np.isnan(P[0]))
@@ -34,10 +42,10 @@ def _split_paths(P: np.ndarray) -> list[np.ndarray]:
     return [p[:, ~np.isnan(p[0])] for p in pieces if np.any(~np.isnan(p[0]))]
 
 
-def plot_example_paths(model, *, use_pyvista: bool = False):
+def plot_example_paths(model, *, use_pyvista: bool = False, simulation: str = "MC"):
     """The example paths (``MC.n_example_paths``) as 3-D polylines, coloured by weight, in the
     cuboid (z down, as MCmatlab). With ``use_pyvista`` a ``pyvista.Plotter`` is returned."""
-    G, MC = model.G, model.MC
+    G, (MC, prefix) = model.G, _run(model, simulation)
     lines = _split_paths(_need(MC.example_paths, "example paths (MC.n_example_paths)"))
     if use_pyvista:
         import pyvista as pv
@@ -59,35 +67,36 @@ def plot_example_paths(model, *, use_pyvista: bool = False):
         for a, b, w in zip(p[:3, :-1].T, p[:3, 1:].T, p[3, :-1], strict=True):
             ax.plot(*np.column_stack([a, b]), color=cm.viridis(min(1.0, w)), lw=0.8)
     ax.set(xlim=(-G.Lx / 2, G.Lx / 2), ylim=(-G.Ly / 2, G.Ly / 2), zlim=(G.Lz, 0),
-           xlabel="x [cm]", ylabel="y [cm]", zlabel="z [cm]", title="Example photon paths")
+           xlabel="x [cm]", ylabel="y [cm]", zlabel="z [cm]", title=f"{prefix}Example photon paths")
     return fig
 
 
-def plot_far_field(model):
+def plot_far_field(model, simulation: str = "MC"):
     """``MC.far_field`` (W/W per bin) over theta (from +z) and phi."""
     import matplotlib.pyplot as plt
 
-    MC = model.MC
+    MC, prefix = _run(model, simulation)
     FF = _need(MC.far_field, "far field (MC.far_field_res)")
     fig, ax = plt.subplots(figsize=(6, 4), constrained_layout=True)
     im = ax.pcolormesh(np.degrees(MC.far_field_phi), np.degrees(MC.far_field_theta), FF,
                        shading="nearest", cmap="inferno")
-    ax.set(xlabel="phi [deg]", ylabel="theta [deg]", title="Far field of the escaping light")
+    ax.set(xlabel="phi [deg]", ylabel="theta [deg]", title=f"{prefix}Far field of the escaping light")
     fig.colorbar(im, ax=ax, label="power per bin [W/W.incident]")
     return fig
 
 
-def plot_light_collector(model):
+def plot_light_collector(model, simulation: str = "MC"):
     """The lens image (summed over time bins) or the fiber's power (over time)."""
     import matplotlib.pyplot as plt
 
-    LC = model.MC.light_collector
+    MC, prefix = _run(model, simulation)
+    LC = MC.light_collector
     img = np.asarray(_need(LC.image, "light collector image (MC.use_light_collector)"))
     fig, ax = plt.subplots(figsize=(5, 4), constrained_layout=True)
     if LC.is_fiber:
         if img.ndim == 0:
             ax.bar([0], [float(img)])
-            ax.set(xticks=[], ylabel="power [W/W.incident]", title="Collected power")
+            ax.set(xticks=[], ylabel="power [W/W.incident]", title=f"{prefix}Collected power")
         else:
             ax.step(LC.t * 1e9, img, where="mid")
             ax.set(xlabel="t [ns]", ylabel="power per time bin [W/W.incident]",
@@ -97,16 +106,16 @@ def plot_light_collector(model):
         img = img.sum(axis=2)
     h = LC.field_size / 2
     im = ax.imshow(img.T, origin="lower", extent=[-h, h, -h, h], cmap="inferno")
-    ax.set(xlabel="X [cm]", ylabel="Y [cm]", title="Image at 1x magnification")
+    ax.set(xlabel="X [cm]", ylabel="Y [cm]", title=f"{prefix}Image at 1x magnification")
     fig.colorbar(im, ax=ax, label="[W/cm$^2$/W.incident]")
     return fig
 
 
-def plot_boundary_irradiance(model):
+def plot_boundary_irradiance(model, simulation: str = "MC"):
     """The six ``NI_*`` maps (W/cm^2/W) on the faces of the cuboid."""
     import matplotlib.pyplot as plt
 
-    G, MC = model.G, model.MC
+    G, (MC, prefix) = model.G, _run(model, simulation)
     _need(MC.NI_zneg, "boundary irradiance (MC.calc_normalized_irradiance)")
     fig, axes = plt.subplots(2, 3, figsize=(11, 6), constrained_layout=True)
     ext = {"x": [-G.Ly / 2, G.Ly / 2, G.Lz, 0], "y": [-G.Lx / 2, G.Lx / 2, G.Lz, 0],
@@ -115,7 +124,7 @@ def plot_boundary_irradiance(model):
                         strict=True):
         im = ax.imshow(getattr(MC, f"NI_{face}").T, extent=ext[face[0]], aspect="auto",
                        cmap="inferno", origin="lower" if face[0] == "z" else "upper")
-        ax.set_title(f"NI_{face}")
+        ax.set_title(f"{prefix}NI_{face}")
         fig.colorbar(im, ax=ax)
     return fig
 

@@ -19,8 +19,8 @@ def voxel_image(G, **fields):
 
 
 def interactive_slicer(model, what: str, show: bool = True):
-    """Open three draggable orthogonal slices of ``what``'s field (G: media, MC: log10 NFR,
-    HS: temperature); returns the plotter (not shown when ``show`` is False)."""
+    """Open three draggable orthogonal slices of ``what``'s field (G: media, MC and FMC: log10
+    NFR, HS: temperature); returns the plotter (not shown when ``show`` is False)."""
     try:
         import pyvista as pv
     except ImportError as err:  # pragma: no cover - depends on the installation
@@ -29,8 +29,8 @@ def interactive_slicer(model, what: str, show: bool = True):
     G = model.G
     if what == "G":
         name, data = "medium", G.medium_map()
-    elif what == "MC":
-        nfr = model.MC.NFR
+    elif what in ("MC", "FMC"):
+        nfr = getattr(model, what).NFR
         name, data = "log10 NFR", np.log10(np.where(nfr > 0, nfr, np.nan))
     else:
         name, data = "T [deg C]", model.HS.T_voxels
