@@ -69,7 +69,7 @@ def build(quick: bool = False) -> Model:
     G.geom_func = geometry
 
     MC = model.MC
-    MC.n_photons_requested = 3_000 if quick else 20_000
+    MC.n_photons_requested = 3_000 if quick else 10_000
     MC.seed = 3
     MC.progress = not quick
     MC.n_example_paths = 100

@@ -67,7 +67,7 @@ def build(quick: bool = False) -> Model:
     src.x_focus, src.y_focus, src.z_focus = 0.0, 0.0, G.Lz / 2
     MC.use_light_collector = True
     MC.request_collected_photons = True
-    MC.n_photons_requested = 3_000 if quick else 300_000  # collected packets
+    MC.n_photons_requested = 3_000 if quick else 100_000  # collected packets
     LC = MC.light_collector
     LC.x, LC.y, LC.z = 0.0, 0.0, G.Lz / 2  # cm, centre of the object plane
     LC.theta, LC.phi = math.atan(1 / math.sqrt(2)), -3 * math.pi / 4
@@ -82,7 +82,7 @@ def run(quick: bool = False) -> dict:
     model = build(quick).run_monte_carlo()
     single = build(quick)
     single.MC.seed = 60
-    single.MC.n_photons_requested *= 2
+    single.MC.n_photons_requested = 6_000 if quick else 30_000
     single.MC.deposition_criteria = DepositionCriteria(min_scatterings=1, max_scatterings=1)
     return {"model": model, "single": single.run_monte_carlo()}
 
@@ -117,21 +117,19 @@ def diagonal_slope(model) -> tuple[float, float]:
 def check(result: dict) -> dict:
     """Time of flight: singly scattered light reaches the object plane at t = z / c.
 
-    * The slope of the diagonal's image position against sqrt(3) c t is -1 within 4
-      standard errors (:func:`diagonal_slope`; about 4% in the quick run).
-    * Nothing arrives before the window opens (-0.15 ps; the plane wave starts at the
-      top face at t = 0): the "before" bin of MCmatlab's run is empty.
+    The slope of the diagonal's image position against sqrt(3) c t is -1 within 4
+    standard errors (:func:`diagonal_slope`; about 3% in the quick run, 1% in the full one).
+
+    MCmatlab's run itself has no such clean number: with 10^8 packets launched, a few
+    scatter in the air (mus = 1e-8 cm^-1) between the lens and the object plane, and
+    arrive "before" t = 0 (that bin is not empty in the full run).
     """
     slope, se = diagonal_slope(result["single"])
-    early = float(result["model"].MC.light_collector.image[:, :, 0].sum())
     return {
         "arrival_time_slope": {
             "value": slope, "expected": -1.0, "tol": 4 * se,
             "what": "dY / d(sqrt(3) c t) on the diagonal's image, single scattering "
                     "(4 standard errors)"},
-        "nothing_before_t0": {
-            "value": early, "expected": 0.0, "tol": 1e-12,
-            "what": "image power in the bin before t_start = -0.15 ps [W/cm^2/W]"},
     }
 
 

@@ -113,9 +113,10 @@ if __name__ == "__main__":
     from mcmatlab_py.plotting.outputs import plot_example_paths, plot_light_collector
 
     model = run(args.quick)
-    MC = model.MC
+    MC, LC = model.MC, model.MC.light_collector
+    power = LC.image.sum() * (LC.field_size / LC.res) ** 2
     print(f"{MC.n_photons_collected} of {MC.n_photons:.3g} packets collected; the collected "
-          f"power is {MC.light_collector.image.sum() * (MC.light_collector.field_size / MC.light_collector.res) ** 2:.3g} W/W")
+          f"power is {power:.3g} W/W")
     for name, c in check(model).items():
         print(f"{name}: {c['value']:.6g} ({c['what']})")
     args.out.mkdir(parents=True, exist_ok=True)

@@ -50,8 +50,8 @@ def geometry(X, Y, Z):
 
 
 def build(quick: bool = False) -> Model:
-    """The model of Example 13; ``quick``: 24^3 voxels, 2 x 10^4 photons, a 12^3 heat mesh and
-    20 updates (every update builds new solvers for the new VHC: small meshes are cheap)."""
+    """The model of Example 13; ``quick``: 24^3 voxels, 2 x 10^4 photons and a 12^3 heat mesh
+    (every update builds new solvers for the new VHC: a small mesh keeps that cheap)."""
     model = Model()
     G = model.G
     G.nx = G.ny = G.nz = 24 if quick else 100
@@ -86,7 +86,7 @@ def build(quick: bool = False) -> Model:
     HS.duration_on, HS.duration_off, HS.duration_end = DURATION, 0.0, 0.0
     HS.T_initial = T0
     HS.plot_temp_limits = (20.0, 45.0)
-    HS.n_updates = 20 if quick else 100
+    HS.n_updates = 100
     HS.media_prop_recalc_period = 1  # the VHC follows the temperature at every update
     HS.slice_positions = (0.5, 0.6, 1.0)
     HS.temp_sensor_positions = [(0, 0, 0.005), (0, 0, 0.015), (0, 0, 0.035), (0, 0, 0.065)]
@@ -103,26 +103,19 @@ def run(quick: bool = False) -> Model:
 
 
 def enthalpy_balance(model) -> float:
-    """Enthalpy gained over the energy absorbed: 1 up to the lag of the VHC updates.
+    """Enthalpy gained by the voxels over the energy absorbed (1 with insulating faces).
 
-    Each node's volume is shared among the media of its elements (lumped P1 weights); water
-    gains ``4.19 (T - T0)``, the other medium ``H(T) - H(T0)`` per cm^3 (:func:`enthalpy`).
-    With insulating faces this equals ``P x duration x`` the absorbed fraction. The heat
-    simulation holds the VHC of the last update over the next, so where the medium crosses
-    40 deg C it runs a little ahead: the error is first order in the update interval.
+    A voxel of water gains ``4.19 (T - T0)`` J/cm^3, one of the other medium
+    ``H(T) - H(T0)`` (:func:`enthalpy`), at its final temperature ``HS.T_voxels``; the light
+    delivers ``P x duration x`` the absorbed fraction. The heat simulation holds each VHC
+    from one update to the next (and takes it from 30 sub-media), so where the medium
+    crosses 40 deg C it runs a little ahead: on the quick grid the balance is 1.074 with 20
+    updates, 1.018 with 100 (MCmatlab's), 1.009 with 400, first order in the update interval.
     """
-    import fem
-
     G, MC, HS = model.G, model.MC, model.HS
-    mesh = HS.mesh
-    elem_medium = G.medium_map().ravel()[fem.element_voxel_index(mesh, G.grid)]
-    quarter = fem.element_volumes(mesh) / 4  # cm^3 of each element given to each corner
-    volume = [np.bincount(mesh.t.ravel(), np.tile(quarter * (elem_medium == i), 4),
-                          minlength=mesh.p.shape[1]) for i in (0, 1)]
-    T = HS.T_nodes
-    gained = (volume[0] @ (WATER_VHC * (T - T0))
-              + volume[1] @ (enthalpy(T) - enthalpy(T0)))
-    return float(gained) / (POWER * DURATION * MC.absorbed_fraction)
+    M, T = G.medium_map(), HS.T_voxels
+    gained = np.where(M == 0, WATER_VHC * (T - T0), enthalpy(T) - enthalpy(T0))
+    return float(gained.sum() * G.dx * G.dy * G.dz) / (POWER * DURATION * MC.absorbed_fraction)
 
 
 def check(model) -> dict:
@@ -130,8 +123,8 @@ def check(model) -> dict:
     return {
         "enthalpy_balance": {
             "value": enthalpy_balance(model), "expected": 1.0, "tol": 0.03,
-            "what": "enthalpy gained / energy absorbed (insulating; first order in the "
-                    "update interval)"},
+            "what": "enthalpy gained / energy absorbed (insulating; off by the VHC's lag, "
+                    "first order in the update interval: 0.018 with 100 updates)"},
         "plateau": {
             "value": model.HS.max_media_temps[1], "min": 40.0, "max": 45.0,
             "what": "highest temperature of the VHC material, deg C (without the step in VHC: "
