@@ -1,4 +1,4 @@
-"""model.plot("G" | "MC" | "HS"; "FMC" in test_fluorescence.py): MCmatlab's figures, returned and saved as PNG."""
+"""model.plot("G" | "MC" | "HS"; "FMC" in test_fluorescence.py): MCmatlab's figures as PNG."""
 
 import matplotlib
 
