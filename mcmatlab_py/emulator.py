@@ -40,13 +40,19 @@ __all__ = [
     "EmulatorSpec",
     "default_cache_dir",
     "direct_member",
+    "cache_key",
     "interpolate_log_na",
     "symmetrize",
     "table_point",
+    "table_row",
     "usable_cache_dir",
 ]
 
 CACHE_VERSION = 5
+#: build methods of :meth:`AbsorptionEmulator.build`: direct Monte Carlo per table point, or
+#: one perturbation ("white") Monte Carlo run per mus column (:mod:`mcmatlab_py.white`)
+METHODS = ("table", "white")
+WHITE_VERSION = 1  #: bumped when the white kernel's numbers change
 #: The table holds log(NA + NA_OFFSET): smooth where NA is zero or noisy in voxels
 #: that (almost) no photon reaches, and exactly inverted on evaluation.
 NA_OFFSET = 1e-3  # W/cm^3/W, far below the NA of the voxels that matter
@@ -217,24 +223,26 @@ class EmulatorSpec:
         text = json.dumps(d, sort_keys=True, default=str)
         return hashlib.sha256(text.encode()).hexdigest()[:24]
 
-    def symmetric_axes(self) -> tuple[bool, bool, bool]:
-        """(x -> -x, y -> -y, x <-> y): the mirror symmetries of the block and beam."""
+    def symmetric_axes(self, voxels: bool = False) -> tuple[bool, bool, bool]:
+        """(x -> -x, y -> -y, x <-> y): the mirror symmetries of the block and beam, on the
+        tabulated field (or, ``voxels=True``, on the Monte Carlo voxels)."""
         sx = self.x_focus == 0
         sy = self.y_focus == 0
-        a, b, _ = self.field_shape
+        a, b, _ = (self.nx, self.ny, self.nz) if voxels else self.field_shape
         swap = (self.x_focus == self.y_focus and self.nx == self.ny and self.Lx == self.Ly
                 and a == b)
         return sx, sy, swap
 
-    def orbits(self) -> tuple[np.ndarray, np.ndarray]:
+    def orbits(self, voxels: bool = False) -> tuple[np.ndarray, np.ndarray]:
         """Voxels equal by symmetry: ``(representatives (n_unique,), inverse (nvox,))``.
 
         ``field.ravel()[representatives][inverse]`` rebuilds a symmetric field; the table
         stores only the ``n_unique`` representatives (about nvox / 8 for a centred beam
-        on a square block).
+        on a square block). ``voxels=True``: the orbits of the Monte Carlo voxels (the
+        same as the field's unless ``mesh_divisions`` is set).
         """
-        sx, sy, swap = self.symmetric_axes()
-        a, b, c = self.field_shape
+        sx, sy, swap = self.symmetric_axes(voxels)
+        a, b, c = (self.nx, self.ny, self.nz) if voxels else self.field_shape
         i, j, k = np.meshgrid(np.arange(a), np.arange(b), np.arange(c), indexing="ij")
         if sx:
             i = np.minimum(i, a - 1 - i)
@@ -354,38 +362,53 @@ class AbsorptionEmulator:
     @classmethod
     def build(cls, spec: EmulatorSpec, *, cache_dir: str | Path | None = None,
               progress: bool = True, out_of_range: str = "error",
-              client=None) -> AbsorptionEmulator:
+              client=None, method: str = "table") -> AbsorptionEmulator:
         """Load the table for ``spec`` from the cache, or run the Monte Carlo and store it.
 
-        Each table point runs its photons on all cores (photon batches in parallel), or,
-        with a ``dask.distributed`` ``client`` (:func:`mcmatlab_py.distributed.connect`),
-        one task per table point on the cluster's workers; both give the same table
-        (every point has its own seed). A corrupted cache file is detected by its
-        checksum and rebuilt.
+        ``method="table"``: one direct Monte Carlo run per table point (``n_mua * n_mus``
+        runs). ``method="white"``: one perturbation Monte Carlo run per ``mus`` column,
+        whose packets carry one weight per tabulated ``mua``
+        (:mod:`mcmatlab_py.white`; ``n_mus`` runs, same photons per column). Each run uses
+        all cores (photon batches in parallel), or, with a ``dask.distributed`` ``client``
+        (:func:`mcmatlab_py.distributed.connect`), one task per run on the cluster's
+        workers; both give the same table. The cache file is keyed by the spec and the
+        method; a corrupted one is detected by its checksum and rebuilt.
         """
         import time
 
         from .distributed import run_tasks
 
+        if method not in METHODS:
+            raise ValueError(f"method must be one of {METHODS}, got {method!r}")
+        key = cache_key(spec, method)
         cache = Path(cache_dir) if cache_dir is not None else default_cache_dir()
-        path = cache / f"emulator-{spec.key()}.npz"
-        loaded = _load(path, spec)
+        path = cache / f"emulator-{key}.npz"
+        loaded = _load(path, spec, key)
         if loaded is not None:
             return cls(spec=spec, log_na=loaded["log_na"], absorbed=loaded["absorbed"],
                        out_of_range=out_of_range, build_seconds=float(loaded["build_seconds"]))
         cache = usable_cache_dir(cache)  # before minutes of Monte Carlo, not after
         path = cache / path.name
-        # cost grows with mus: do the expensive column first so the ETA is honest
-        points = [(a, b) for b in range(spec.n_mus)[::-1] for a in range(spec.n_mua)]
-        t0 = time.perf_counter()
-        results = run_tasks(functools.partial(table_point, spec), points, client=client,
-                            progress=progress, label="emulator table")
         log_na = np.empty((spec.n_mua, spec.n_mus, spec.orbits()[0].size))
         absorbed = np.empty((spec.n_mua, spec.n_mus))
-        for (a, b), (row, frac) in zip(points, results, strict=True):
-            log_na[a, b], absorbed[a, b] = row, frac
+        t0 = time.perf_counter()
+        # cost grows with mus: do the expensive column first so the ETA is honest
+        if method == "white":
+            from .white import white_column
+
+            columns = list(range(spec.n_mus))[::-1]
+            results = run_tasks(functools.partial(white_column, spec), columns, client=client,
+                                progress=progress, label="emulator table (white)")
+            for b, (rows, fracs) in zip(columns, results, strict=True):
+                log_na[:, b], absorbed[:, b] = rows, fracs
+        else:
+            points = [(a, b) for b in range(spec.n_mus)[::-1] for a in range(spec.n_mua)]
+            results = run_tasks(functools.partial(table_point, spec), points, client=client,
+                                progress=progress, label="emulator table")
+            for (a, b), (row, frac) in zip(points, results, strict=True):
+                log_na[a, b], absorbed[a, b] = row, frac
         seconds = time.perf_counter() - t0
-        _store(path, spec, log_na, absorbed, seconds)
+        _store(path, key, log_na, absorbed, seconds)
         return cls(spec=spec, log_na=log_na, absorbed=absorbed, out_of_range=out_of_range,
                    build_seconds=seconds)
 
@@ -420,13 +443,20 @@ def table_point(spec: EmulatorSpec, point: tuple[int, int]) -> tuple[np.ndarray,
     res = simulate(m.G, m.MC, M, *optical_arrays(m.G.media, m.MC.wavelength), seed=spec.seed,
                    n_photons=m.MC.n_photons_requested)
     dV = m.G.dx * m.G.dy * m.G.dz
-    na = res.absorbed / (res.n_photons * dV)
+    return table_row(spec, res.absorbed / (res.n_photons * dV)), float(res.absorbed.sum()
+                                                                     / res.n_photons)
+
+
+def table_row(spec: EmulatorSpec, na: np.ndarray) -> np.ndarray:
+    """The stored form of one table point's NA (nx, ny, nz) in W/cm^3/W: projected onto
+    the mesh nodes when ``spec.mesh_divisions`` is set, symmetrised, log(. + offset) at
+    the orbit representatives (n_unique,)."""
     if spec.mesh_divisions is not None:
         na = symmetrize(na, spec, voxels=True)
         na = (_load_operator(spec) @ na.ravel()).reshape(spec.field_shape)  # W per node per W
     na = symmetrize(na, spec)
     reps, _ = spec.orbits()
-    return np.log(na.ravel()[reps] + spec.offset), float(res.absorbed.sum() / res.n_photons)
+    return np.log(na.ravel()[reps] + spec.offset)
 
 
 def symmetrize(na: np.ndarray, spec: EmulatorSpec, voxels: bool = False) -> np.ndarray:
@@ -448,6 +478,15 @@ def symmetrize(na: np.ndarray, spec: EmulatorSpec, voxels: bool = False) -> np.n
     if swap:
         na = 0.5 * (na + na.transpose(1, 0, 2))
     return na
+
+
+def cache_key(spec: EmulatorSpec, method: str = "table") -> str:
+    """The cache key of a table: the spec's, and for ``"white"`` the method as well (the
+    ``"table"`` key is the spec's own, so the tables cached before methods existed stay)."""
+    if method == "table":
+        return spec.key()
+    text = f"{spec.key()}-{method}-{WHITE_VERSION}"
+    return f"{method}-" + hashlib.sha256(text.encode()).hexdigest()[:24]
 
 
 def _checksum(*arrays) -> str:
@@ -477,21 +516,21 @@ def usable_cache_dir(cache: Path) -> Path:
         return tmp
 
 
-def _store(path: Path, spec: EmulatorSpec, log_na, absorbed, seconds) -> None:
+def _store(path: Path, key: str, log_na, absorbed, seconds) -> None:
     path.parent.mkdir(parents=True, exist_ok=True)
     tmp = path.with_suffix(f".tmp{os.getpid()}.npz")
-    np.savez(tmp, log_na=log_na, absorbed=absorbed, build_seconds=seconds, key=spec.key(),
+    np.savez(tmp, log_na=log_na, absorbed=absorbed, build_seconds=seconds, key=key,
              checksum=_checksum(log_na, absorbed))
     os.replace(tmp, path)  # atomic: a reader never sees half a table
 
 
-def _load(path: Path, spec: EmulatorSpec):
+def _load(path: Path, spec: EmulatorSpec, key: str):
     if not path.exists():
         return None
     try:
         with np.load(path, allow_pickle=False) as f:
             data = {k: f[k] for k in ("log_na", "absorbed", "build_seconds", "key", "checksum")}
-        ok = (str(data["key"]) == spec.key()
+        ok = (str(data["key"]) == key
               and data["log_na"].shape == (spec.n_mua, spec.n_mus, spec.orbits()[0].size)
               and str(data["checksum"]) == _checksum(data["log_na"], data["absorbed"]))
     except Exception:  # noqa: BLE001 - any unreadable file is treated as corrupted

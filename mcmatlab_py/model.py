@@ -250,6 +250,10 @@ class MonteCarloSimulation(StrictAttributes):
     roulette_chance: float = 0.1  #: survival probability in roulette (MCmatlab's CHANCE)
     n_threads: int | None = None  #: None: all numba threads
     batch_size: int = 1000  #: photons per random stream (part of what a seed means)
+    #: run on an NVIDIA GPU (MCmatlab's useGPU; the ``gpu`` extra): the plain outputs only,
+    #: statistically the same as the CPU's, not bit-identical
+    use_gpu: bool = False
+    gpu_device: int = 0  #: index of the CUDA device used with ``use_gpu`` (MCmatlab's GPUdevice)
     progress: bool = True  #: progress bar on stderr for runs longer than a few seconds
     light_source: LightSource = field(default_factory=LightSource)
     #: nm; selects the value of media given as functions of wavelength (one wavelength;
@@ -323,7 +327,7 @@ class MonteCarloSimulation(StrictAttributes):
                 **{f"normalizedIrradiance_{s}": f"NI_{s}"
                    for s in ("xpos", "xneg", "ypos", "yneg", "zpos", "zneg")}}
     _not_built = (
-        "useGPU", "GPUdevice", "calcNormalizedFluenceRate", "calcNFR",
+        "calcNormalizedFluenceRate", "calcNFR",
         "interfaceNormals", "P", "spectrumFunc",
         "spectrum", "FRinitial", "FRdepIterations", "CDFs",
     )
@@ -360,6 +364,9 @@ class MonteCarloSimulation(StrictAttributes):
             self.n_threads = _check_int(o, "n_threads", self.n_threads)
         if self.seed is not None:
             self.seed = _check_int(o, "seed", self.seed, minimum=0)
+        if not isinstance(self.use_gpu, bool | np.bool_):
+            raise ValueError(f"{o}.use_gpu must be True or False, got {self.use_gpu!r}")
+        self.gpu_device = _check_int(o, "gpu_device", self.gpu_device, minimum=0)
         if not isinstance(self.light_source, LightSource):
             raise ValueError(f"{o}.light_source must be a LightSource, got {self.light_source!r}")
         self.light_source.validate(G)

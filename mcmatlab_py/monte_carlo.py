@@ -19,6 +19,7 @@ from .progress import Progress
 __all__ = [
     "MCResult",
     "batch_range",
+    "gpu_available",
     "optical_arrays",
     "run_monte_carlo",
     "run_simulation",
@@ -72,6 +73,11 @@ def simulate(G, MC, M: np.ndarray, mua, mus, g, nref, *, seed: int, n_photons: i
     ``dask.distributed`` ``client`` the photon batches are split into ranges, one task
     each, and the integer tallies summed: the same numbers as here.
     """
+    if getattr(MC, "use_gpu", False):
+        if client is not None:
+            raise NotBuiltError("MC.use_gpu with a dask client (a cluster of GPUs) is not built")
+        return _simulate_gpu(G, MC, M, mua, mus, g, nref, seed=seed, n_photons=n_photons,
+                             time_limit_s=time_limit_s, label=label)
     if client is not None:
         return _simulate_distributed(G, MC, M, mua, mus, g, nref, seed=seed,
                                      n_photons=n_photons, client=client, label=label)
@@ -140,6 +146,80 @@ def simulate(G, MC, M: np.ndarray, mua, mus, g, nref, *, seed: int, n_photons: i
     return MCResult(absorbed=absorbed, tally=tally.sum(axis=0)[: K.N_TALLY], n_photons=int(n_done),
                     kernel_seconds=kernel_s, kernel_cpu_seconds=kernel_cpu, spec=spec,
                     ext=out[3].sum(axis=0), paths=out[4], path_n=out[5])
+
+
+def gpu_available() -> bool:
+    """Whether ``MC.use_gpu = True`` can run here: the ``numba-cuda`` package (the ``gpu``
+    extra) and a CUDA GPU, or numba's CUDA simulator (``NUMBA_ENABLE_CUDASIM=1`` set before
+    ``numba.cuda`` is first imported)."""
+    try:
+        from numba import cuda
+    except ImportError:
+        return False
+    return bool(cuda.is_available())
+
+
+def _simulate_gpu(G, MC, M, mua, mus, g, nref, *, seed, n_photons, time_limit_s,
+                  label) -> MCResult:
+    """The plain run on a CUDA GPU (:mod:`mcmatlab_py._mc_cuda`): the same totals as
+    :func:`simulate`, statistically (each CUDA thread runs its own random stream)."""
+    spec = output_spec(G, MC, len(mua), _parent_media(G, MC, len(mua)))
+    if spec.active:
+        raise NotBuiltError(
+            "MC.use_gpu runs the plain Monte Carlo only (NA, NFR, the escaped and absorbed "
+            "fractions): the optional outputs (normalized irradiance, far field, light "
+            "collector, radial bins, deposition criteria, example paths) are not built for the "
+            "GPU; set MC.use_gpu = False for them")
+    if not gpu_available():
+        raise RuntimeError(
+            "MC.use_gpu = True needs numba-cuda (pip install 'tissue-enkf[gpu]') and an NVIDIA "
+            "GPU with its driver; none was found (numba.cuda.is_available() is False). "
+            "Set MC.use_gpu = False to run on the CPU")
+    from numba import cuda
+
+    from . import _mc_cuda as KC
+
+    if not numba.config.ENABLE_CUDASIM:
+        cuda.select_device(int(MC.gpu_device))
+    n_total = n_photons if n_photons is not None else np.iinfo(np.int64).max // 4
+    args = list(_kernel_args(G, MC, M, mua, mus, g, nref, seed, n_total))
+    if args[22] is None:  # phase_idx: the CUDA kernel takes an array (-1: Henyey-Greenstein)
+        args[22] = np.full(len(mua), -1, dtype=np.int32)
+    per = KC.PHOTONS_PER_THREAD
+    args[27] = per
+    args = [cuda.to_device(a) if isinstance(a, np.ndarray) else a for a in args]
+    nvox = M.size
+    acc = cuda.to_device(np.zeros(nvox, dtype=np.int64))
+    tally = cuda.to_device(np.zeros(K.N_TALLY, dtype=np.int64))
+    n_streams = -(-n_total // per) if n_photons is not None else None
+    tpb = KC.THREADS_PER_BLOCK
+    bar = Progress(n_streams if n_streams is not None else time_limit_s, label,
+                   enabled=MC.progress)
+    done, per_round = 0, 64 * tpb
+    kernel_s = kernel_cpu = 0.0
+    while True:
+        todo = per_round if n_streams is None else min(per_round, n_streams - done)
+        t0, c0 = time.perf_counter(), time.process_time()
+        KC.transport_streams[-(-todo // tpb), tpb](*args, done, todo, acc, tally)
+        cuda.synchronize()
+        dt = time.perf_counter() - t0
+        kernel_s += dt
+        kernel_cpu += time.process_time() - c0
+        done += todo
+        bar.update(done if n_streams is not None else kernel_s,
+                   f"{min(done * per, n_total) / max(kernel_s, 1e-9):.3g} photons/s")
+        if (n_streams is not None and done >= n_streams) or (
+                n_streams is None and kernel_s >= time_limit_s):
+            break
+        # rounds of about half a second (the first one also compiles the kernel)
+        per_round = int(min(max(tpb, 0.5 * todo / max(dt, 1e-6)), 16 * per_round))
+        if n_streams is None:
+            per_round = min(per_round, int((time_limit_s - kernel_s) * todo / max(dt, 1e-6)) + tpb)
+    bar.close()
+    n_done = n_photons if n_photons is not None else done * per
+    return MCResult(absorbed=acc.copy_to_host().reshape(M.shape) / K.W_ONE,
+                    tally=tally.copy_to_host(), n_photons=int(n_done), kernel_seconds=kernel_s,
+                    kernel_cpu_seconds=kernel_cpu, spec=spec)
 
 
 def _run_until_collected(args, acc, tally, out, target: int, time_limit_s, bs: int):

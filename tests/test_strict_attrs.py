@@ -58,11 +58,11 @@ def test_mcmatlab_methods_point_to_ours():
 
 
 @pytest.mark.parametrize("label, name", [
-    ("MC", "useGPU"),
+    ("MC", "spectrumFunc"),
     ("MC", "calcNormalizedFluenceRate"),
     ("HS", "useGPU"),
     ("Medium", "PY"),
-    ("FMC", "useGPU"),
+    ("FMC", "calcNormalizedFluenceRate"),
 ])
 def test_mcmatlab_features_not_built_say_so(label, name):
     obj = objects()[label]

@@ -104,6 +104,30 @@ def check(model) -> dict:
     }
 
 
+def banana_figure(model):
+    """The absorption of the collected packets summed over x (log scale), and the lens image."""
+    import matplotlib.pyplot as plt
+    from matplotlib.colors import LogNorm
+
+    G, MC, LC = model.G, model.MC, model.MC.light_collector
+    A = MC.NA.sum(axis=0) * G.dx  # (ny, nz) W/cm^2/W
+    fig, (ax0, ax1) = plt.subplots(1, 2, figsize=(10, 4), layout="constrained",
+                                   gridspec_kw={"width_ratios": [1.2, 1]})
+    im = ax0.imshow(np.where(A > 0, A, np.nan).T, extent=[-G.Ly / 2, G.Ly / 2, G.Lz, 0],
+                    cmap="inferno", norm=LogNorm(vmin=A.max() * 1e-3, vmax=A.max()))
+    ax0.axvline(MC.light_source.y_focus, color="w", ls=":", lw=0.8)
+    ax0.axvline(LC.y, color="c", ls=":", lw=0.8)
+    ax0.set(xlabel="y [cm]", ylabel="z [cm]",
+            title="Absorption of the collected light, summed over x")
+    fig.colorbar(im, ax=ax0, label="[W/cm$^2$/W]")
+    h = LC.field_size / 2
+    im = ax1.imshow(LC.image.T, origin="lower", extent=[-h + LC.x, h + LC.x, -h + LC.y, h + LC.y],
+                    cmap="inferno")
+    ax1.set(xlabel="x [cm]", ylabel="y [cm]", title="Lens image (beam at y = +0.025 cm)")
+    fig.colorbar(im, ax=ax1, label="[W/cm$^2$/W]")
+    return fig
+
+
 if __name__ == "__main__":
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--quick", action="store_true", help="small grid, few photons (seconds)")
@@ -123,5 +147,6 @@ if __name__ == "__main__":
     model.plot("G", args.out / "ex08")
     model.plot("MC", args.out / "ex08")  # NA, NFR of the collected packets only
     plot_light_collector(model).savefig(args.out / "ex08_image.png", dpi=100)
+    banana_figure(model).savefig(args.out / "ex08_banana.png", dpi=100)
     plot_example_paths(model).savefig(args.out / "ex08_paths.png", dpi=100)
     print(f"figures in {args.out}")

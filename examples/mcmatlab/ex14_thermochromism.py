@@ -93,7 +93,6 @@ def build(quick: bool = False) -> Model:
     HS.plot_temp_limits = (20.0, 50.0)
     HS.n_updates = 50
     HS.media_prop_recalc_period = 2  # re-run the Monte Carlo every 8 ms if mua changed
-    HS.slice_positions = (0.5, 0.5, 1.0)  # MCmatlab's default
     HS.temp_sensor_positions = [(0, 0.009, 0.032), (0, 0.002, 0.044), (0, -0.007, 0.059),
                                 (0, -0.017, 0.078)]
     HS.progress = not quick

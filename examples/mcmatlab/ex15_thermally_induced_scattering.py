@@ -90,7 +90,6 @@ def build(quick: bool = False) -> Model:
     HS.plot_temp_limits = (20.0, 130.0)
     HS.n_updates = 30
     HS.media_prop_recalc_period = 5
-    HS.slice_positions = (0.5, 0.5, 1.0)  # MCmatlab's default
     HS.temp_sensor_positions = [(0, 0, 0.065), (0, 0, 0.075), (0, 0, 0.085)]
     HS.progress = not quick
     if quick:

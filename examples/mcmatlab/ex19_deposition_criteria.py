@@ -4,8 +4,8 @@ A pencil beam along +z through the middle of a 1 x 1 x 1.5 mm block: 0.3 mm of a
 tissue with mua = 1, mus = 10 cm^-1, g = 0 (isotropic scattering), 532 nm, every face
 escaping. ``deposition_criteria`` with min = max = 1 scatterings, judged at every deposit
 (``evaluate_only_at_end_of_life = False``), keeps in ``NA`` and ``NFR`` only what the
-packets lose between their first and second scattering: a ball of light around the
-first scattering points along the beam. 25 example paths are drawn.
+packets lose between their first and second scattering: a halo about one mean free
+path (0.9 mm) wide around the beam, densest next to it. 25 example paths are drawn.
 
     python examples/mcmatlab/ex19_deposition_criteria.py [--quick] [--out DIR]
 

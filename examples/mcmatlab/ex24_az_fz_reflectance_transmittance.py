@@ -11,7 +11,7 @@ the reflectance R(r) and transmittance T(r) against the distance from the beam
 ``plotRadialReflectanceTransmittance``), here also MCML's own radial bins
 (``MC.n_radial_bins``: ``Rd_r``, ``Tt_r``).
 
-The check runs MCML's published slab (MCML manual, Wang, Jacques & Zheng 1995, Table
+The check runs MCML's published slab (the MCML manual's Table
 6.1, after van de Hulst 1980: n = 1, mua = 10, mus = 90 cm^-1, g = 0.75, 0.2 mm thick)
 through the same radial tallies.
 

@@ -1,0 +1,123 @@
+"""Perturbation ("white") Monte Carlo of a homogeneous block: NA for many ``mua`` per run.
+
+:func:`white_absorbed` runs the kernel of :mod:`mcmatlab_py._white_kernel` once for one
+``mus`` and returns the absorbed power for every ``mua`` of a list; the emulator's
+``method="white"`` build (:meth:`mcmatlab_py.emulator.AbsorptionEmulator.build`) makes one
+such run per column of its table (``n_mus`` runs instead of ``n_mua * n_mus``).
+
+Where re-weighting stops being accurate
+---------------------------------------
+Every weight is unbiased, but its noise is not that of a direct run at the same ``mua``:
+the paths are drawn without absorption, so a strongly absorbing ``mua_k`` is estimated
+from long paths whose weight is almost all gone. The noise of ``k`` grows with
+``mua_k`` times the spread of the path lengths that reach a voxel; it is small while
+``mua_k`` stays well below the reduced scattering ``mus (1 - g)`` (the diffusive regime,
+where the paths are short and alike) and grows where ``mua_k`` approaches or exceeds
+it, and in deep voxels at high ``mua``, which only the rare long paths reach. For the
+paper's block (``g = 0.9``) the emulator's table spans ``mua / (mus (1 - g))`` from
+5e-4 to 20; ``validation/emulator_accuracy.py --method white`` measures the error at
+off-grid points, and ``tests/test_white.py`` checks single ``mua`` values, the table's
+edges included, against direct Monte Carlo. A medium with several ``mus`` or ``n``
+(layers) changes the paths themselves and is not re-weighting: the kernel is for one
+medium only.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numba
+import numpy as np
+
+from . import _white_kernel as WK
+
+__all__ = ["WhiteResult", "white_absorbed", "white_column"]
+
+
+@dataclass
+class WhiteResult:
+    """Raw totals of a white Monte Carlo run.
+
+    ``absorbed`` is (K, nx, ny, nz) absorbed weight summed over the packets
+    (launched-packet units), one map per ``mua_k``; ``tally`` (N_TALLY, K) the totals of
+    the ``T_*`` slots of :mod:`mcmatlab_py._mc_kernel` in the same units.
+    """
+
+    mua: np.ndarray  #: (K,) cm^-1
+    absorbed: np.ndarray
+    tally: np.ndarray
+    n_photons: int
+
+    def fraction(self, slot: int) -> np.ndarray:
+        """(K,) a ``T_*`` tally as a fraction of the launched power."""
+        return self.tally[slot] / self.n_photons
+
+
+def white_absorbed(spec, mua, mus: float, *, n_photons: int, seed: int,
+                   n_threads: int | None = None, symmetrized: bool = False) -> WhiteResult:
+    """One white Monte Carlo run of the block of ``spec`` (an
+    :class:`~mcmatlab_py.emulator.EmulatorSpec`) with scattering ``mus`` (cm^-1), for every
+    absorption in ``mua`` (K,) cm^-1. Deterministic for a seed, whatever ``n_threads``.
+
+    ``symmetrized``: tally each voxel's orbit under the mirror symmetries of block and beam
+    (``spec.orbits(voxels=True)``) and return the orbit averages, which equals
+    :func:`~mcmatlab_py.emulator.symmetrize` of the voxel map (``voxels=True``); the tally
+    is then about 8 times smaller and stays in the caches (about twice as fast on 100 x
+    100 x 50 voxels).
+    """
+    from .monte_carlo import _kernel_args
+
+    mua = np.ascontiguousarray(np.atleast_1d(mua), dtype=np.float64)
+    if mua.ndim != 1 or not np.all(np.isfinite(mua)) or np.any(mua <= 0):
+        raise ValueError(f"mua must be finite values > 0, got {mua!r}")
+    if not (np.isfinite(mus) and mus > 0):
+        raise ValueError(f"mus must be finite and > 0, got {mus!r}")
+    m = spec.model(float(mua[0]), float(mus), n_photons=n_photons, seed=seed)
+    M = m.G.medium_map()
+    m.MC.validate(m.G)
+    one = np.ones(1)
+    args = _kernel_args(m.G, m.MC, M, one * mua[0], one * mus, one * spec.g, one * spec.n,
+                        seed, int(n_photons))
+    (_, _, _, _, _, _, nx, ny, nz, dx, dy, dz, boundary_type, n_out, matched, roulette,
+     w_thr, chance, si, sf, stab, svox, *_rest) = args
+    bs = m.MC.batch_size
+    n_threads = min(n_threads or numba.get_num_threads(), numba.config.NUMBA_NUM_THREADS)
+    K = mua.size
+    if symmetrized:
+        _, fold = spec.orbits(voxels=True)
+        n_rows = int(fold.max()) + 1
+    else:
+        fold, n_rows = np.arange(nx * ny * nz), nx * ny * nz
+    fold = np.ascontiguousarray(fold, dtype=np.int64)
+    acc = np.zeros((n_threads, n_rows, K), dtype=np.int64)
+    tally = np.zeros((n_threads, WK.N_TALLY, K), dtype=np.int64)
+    kargs = (mua, float(mus), float(spec.g), float(spec.n), nx, ny, nz, dx, dy, dz,
+             boundary_type, n_out, matched, roulette, w_thr, chance, si, sf, stab, svox, fold,
+             np.uint64(seed), bs, int(n_photons))
+    old = numba.get_num_threads()
+    numba.set_num_threads(n_threads)
+    try:
+        WK.run_white_batches(*kargs, 0, -(-int(n_photons) // bs), acc, tally)
+    finally:
+        numba.set_num_threads(old)
+    rows = acc.sum(axis=0).T / WK.W_ONE  # (K, n_rows)
+    if symmetrized:
+        rows = rows / np.bincount(fold, minlength=n_rows)  # the orbit average
+    absorbed = rows[:, fold].reshape(K, nx, ny, nz)
+    return WhiteResult(mua=mua, absorbed=absorbed, tally=tally.sum(axis=0) / WK.W_ONE,
+                       n_photons=int(n_photons))
+
+
+def white_column(spec, b: int) -> tuple[np.ndarray, np.ndarray]:
+    """Column ``b`` (one ``mus``) of the emulator table of ``spec`` by one white run:
+    log(NA + offset) at the orbit representatives (n_mua, n_unique) and the absorbed
+    fraction of every ``mua`` (n_mua,). The photons and the seed are those of the direct
+    table's points in that column (``spec.photons_at(mus)``, ``spec.seed``)."""
+    from .emulator import table_row
+
+    mus = float(spec.mus_grid()[b])
+    res = white_absorbed(spec, spec.mua_grid(), mus, n_photons=spec.photons_at(mus),
+                         seed=spec.seed, symmetrized=True)
+    dV = spec.Lx * spec.Ly * spec.Lz / (spec.nx * spec.ny * spec.nz)
+    rows = np.stack([table_row(spec, a / (res.n_photons * dV)) for a in res.absorbed])
+    return rows, res.absorbed.reshape(res.mua.size, -1).sum(axis=1) / res.n_photons
