@@ -51,7 +51,7 @@ from ._mc_kernel import (
     T_TOP,
     W_ONE,
 )
-from ._mc_steps import _clamp, _fresnel, _hg_cos, _mirror, _plane_distance, _refract_face, _spin
+from ._mc_steps import _clamp, _fresnel, _hg_cos, _mirror, _plane_distance, _spin
 from ._rng import next_double, seed_stream
 from ._sources import SI_SURFACE, launch
 
