@@ -2,6 +2,9 @@
 
     python benchmarks/bench_emulator.py            # evaluation (builds/loads the cached table)
     python benchmarks/bench_emulator.py --rebuild  # also time a build from scratch (minutes)
+    python benchmarks/bench_emulator.py --builds [--photons 250000]
+        # the direct ("table") and perturbation ("white") builds from scratch, side by side
+        # in this process, and their ratio
 
 The filter's emulator: Monte Carlo on the paper's 100 x 100 x 50 voxels, nodal loads on the
 20 x 20 x 10 mesh; and the plain voxel emulator on 20 x 20 x 10.
@@ -16,7 +19,7 @@ import time
 import numpy as np
 
 from enkf.paper import emulator_for, paper_model
-from mcmatlab_py.emulator import AbsorptionEmulator, EmulatorSpec
+from mcmatlab_py.emulator import AbsorptionEmulator, EmulatorSpec, table_point
 
 
 def time_eval(emu, repeat=2000):
@@ -36,10 +39,44 @@ def time_eval(emu, repeat=2000):
     return best
 
 
+def time_builds(n_photons: int) -> None:
+    """Both build methods from scratch (temporary caches), alternating, in this process."""
+    from mcmatlab_py.white import white_column
+
+    # compile (or load) both kernels outside the timings
+    tiny = EmulatorSpec.from_model(paper_model((4, 4, 2), progress=False), n_photons=100)
+    table_point(tiny, (0, 0))
+    white_column(tiny, 0)
+    for label, spec in [
+        ("voxel NA, 20x20x10", EmulatorSpec.from_model(paper_model((20, 20, 10), progress=False),
+                                                      n_photons=n_photons)),
+        ("nodal loads, MC 100x100x50 -> mesh 20x20x10", EmulatorSpec.from_model(
+            paper_model((100, 100, 50), progress=False), n_photons=n_photons,
+            mesh_divisions=(20, 20, 10))),
+    ]:
+        seconds = {}
+        for method in ("table", "white"):
+            with tempfile.TemporaryDirectory() as tmp:
+                t0 = time.perf_counter()
+                AbsorptionEmulator.build(spec, cache_dir=tmp, progress=False, method=method)
+                seconds[method] = time.perf_counter() - t0
+        print(f"{label}, {spec.n_mua} x {spec.n_mus} table, {n_photons} photons at mus = 100: "
+              f"table {seconds['table']:.1f} s ({spec.n_mua * spec.n_mus} runs), white "
+              f"{seconds['white']:.1f} s ({spec.n_mus} runs): "
+              f"{seconds['table'] / seconds['white']:.2f}x", flush=True)
+
+
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--rebuild", action="store_true")
+    ap.add_argument("--builds", action="store_true",
+                    help="time the table and white builds side by side (minutes)")
+    ap.add_argument("--photons", type=int, default=250_000,
+                    help="photons per table point at mus = 100 for --builds")
     args = ap.parse_args(argv)
+    if args.builds:
+        time_builds(args.photons)
+        return
     for label, make in [
         ("nodal loads, MC 100x100x50 -> mesh 20x20x10", lambda cache: emulator_for(
             cache_dir=cache, progress=False)),

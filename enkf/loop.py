@@ -114,6 +114,8 @@ class _Filter:
             self.sd_noisy = sd_model[self.noisy]
         else:
             self.noisy, self.sd_noisy = np.arange(self.n_state), None
+        # noise on every state variable (the usual case): a plain add, no gather and scatter
+        self.noisy_all = self.noisy.size == self.n_state
         ai = config.adaptive_inflation
         self.adaptive = None if ai is None else (
             inflation_state if inflation_state is not None else InflationEstimator(ai))
@@ -151,7 +153,8 @@ class _Filter:
         N, rng = self.N, self.rng
         v = None
         if self.noise_fn is None and self.noisy.size:
-            v = self.sd_noisy * rng.standard_normal((N, self.noisy.size))
+            v = rng.standard_normal((N, self.noisy.size))
+            v *= self.sd_noisy  # in place: the same numbers, one (N, n) temporary fewer
         if not self.rw_on:
             return v, None
         xi = rng.standard_normal((N, self.n_par))
@@ -181,8 +184,11 @@ class _Filter:
             if v.shape != (N, n_state):
                 raise ValueError(f"model_noise must return shape ({N}, {n_state}), got {v.shape}")
         if v is not None:
-            X1 = X1.copy()  # the forecast may hand back a view of its own buffers
-            X1[:, self.noisy] += v
+            if self.noisy_all:  # a new array: the forecast may hand back its own buffers
+                X1 = X1 + v
+            else:
+                X1 = X1.copy()
+                X1[:, self.noisy] += v
         U1 = U0
         if P.param_dynamics is not None:
             U1 = np.asarray(P.param_dynamics(U0, t_a, t_b), dtype=float)

@@ -184,6 +184,7 @@ if __name__ == "__main__":
     for name, c in check(result).items():
         print(f"{name}: {c['value']:.6g} ({c['what']})")
     args.out.mkdir(parents=True, exist_ok=True)
-    for what in ("G", "MC", "FMC", "HS"):
+    for what in ("G", "MC", "HS"):
         model.plot(what, args.out / "test1")
+    model.plot("FMC", args.out / "test1_FMC")  # emitters, NA, NFR of the fluorescence
     print(f"figures in {args.out}")

@@ -1,0 +1,126 @@
+"""The perturbation ("white") Monte Carlo against the direct kernel, and the white build.
+
+A packet's contribution to a layer's absorbed power or to the escaped power lies in
+[0, 1] (up to the roulette gains of a survivor, at most 0.09 each, so we take [0, 1.1]):
+the standard error of such a tally over N packets is at most sqrt(p (c - p) / N) with
+c = 1.1 (the two-valued case is the worst). The white run and the direct run are
+independent, so their difference has at most sqrt(se_w^2 + se_d^2); tests allow 4.5 of
+those (about 7e-6 two-sided per comparison).
+"""
+
+import math
+
+import numba
+import numpy as np
+import pytest
+
+from mcmatlab_py import _mc_kernel as K
+from mcmatlab_py.emulator import AbsorptionEmulator, EmulatorSpec, cache_key, symmetrize
+from mcmatlab_py.white import white_absorbed, white_column
+
+C = 1.1
+
+
+def se_bound(p: float, n: int) -> float:
+    return math.sqrt(max(p * (C - p), 1e-300) / n)
+
+
+def spec_(**kw):
+    args = dict(nx=8, ny=8, nz=4, Lx=0.5, Ly=0.5, Lz=0.25, g=0.9, n=1.3, source_type="tophat",
+                radius=0.1, n_photons=3000, seed=7)
+    args.update(kw)
+    return EmulatorSpec(**args)
+
+
+def assert_same_tallies(white_maps, direct_maps, n_w, n_d, what):
+    """Each tally (a sum of NA over a layer, in launched-power units) within 4.5 bounds."""
+    for tw, td in zip(white_maps, direct_maps, strict=True):
+        p = 0.5 * (tw + td)
+        tol = 4.5 * math.hypot(se_bound(p, n_w), se_bound(p, n_d))
+        assert abs(tw - td) <= tol, (what, tw, td, tol)
+
+
+def compare(spec, mua, mus, n_w, n_d):
+    res = white_absorbed(spec, mua, mus, n_photons=n_w, seed=11)
+    for k, a in enumerate(mua):
+        MC = spec.model(a, mus, n_photons=n_d, seed=12).run_monte_carlo().MC
+        dV = spec.Lx * spec.Ly * spec.Lz / (spec.nx * spec.ny * spec.nz)
+        direct = MC.NA * dV  # absorbed fraction per voxel
+        white = res.absorbed[k] / n_w
+        what = f"mua={a} mus={mus}"
+        assert_same_tallies(white.sum((0, 1)), direct.sum((0, 1)), n_w, n_d, what + " z layers")
+        assert_same_tallies(white.sum((1, 2)), direct.sum((1, 2)), n_w, n_d, what + " x slabs")
+        assert_same_tallies([res.fraction(K.T_TOP)[k], white.sum()],
+                            [MC.escaped["top"], MC.absorbed_fraction], n_w, n_d,
+                            what + " escaped top, absorbed")
+
+
+@pytest.mark.parametrize("mus", [10.0, 2000.0])
+def test_white_equals_direct_at_the_table_edges(mus):
+    """mua at both ends of the default table range (0.1, 20) and inside, one white run."""
+    spec = spec_()
+    n_w, n_d = (20000, 20000) if mus < 100 else (3000, 3000)
+    compare(spec, np.array([0.1, 1.3, 20.0]), mus, n_w, n_d)
+
+
+@pytest.mark.parametrize("matched, boundary_type, source",
+                         [(False, 1, "tophat"), (False, 2, "gaussian"), (True, 3, "pencil"),
+                          (True, 0, "isotropic_point"), (False, 1, "plane_wave")])
+def test_white_equals_direct_interfaces_boundaries_sources(matched, boundary_type, source):
+    spec = spec_(matched_interfaces=matched, boundary_type=boundary_type, source_type=source,
+                 z_focus=0.1 if source == "isotropic_point" else 0.0)
+    compare(spec, np.array([0.5, 4.0]), 100.0, 10000, 10000)
+
+
+@pytest.mark.parametrize("roulette", [True, False])
+def test_energy_balance_is_exact_for_every_mua(roulette, monkeypatch):
+    spec = spec_(matched_interfaces=False)
+    if not roulette:
+        model = EmulatorSpec.model
+
+        def no_roulette(self, *a, **kw):
+            m = model(self, *a, **kw)
+            m.MC.russian_roulette = False
+            return m
+
+        monkeypatch.setattr(EmulatorSpec, "model", no_roulette)
+    res = white_absorbed(spec, [0.1, 2.0, 20.0], 300.0, n_photons=2000, seed=1)
+    out = res.tally[[K.T_SPECULAR, K.T_TOP, K.T_BOTTOM, K.T_SIDES, K.T_OUTSIDE_ABSORBED,
+                     K.T_KILLED, K.T_MISSED]].sum(axis=0)
+    balance = res.absorbed.reshape(3, -1).sum(axis=1) + out - res.tally[K.T_ROULETTE]
+    # fixed-point sums: exact up to the float division of the final totals
+    np.testing.assert_allclose(balance, res.tally[K.T_LAUNCHED], rtol=1e-13)
+    assert (res.tally[K.T_ROULETTE] != 0).any() == roulette
+
+
+def test_same_seed_same_result_any_thread_count():
+    spec = spec_()
+    runs = [white_absorbed(spec, [0.3, 3.0], 200.0, n_photons=3000, seed=5, n_threads=t)
+            for t in (1, min(2, numba.config.NUMBA_NUM_THREADS))]
+    np.testing.assert_array_equal(runs[0].absorbed, runs[1].absorbed)
+    np.testing.assert_array_equal(runs[0].tally, runs[1].tally)
+    other = white_absorbed(spec, [0.3, 3.0], 200.0, n_photons=3000, seed=6)
+    assert not np.array_equal(runs[0].absorbed, other.absorbed)
+
+
+def test_symmetrized_tally_equals_symmetrize():
+    spec = spec_()
+    plain = white_absorbed(spec, [1.0], 100.0, n_photons=3000, seed=2)
+    folded = white_absorbed(spec, [1.0], 100.0, n_photons=3000, seed=2, symmetrized=True)
+    np.testing.assert_allclose(folded.absorbed[0], symmetrize(plain.absorbed[0], spec),
+                               rtol=1e-12, atol=1e-15)
+
+
+def test_white_build_is_cached_under_its_own_key(tmp_path):
+    spec = spec_(mua_range=(0.5, 4.0), mus_range=(50.0, 400.0), n_mua=4, n_mus=4,
+                 n_photons=1000)
+    assert cache_key(spec, "white") != cache_key(spec, "table") == spec.key()
+    emu = AbsorptionEmulator.build(spec, cache_dir=tmp_path, progress=False, method="white")
+    assert len(list(tmp_path.glob("emulator-white-*.npz"))) == 1
+    rows, fracs = white_column(spec, 2)
+    np.testing.assert_array_equal(emu.log_na[:, 2], rows)
+    np.testing.assert_array_equal(emu.absorbed[:, 2], fracs)
+    again = AbsorptionEmulator.build(spec, cache_dir=tmp_path, progress=False, method="white")
+    np.testing.assert_array_equal(again.log_na, emu.log_na)
+    with pytest.raises(ValueError, match="method"):
+        AbsorptionEmulator.build(spec, cache_dir=tmp_path, progress=False, method="fast")
