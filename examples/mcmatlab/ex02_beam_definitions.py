@@ -237,8 +237,9 @@ def check(models: dict) -> dict:
         "far-field fraction within pi/4 of +z: isotropic, (1 - cos(pi/4)) / 2")
 
     m = models["tophat_gaussian"]
+    L = launches(m)
     out["tophat_radius"] = mean_entry(
-        launches(m)["a"] ** 2 + launches(m)["b"] ** 2, TOPHAT_RADIUS**2 / 2,
+        L["a"] ** 2 + L["b"] ** 2, TOPHAT_RADIUS**2 / 2,
         "mean square focal-plane radius (cm^2): top-hat disc of radius R, R^2/2")
     t_ratio = math.tan(math.pi / 10) / math.tan(GAUSS_HALF_ANGLE)
     out["gaussian_angle"] = fraction_entry(
@@ -254,8 +255,9 @@ def check(models: dict) -> dict:
         "far-field fraction within pi/4: Lambertian, sin^2(pi/4)")
 
     m = models["ring"]
+    L = launches(m)
     out["ring_radius"] = mean_entry(
-        np.hypot(launches(m)["a"], launches(m)["b"]), expected_ring_radius(),
+        np.hypot(L["a"], L["b"]), expected_ring_radius(),
         "mean focal-plane radius (cm) of the custom ring array (intensity per area)")
     out["ring_angles"] = fraction_entry(
         m, math.pi / 10, expected_ring_fraction(math.pi / 10),

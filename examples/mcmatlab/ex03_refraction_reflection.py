@@ -24,7 +24,8 @@ the kernel applies Fresnel's reflectance against ``MC.n_outside = 1``, where MCm
 lets a packet leave and counts it as escaped only from a medium of n = 1: here the
 side faces of the water reflect too, and the 2% of directions that are totally
 reflected at every face (water) stay trapped until absorbed, which takes ~10^4 cm of
-path, most of the run time (the photon counts are kept small for that reason). NA and
+path, most of the run time (the photon counts are kept small for that reason: the
+full run, 10^4 photons on 100^3 voxels, took 12 min on 2 shared cores). NA and
 NFR are zero in the air, where MCmatlab shows the rays: the kernel deposits weight only
 where a packet interacts (mua + mus = 2e-8 cm^-1 in air).
 """
