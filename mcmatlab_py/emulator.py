@@ -45,6 +45,7 @@ __all__ = [
     "symmetrize",
     "table_point",
     "table_row",
+    "table_rows",
     "usable_cache_dir",
 ]
 
@@ -451,12 +452,20 @@ def table_row(spec: EmulatorSpec, na: np.ndarray) -> np.ndarray:
     """The stored form of one table point's NA (nx, ny, nz) in W/cm^3/W: projected onto
     the mesh nodes when ``spec.mesh_divisions`` is set, symmetrised, log(. + offset) at
     the orbit representatives (n_unique,)."""
+    return table_rows(spec, na[None])[0]
+
+
+def table_rows(spec: EmulatorSpec, na: np.ndarray, symmetric: bool = False) -> np.ndarray:
+    """:func:`table_row` of a stack of maps (K, nx, ny, nz) -> (K, n_unique), with one sparse
+    product for the projection; ``symmetric``: the maps are already symmetrised on the
+    voxels (as the white run's orbit tallies are)."""
     if spec.mesh_divisions is not None:
-        na = symmetrize(na, spec, voxels=True)
-        na = (_load_operator(spec) @ na.ravel()).reshape(spec.field_shape)  # W per node per W
-    na = symmetrize(na, spec)
+        if not symmetric:
+            na = np.stack([symmetrize(m, spec, voxels=True) for m in na])
+        flat = na.reshape(na.shape[0], -1)
+        na = (_load_operator(spec) @ flat.T).T.reshape((-1, *spec.field_shape))  # W/node/W
     reps, _ = spec.orbits()
-    return np.log(na.ravel()[reps] + spec.offset)
+    return np.stack([np.log(symmetrize(m, spec).ravel()[reps] + spec.offset) for m in na])
 
 
 def symmetrize(na: np.ndarray, spec: EmulatorSpec, voxels: bool = False) -> np.ndarray:

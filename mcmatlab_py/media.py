@@ -91,8 +91,9 @@ def n_arguments(f: Callable) -> int | None:
     kinds = [p.kind for p in params]
     if inspect.Parameter.VAR_POSITIONAL in kinds:
         return None
-    return sum(k in (inspect.Parameter.POSITIONAL_ONLY, inspect.Parameter.POSITIONAL_OR_KEYWORD)
-               for k in kinds)
+    # the arguments a call must give: those with defaults (f(theta, g=0.9)) are parameters
+    return sum(p.kind in (inspect.Parameter.POSITIONAL_ONLY, inspect.Parameter.POSITIONAL_OR_KEYWORD)
+               and p.default is inspect.Parameter.empty for p in params)
 
 
 @dataclass

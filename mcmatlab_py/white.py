@@ -113,11 +113,11 @@ def white_column(spec, b: int) -> tuple[np.ndarray, np.ndarray]:
     log(NA + offset) at the orbit representatives (n_mua, n_unique) and the absorbed
     fraction of every ``mua`` (n_mua,). The photons and the seed are those of the direct
     table's points in that column (``spec.photons_at(mus)``, ``spec.seed``)."""
-    from .emulator import table_row
+    from .emulator import table_rows
 
     mus = float(spec.mus_grid()[b])
     res = white_absorbed(spec, spec.mua_grid(), mus, n_photons=spec.photons_at(mus),
                          seed=spec.seed, symmetrized=True)
     dV = spec.Lx * spec.Ly * spec.Lz / (spec.nx * spec.ny * spec.nz)
-    rows = np.stack([table_row(spec, a / (res.n_photons * dV)) for a in res.absorbed])
+    rows = table_rows(spec, res.absorbed / (res.n_photons * dV), symmetric=True)
     return rows, res.absorbed.reshape(res.mua.size, -1).sum(axis=1) / res.n_photons
