@@ -320,7 +320,7 @@ def identify_config_from_dict(cfg: dict) -> IdentifyConfig:
     exact = emu.get("exact", False)
     if not isinstance(exact, bool):
         raise ConfigError(f"filter.emulator.exact must be true or false, got {shorten(repr(exact))}")
-    if "dt" in cfg.get("HS", {}):
+    if "dt" in cfg.get("HS", {}) and model.HS.dt is not None:
         setup_kw["max_dt"] = float(model.HS.dt)  # the filter's longest heat step
         check_steps(model.HS.total_duration / model.HS.dt, "the filter's heat steps (HS.dt = "
                     f"{model.HS.dt:g} s over {model.HS.total_duration:g} s of laser pulses)",
