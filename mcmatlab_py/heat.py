@@ -33,6 +33,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from fem.checks import check_number
+
 from ._strict import StrictAttributes
 from .media import check_positive
 
@@ -187,12 +189,11 @@ class HeatSimulation(StrictAttributes):
             raise ValueError("HS.duration_on + HS.duration_off must be > 0, got "
                              f"{self.duration_on} + {self.duration_off}")
         for name in ("n_pulses", "n_updates"):
-            v = getattr(self, name)
-            if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or v < 1:
-                raise ValueError(f"HS.{name} must be an integer >= 1, got {v!r}")
-        p = self.media_prop_recalc_period
-        if isinstance(p, bool) or not isinstance(p, (int, np.integer)) or p < 0:
-            raise ValueError(f"HS.media_prop_recalc_period must be an integer >= 0, got {p!r}")
+            setattr(self, name, check_number(f"HS.{name}", getattr(self, name), integer=True,
+                                             lo=1, hi=10**7))
+        self.media_prop_recalc_period = check_number(
+            "HS.media_prop_recalc_period", self.media_prop_recalc_period, integer=True, lo=0,
+            hi=10**7)
         if self.dt is not None:
             self.dt = check_positive("HS", "dt", self.dt)
             if self.dt > self.total_duration:

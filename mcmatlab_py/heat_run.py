@@ -142,6 +142,11 @@ def run_heat(model) -> None:  # noqa: C901  (one loop with its callbacks)
     def stepper_for(dt, vhc, tc):
         key = (round(dt, 15), coupling.version)
         if key not in steppers or not single_thermal and (HS.VHC_t or HS.TC_t):
+            # a stepper of an older coupling version is never used again: keep only the
+            # current version's (one per step length), or media re-binned at every update
+            # would hold one factorization each (24 GB at 100^3 voxels)
+            for old in [k for k in steppers if k[1] != coupling.version]:
+                del steppers[old]
             steppers[key] = fem.HeatStepper(mesh, vhc, tc, dt, theta=HS.theta,
                                             boundary=boundary)
         return steppers[key]

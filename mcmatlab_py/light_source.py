@@ -47,6 +47,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from fem.checks import check_number, shorten
+
 from . import _sources as S
 from ._strict import StrictAttributes
 from .media import check_positive
@@ -158,24 +160,14 @@ def _width(owner: str, value, *, angular: bool) -> float:
     """A width >= 0 (cm, or rad below pi/2 if ``angular``); ValueError naming ``owner``."""
     if value is None:
         raise ValueError(f"{owner} must be set for this source type")
-    try:
-        w = float(value)
-    except (TypeError, ValueError):
-        raise ValueError(f"{owner} must be a number, got {value!r}") from None
-    if not (math.isfinite(w) and w >= 0) or (angular and not w < math.pi / 2):
-        bound = "in [0, pi/2) rad" if angular else ">= 0 and finite"
-        raise ValueError(f"{owner} must be {bound}, got {value!r}")
+    w = check_number(owner, value, lo=0.0, hi=1e3)
+    if angular and not w < math.pi / 2:
+        raise ValueError(f"{owner} must be in [0, pi/2) rad, got {shorten(repr(value))}")
     return w
 
 
 def _number(name: str, value) -> float:
-    try:
-        v = float(value)
-    except (TypeError, ValueError):
-        raise ValueError(f"MC.light_source.{name} must be a number, got {value!r}") from None
-    if not math.isfinite(v):
-        raise ValueError(f"MC.light_source.{name} must be finite, got {value!r}")
-    return v
+    return check_number(f"MC.light_source.{name}", value, lo=-1e3, hi=1e3)
 
 
 def validate_light_source(src, G) -> None:

@@ -172,10 +172,7 @@ class Medium(StrictAttributes):
             value = getattr(self, field)
             if value is not None:
                 setattr(self, field, check_positive(owner, field, value, allow_zero=True))
-        nb = self.n_bins
-        if isinstance(nb, bool) or not isinstance(nb, (int, np.integer)) or nb < 1 or nb > 255:
-            raise ValueError(f"{owner}.n_bins must be an integer in 1..255, got {nb!r}")
-        self.n_bins = int(nb)
+        self.n_bins = check_number(f"{owner}.n_bins", self.n_bins, integer=True, lo=1, hi=255)
         cpf = self.custom_phase_func
         if cpf is not None and not callable(cpf):
             arr = np.asarray(cpf, dtype=np.float64)  # checked in full when tabulated (optics)

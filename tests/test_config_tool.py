@@ -61,7 +61,7 @@ def with_(path: str, value, base=None):
     ("HS.dt", 0.0, "HS.dt must be > 0, got 0.0"),
     ("HS.dt", 5.0, "HS.dt = 5.0 s is longer than the whole run"),
     ("HS.P", -0.5, "HS.P must be >= 0, got -0.5"),
-    ("HS.n_pulses", 0, "HS.n_pulses must be an integer >= 1, got 0"),
+    ("HS.n_pulses", 0, "HS.n_pulses must be >= 1, got 0"),
     ("HS.mesh_divisions", [0, 5, 5], "HS.mesh_divisions must be [nx, ny, nz]"),
     ("HS.T_ambient", "warm", "HS.T_ambient must be a number, got 'warm'"),
     ("HS.heat_transfer_coefficient", -1.0, "HS.heat_transfer_coefficient must be > 0"),

@@ -162,7 +162,7 @@ def test_movie_is_an_mp4_of_the_updates(tmp_path):
 
 @pytest.mark.parametrize("mutate, pattern", [
     (lambda HS: setattr(HS, "duration_end", -1.0), r"HS\.duration_end must be >= 0"),
-    (lambda HS: setattr(HS, "n_updates", 0), r"HS\.n_updates must be an integer >= 1"),
+    (lambda HS: setattr(HS, "n_updates", 0), r"HS\.n_updates must be >= 1"),
     (lambda HS: setattr(HS, "slice_positions", (0.5, 2, 0)), r"HS\.slice_positions"),
     (lambda HS: setattr(HS, "plot_temp_limits", (50, 40)), r"HS\.plot_temp_limits"),
     (lambda HS: setattr(HS, "T_initial", np.zeros((2, 2, 2))), r"HS\.T_initial must be"),
