@@ -27,9 +27,9 @@ import warnings
 from dataclasses import dataclass, field
 from pathlib import Path
 
-import numba
 import numpy as np
 
+from ._interp import interpolate_log_na
 from ._strict import NotBuiltError
 from .media import Medium
 from .model import Geometry, MonteCarloSimulation
@@ -63,54 +63,6 @@ def default_cache_dir() -> Path:
     """``$TISSUE_ENKF_CACHE``, else ``~/.cache/tissue-enkf``."""
     env = os.environ.get("TISSUE_ENKF_CACHE")
     return Path(env) if env else Path.home() / ".cache" / "tissue-enkf"
-
-
-@numba.njit(cache=True, inline="always")
-def _lagrange4(t, i0, grid_log):
-    """Weights of the 4-point Lagrange interpolant at ``t`` on nodes ``grid_log[i0:i0+4]``."""
-    x0 = grid_log[i0]
-    x1 = grid_log[i0 + 1]
-    x2 = grid_log[i0 + 2]
-    x3 = grid_log[i0 + 3]
-    w0 = (t - x1) * (t - x2) * (t - x3) / ((x0 - x1) * (x0 - x2) * (x0 - x3))
-    w1 = (t - x0) * (t - x2) * (t - x3) / ((x1 - x0) * (x1 - x2) * (x1 - x3))
-    w2 = (t - x0) * (t - x1) * (t - x3) / ((x2 - x0) * (x2 - x1) * (x2 - x3))
-    w3 = (t - x0) * (t - x1) * (t - x2) / ((x3 - x0) * (x3 - x1) * (x3 - x2))
-    return w0, w1, w2, w3
-
-
-@numba.njit(cache=True)
-def _stencil(t, grid_log):
-    n = grid_log.size
-    i = np.searchsorted(grid_log, t) - 1
-    i0 = min(max(i - 1, 0), n - 4)
-    return i0
-
-
-@numba.njit(cache=True, parallel=True)
-def interpolate_log_na(table, lmua_grid, lmus_grid, lmua, lmus, offset, out):
-    """``out[n] = exp(sum_ab w_a(lmua[n]) w_b(lmus[n]) table[a, b]) - offset`` (4 x 4 Lagrange).
-
-    table : (n_mua, n_mus, nvox) float64 log NA; lmua, lmus : (N,) logs; out : (N, nvox).
-    """
-    N = lmua.size
-    nvox = table.shape[2]
-    for n in numba.prange(N):
-        ia = _stencil(lmua[n], lmua_grid)
-        ib = _stencil(lmus[n], lmus_grid)
-        wa = _lagrange4(lmua[n], ia, lmua_grid)
-        wb = _lagrange4(lmus[n], ib, lmus_grid)
-        row = out[n]
-        for v in range(nvox):
-            row[v] = 0.0
-        for a in range(4):
-            for b in range(4):
-                w = wa[a] * wb[b]
-                src = table[ia + a, ib + b]
-                for v in range(nvox):
-                    row[v] += w * src[v]
-        for v in range(nvox):
-            row[v] = max(np.exp(row[v]) - offset, 0.0)
 
 
 @dataclass
@@ -552,51 +504,5 @@ def _load(path: Path, spec: EmulatorSpec, key: str):
     return data
 
 
-@dataclass
-class DirectMonteCarloAbsorption:
-    """The exact mode: the same call as :class:`AbsorptionEmulator`, by direct Monte Carlo.
-
-    Each call runs one Monte Carlo per member (``spec.n_photons`` photons, seed
-    ``spec.seed + call index`` so that successive calls are independent), and projects
-    onto the mesh nodes when ``spec.mesh_divisions`` is set.
-    """
-
-    spec: EmulatorSpec
-    calls: int = 0
-    client: object = None  #: a dask.distributed client: one task per member
-    exact = True  #: every call runs Monte Carlo (enkf.tissue.absorption.Absorption)
-
-    @property
-    def shape(self) -> tuple[int, int, int]:
-        return self.spec.field_shape
-
-    @property
-    def kind(self) -> str:
-        return "NA" if self.spec.mesh_divisions is None else "load"
-
-    @property
-    def inverse(self) -> np.ndarray:
-        """Identity orbits: ``unique`` returns every entry."""
-        return np.arange(int(np.prod(self.shape)))
-
-    def unique(self, mua, mus) -> np.ndarray:
-        return self(mua, mus).reshape(np.size(mua), -1)
-
-    def __call__(self, mua, mus) -> np.ndarray:
-        from .distributed import run_tasks
-
-        mua, mus = np.broadcast_arrays(np.atleast_1d(mua), np.atleast_1d(mus))
-        members = [(float(a), float(s)) for a, s in zip(mua.ravel(), mus.ravel(), strict=True)]
-        maps = run_tasks(functools.partial(direct_member, self.spec, self.spec.seed + self.calls),
-                         members, client=self.client)
-        self.calls += 1
-        return np.stack(maps)
-
-
-def direct_member(spec: EmulatorSpec, seed: int, coefficients: tuple[float, float]) -> np.ndarray:
-    """NA (or the nodal load) of one member by direct Monte Carlo (a task body)."""
-    mua, mus = coefficients
-    na = spec.model(mua, mus, seed=seed).run_monte_carlo().MC.NA
-    if spec.mesh_divisions is None:
-        return na
-    return (_load_operator(spec) @ na.ravel()).reshape(spec.field_shape)
+# the exact mode lives in its own module; its names stay importable from here
+from .exact import DirectMonteCarloAbsorption, direct_member  # noqa: E402
