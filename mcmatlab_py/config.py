@@ -45,10 +45,9 @@ from pathlib import Path
 
 import numpy as np
 
-from fem.checks import check_number
+from fem.checks import check_number, shorten
 
 from .media import Medium
-from .messages import shorten
 from .model import Model
 
 __all__ = ["ConfigError", "check_keys", "load_model", "model_from_config", "read_toml"]

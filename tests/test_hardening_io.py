@@ -17,8 +17,8 @@ from enkf.app.cli import main
 from enkf.app.readers import follow_csv, load_frames, read_sensor_csv
 from enkf.app.rundir import atomic_dir
 from enkf.tissue import OnlineIdentifier
+from fem.checks import shorten
 from mcmatlab_py.config import read_toml
-from mcmatlab_py.messages import shorten
 
 EX = Path(__file__).parents[1] / "examples"
 TINY = (EX / "tiny.toml").read_text()

@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from mcmatlab_py.messages import shorten  # re-exported: the one helper of all packages
+from fem.checks import shorten  # re-exported: the one helper of all packages
 
 from .config import run_table
 

@@ -38,10 +38,9 @@ from pathlib import Path
 
 import numpy as np
 
-from fem.checks import check_number
+from fem.checks import check_number, shorten
 from mcmatlab_py.budget import check_filter, check_steps
 from mcmatlab_py.config import ConfigError, check_keys, model_from_config, read_toml
-from mcmatlab_py.messages import shorten
 
 from ..problem import DEFAULT_METHOD
 from ..tissue.parameters import ESTIMATES, PARAMETER_NAMES, TRACKED_DEPTHS, tracked_points

@@ -31,7 +31,7 @@ from pathlib import Path
 
 import numpy as np
 
-from mcmatlab_py.messages import shorten
+from fem.checks import shorten
 
 from ..tissue.image import ThermalImage
 

@@ -24,39 +24,14 @@ from __future__ import annotations
 
 import argparse
 import math
+import sys
 from pathlib import Path
 
-import numpy as np
+sys.path.insert(0, str(Path(__file__).parent))
+from ex04_blood_vessel import geometry, media  # noqa: E402  (Example 4's tissue)
 
-from mcmatlab_py import Medium, Model, calc_mua, calc_mus
-from mcmatlab_py.monte_carlo import gpu_available
-
-Z_SURF = 0.01  #: cm, the skin surface (gel above)
-EPIDERMIS = 0.006  #: cm, epidermis thickness
-VESSEL_RADIUS = 0.01  #: cm
-VESSEL_DEPTH = 0.04  #: cm below the skin surface (of the vessel's axis)
-
-
-def geometry(X, Y, Z):
-    """0 water (gel), 1 epidermis, 2 dermis, 3 blood: a vessel along y at x = 0."""
-    M = np.zeros(X.shape, dtype=int)
-    M[Z > Z_SURF] = 1
-    M[Z > Z_SURF + EPIDERMIS] = 2
-    M[X**2 + (Z - (Z_SURF + VESSEL_DEPTH)) ** 2 < VESSEL_RADIUS**2] = 3
-    return M
-
-
-def media() -> list[Medium]:
-    """MCmatlab's four media (optical properties only: no heat simulation here)."""
-    return [
-        Medium("water", mua=0.00036, mus=10.0, g=1.0),
-        Medium("epidermis", mua=lambda w: calc_mua(w, S=0.75, B=0.0, W=0.75, F=0.0, M=0.03),
-               mus=lambda w: calc_mus(w, 40.0, 0.0, 1.0, 0.9), g=0.9),
-        Medium("dermis", mua=lambda w: calc_mua(w, S=0.67, B=0.002, W=0.65, F=0.0, M=0.0),
-               mus=lambda w: calc_mus(w, 42.4, 0.62, 1.0, 0.9), g=0.9),
-        Medium("blood", mua=lambda w: calc_mua(w, S=0.75, B=1.0, W=0.95, F=0.0, M=0.0),
-               mus=lambda w: calc_mus(w, 10.0, 0.0, 1.0, 0.9), g=0.9),
-    ]
+from mcmatlab_py import Model  # noqa: E402
+from mcmatlab_py.monte_carlo import gpu_available  # noqa: E402
 
 
 def build(quick: bool = False, use_gpu: bool = False, seed: int = 16) -> Model:
