@@ -15,6 +15,21 @@ from tqdm.auto import tqdm
 __all__ = ["Progress"]
 
 
+class _Lines:
+    """A log or a pipe: each tqdm frame on a line of its own instead of ``\r`` overwrites."""
+
+    def __init__(self, stream):
+        self.stream = stream
+
+    def write(self, text: str) -> None:
+        for frame in text.split("\r"):
+            if frame.strip():
+                self.stream.write(frame.rstrip("\n") + "\n")
+
+    def flush(self) -> None:
+        self.stream.flush()
+
+
 class Progress:
     """Progress of a long loop: ``update(done)`` with ``done`` in [0, total].
 
@@ -38,7 +53,8 @@ class Progress:
         interactive = bool(getattr(stream, "isatty", lambda: False)())
         self.total = max(float(total), 1e-300)
         self._bar = tqdm(total=float(total), desc=label, disable=not enabled, delay=delay,
-                         file=stream, leave=not interactive, dynamic_ncols=True,
+                         file=stream if interactive else _Lines(stream),
+                         leave=not interactive, dynamic_ncols=True,
                          mininterval=0.2 if interactive else 10.0,
                          bar_format="{desc}: {percentage:5.1f}%|{bar:30}| {elapsed}<{remaining}"
                                     " {postfix}")
