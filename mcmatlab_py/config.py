@@ -63,8 +63,21 @@ _G_KEYS = {"nx", "ny", "nz", "Lx", "Ly", "Lz", "media", "regions"}
 _MC_KEYS = {
     "n_photons_requested", "simulation_time_requested", "seed", "matched_interfaces",
     "boundary_type", "n_outside", "russian_roulette", "weight_threshold", "roulette_chance",
-    "n_threads", "batch_size", "light_source",
+    "n_threads", "batch_size", "light_source", "wavelength", "smoothing_length_scale",
+    # the optional outputs (MCmatlab's light collector, far field, paths, NI maps, MCML's radial
+    # tallies) and their tables
+    "use_light_collector", "light_collector", "request_collected_photons", "far_field_res",
+    "n_example_paths", "calc_normalized_irradiance", "n_radial_bins", "radial_bin_size",
+    "n_angle_bins", "deposition_criteria",
 }
+#: [MC.light_collector]: a lens (f finite) or a fiber (f = inf)
+_COLLECTOR_KEYS = {"x", "y", "z", "theta", "phi", "f", "diam", "field_size", "NA", "res",
+                   "t_start", "t_end", "n_time_bins"}
+#: [MC.deposition_criteria]
+_CRITERIA_KEYS = {f"{b}_{what}" for b in ("min", "max")
+                  for what in ("scatterings", "refractions", "reflections",
+                               "interface_transitions", "medium_idx_to_consider")}
+_CRITERIA_KEYS |= {"only_collected", "evaluate_only_at_end_of_life"}
 _SOURCE_KEYS = {"source_type", "radius", "x_focus", "y_focus", "z_focus"}
 #: the tables of a config file: the model here, the rest for ``tissue-enkf identify``
 TOP_LEVEL_KEYS = {"G", "MC", "HS", "sensors", "filter", "data", "run"}
@@ -191,9 +204,12 @@ def model_from_config(cfg: dict) -> Model:
             raise ConfigError(f"G.regions must be an array of tables, got {shorten(repr(G_cfg['regions']))}")
         model.G.geom_func = _region_map(G_cfg["regions"])
     MC_cfg = check_keys("MC", cfg.get("MC", {}), _MC_KEYS)
-    _set(model.MC, "MC", MC_cfg, skip=("light_source",))
-    src_cfg = check_keys("MC.light_source", MC_cfg.get("light_source", {}), _SOURCE_KEYS)
-    _set(model.MC.light_source, "MC.light_source", src_cfg)
+    tables = {"light_source": (_SOURCE_KEYS, model.MC.light_source),
+              "light_collector": (_COLLECTOR_KEYS, model.MC.light_collector),
+              "deposition_criteria": (_CRITERIA_KEYS, model.MC.deposition_criteria)}
+    _set(model.MC, "MC", MC_cfg, skip=tuple(tables))
+    for name, (keys, obj) in tables.items():
+        _set(obj, f"MC.{name}", check_keys(f"MC.{name}", MC_cfg.get(name, {}), keys))
     if "HS" in cfg:
         HS_cfg = check_keys("HS", cfg["HS"], _HS_KEYS)
         _check_hs(HS_cfg)

@@ -223,3 +223,45 @@ def test_mc_run_has_a_manifest(tmp_path):
     assert run("mc", EX / "tiny.toml", "--out", out, "--quiet", "--photons", "5000") == 0
     man = json.loads((out / "run.json").read_text())
     assert man["command"] == "mc" and man["config"]["MC"]["seed"] == 1
+
+
+OUTPUTS_TOML = TINY.replace("[MC.light_source]", """far_field_res = 8
+n_example_paths = 3
+calc_normalized_irradiance = true
+n_radial_bins = 5
+radial_bin_size = 0.02
+n_angle_bins = 4
+use_light_collector = true
+
+[MC.light_collector]
+z = -0.5
+f = inf
+diam = 0.2
+NA = 0.5
+t_end = 1e-10
+n_time_bins = 5
+
+[MC.deposition_criteria]
+min_scatterings = 1
+
+[MC.light_source]""")
+
+
+def test_mc_config_asks_for_the_optional_outputs_and_gets_them_with_figures(tmp_path, capsys):
+    out = tmp_path / "mc"
+    cfg = tmp_path / "outputs.toml"
+    cfg.write_text(OUTPUTS_TOML)
+    assert run("mc", cfg, "--out", out, "--quiet", "--photons", "5000") == 0
+    with np.load(out / "outputs.npz") as z:
+        names = set(z.files)
+        assert {"NI_zneg", "far_field", "Rd_r", "example_paths", "light_collector_image",
+                "light_collector_t"} <= names
+        # MCmatlab's n_time_bins + 2: before t_start, the bins, after t_end
+        assert z["light_collector_image"].shape == (7,)
+    summary = json.loads((out / "summary.json").read_text())
+    assert 0 < summary["collected_fraction"] < summary["escaped"]["top"]
+    assert sorted(p.name for p in out.glob("MC_*.png"))  # MCmatlab's output figures
+    (tmp_path / "bad.toml").write_text(OUTPUTS_TOML.replace("diam = 0.2", "diameter = 0.2"))
+    assert run("mc", tmp_path / "bad.toml", "--out", tmp_path / "b") == 2
+    assert "unknown key MC.light_collector.diameter" in capsys.readouterr().err
+    assert not (tmp_path / "b").exists()

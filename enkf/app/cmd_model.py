@@ -58,6 +58,10 @@ def cmd_mc(args) -> int:
         np.savez_compressed(tmp / "NA.npz", NA=MC.NA, NFR=MC.NFR, x=G.x, y=G.y, z=G.z)
         write_voxel_vtu(tmp / "NA.vtu", G, {"NA": MC.NA, "NFR": MC.NFR})
         plot_na_slices(model, tmp / "NA_slices.png")
+        extra = _mc_outputs(MC)
+        if extra:  # the optional outputs the config asked for, and MCmatlab's figures of them
+            np.savez_compressed(tmp / "outputs.npz", **extra)
+            model.plot("MC", tmp / "MC.png")
         from mcmatlab_py.config import read_toml
 
         from .report import manifest
@@ -81,12 +85,33 @@ def cmd_mc(args) -> int:
             "wall_seconds": time.perf_counter() - t0,
             "seed": MC.seed_used,
             "grid": {"nx": G.nx, "ny": G.ny, "nz": G.nz, "Lx": G.Lx, "Ly": G.Ly, "Lz": G.Lz},
+            **({"collected_fraction": float(np.sum(MC.light_collector.image)),
+                "n_photons_collected": MC.n_photons_collected}
+               if MC.use_light_collector else {}),
+            "outputs": sorted(extra),
         })
     # the result, even with --quiet (it hides the progress bars only)
     print(f"absorbed {MC.absorbed_fraction:.4f}, escaped top {MC.escaped['top']:.4f} "
           f"bottom {MC.escaped['bottom']:.4f} sides {MC.escaped['sides']:.4f}; "
           f"{MC.n_photons} photons at {MC.photons_per_second:.3g}/s -> {args.out}")
     return 0
+
+
+_OUTPUT_NAMES = ("NI_xpos", "NI_xneg", "NI_ypos", "NI_yneg", "NI_zpos", "NI_zneg", "far_field",
+                 "far_field_theta", "far_field_phi", "Rd_r", "Tt_r", "Rd_a", "Tt_a", "radial_r",
+                 "exit_angle", "example_paths")
+
+
+def _mc_outputs(MC) -> dict:
+    """The optional outputs of a run as arrays for ``outputs.npz`` (those computed only)."""
+    import numpy as np
+
+    out = {k: np.asarray(getattr(MC, k)) for k in _OUTPUT_NAMES if getattr(MC, k) is not None}
+    if MC.use_light_collector:
+        LC = MC.light_collector
+        out.update({f"light_collector_{k}": np.asarray(getattr(LC, k))
+                    for k in ("image", "X", "Y", "t") if getattr(LC, k) is not None})
+    return out
 
 
 def cmd_heat(args) -> int:
