@@ -1,8 +1,9 @@
 """Combine Monte Carlo runs (MCmatlab's ``combineModels``): several seeds, or several beams.
 
-Runs of one light source are averaged with weights ``n_photons`` (as if it were one longer
-run). Runs of different light sources are superposed with weights given by their powers
-(MCmatlab's ``MC.P``): the result is per W of the total power ``sum(powers)``.
+Runs of one light source (and one ``MC.P``) are averaged with weights ``n_photons`` (as if
+it were one longer run). Runs of different light sources are superposed with weights given
+by their powers, each model's ``MC.P`` as in MCmatlab or ``powers``: the result is per W of
+the total power, which becomes its ``MC.P``.
 """
 
 from __future__ import annotations
@@ -42,8 +43,9 @@ def combine_models(models: list, powers: list[float] | None = None):
     models : list of Model, each run with :meth:`Model.run_monte_carlo` on the same
         geometry and settings (a ``ValueError`` names the first field that differs).
     powers : list of float, optional
-        W, relative powers of the runs' light sources (MCmatlab's ``MC.P``). Needed when
-        the light sources differ; without it the runs are averaged by photon count.
+        W, relative powers of the runs' light sources, instead of each model's ``MC.P``
+        (MCmatlab's weights). One of the two is needed when the light sources or powers
+        differ; runs of one source and power are averaged by photon count.
 
     Returns
     -------
@@ -74,19 +76,25 @@ def combine_models(models: list, powers: list[float] | None = None):
                     raise ValueError(f"combine_models: MC.light_collector.{name} differs")
         if m.MC.deposition_criteria != first.MC.deposition_criteria:
             raise ValueError("combine_models: MC.deposition_criteria differ")
+    same_beam = all(m.MC.light_source == first.MC.light_source and m.MC.P == first.MC.P
+                    for m in models)
+    if powers is None and not same_beam:
+        if any(m.MC.P is None for m in models):
+            raise ValueError("combine_models: the light sources or powers differ: set every "
+                             "model's MC.P (W; relative values will do) or give powers=[...]")
+        powers = [m.MC.P for m in models]
     if powers is None:
-        if any(m.MC.light_source != first.MC.light_source for m in models):
-            raise ValueError("combine_models: the light sources differ: give their powers "
-                             "(powers=[...], W)")
         w = np.array([m.MC.n_photons for m in models], dtype=float)
     else:
         w = np.asarray(powers, dtype=float)
         if w.shape != (len(models),) or not np.all(np.isfinite(w)) or np.any(w < 0) or w.sum() <= 0:
             raise ValueError(f"combine_models: powers must be {len(models)} non-negative "
                              f"numbers, not all zero, got {powers!r}")
-    w = w / w.sum()
     out = copy.deepcopy(first)
     MC = out.MC
+    if powers is not None:
+        MC.P = float(w.sum())  # W: the outputs are per W of all the light sources together
+    w = w / w.sum()
 
     def mix(get):
         values = [get(m) for m in models]

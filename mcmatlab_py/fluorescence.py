@@ -50,6 +50,8 @@ class FluorescenceMonteCarloSimulation(MonteCarloSimulation):
       as the centre of the MCML radial bins), and ``source_distribution`` is a result, the
       emitted fluorescence, W/cm^3 per W of incident excitation.
     * ``FR``, ``T`` and ``FD`` are copied from ``model.MC`` at the run (one voxel state).
+    * ``P`` and ``fr_dep_iterations`` are not its settings (MCmatlab's FMC has neither): the
+      fluence-rate iteration is the excitation's, ``model.MC``.
     * ``emitted_power``: the fluorescence emitted in the cuboid, W per W incident.
     * the maps are per W of incident excitation, the fractions are of ``emitted_power``
       (see :mod:`mcmatlab_py.fluorescence`).
@@ -71,6 +73,11 @@ class FluorescenceMonteCarloSimulation(MonteCarloSimulation):
                 "MCmatlab's broadband FMC.wavelength (an array of wavelengths) is not built yet: "
                 "run one fluorescence wavelength at a time and weight the runs by the emission "
                 "spectrum (examples/mcmatlab/ex23_broadband_monte_carlo.py)")
+        for name, default in (("P", None), ("fr_dep_iterations", 0)):
+            if getattr(self, name) != default:
+                raise ValueError(f"FMC.{name} = {getattr(self, name)!r}: the fluorescence run has "
+                                 f"no power or fluence-rate iteration of its own (MCmatlab's "
+                                 f"neither); set MC.{name}, the excitation's")
         super().validate(G)
 
 
@@ -90,16 +97,18 @@ def _check_excitation(G, MC) -> None:
                          "wavelength (photon energies, lambda_x / lambda_f)")
 
 
-def fluorescence_emitters(G, MC, wavelength: float, M_raw: np.ndarray | None = None
-                          ) -> np.ndarray:
+def fluorescence_emitters(G, MC, wavelength: float, M_raw: np.ndarray | None = None, *,
+                          state: tuple | None = None) -> np.ndarray:
     """(nx, ny, nz) fluorescence emitted at ``wavelength`` (nm), W/cm^3 per W incident.
 
     ``MC`` is the run excitation (``NA``, ``wavelength``, ``FR``, ``T``, ``FD``); each medium
     with a ``QY`` emits :math:`NA \\cdot QY(\\lambda_x) \\cdot \\lambda_x / \\lambda_f`
     (photons emitted per photon absorbed, times their energy ratio). ``M_raw``: the media
-    map of ``G`` (computed when not given). A medium whose ``ES`` is 0 at ``wavelength``
-    where it absorbed light raises ``ValueError``: with one fluorescence wavelength all its
-    emission would be put where its spectrum says there is none.
+    map of ``G`` (computed when not given). ``state``: the voxel ``(FR, T, FD)`` seen by
+    ``QY`` and ``ES`` instead of ``MC``'s (a heat run's state, the excitation unchanged).
+    A medium whose ``ES`` is 0 at ``wavelength`` where it absorbed light raises
+    ``ValueError``: with one fluorescence wavelength all its emission would be put where
+    its spectrum says there is none.
     """
     _check_excitation(G, MC)
     M_raw = G.medium_map() if M_raw is None else M_raw
@@ -112,12 +121,12 @@ def fluorescence_emitters(G, MC, wavelength: float, M_raw: np.ndarray | None = N
         mask = M_raw == i
         if not mask.any():
             continue
-        state = [np.broadcast_to(np.asarray(v, dtype=np.float64), shape)[mask]
-                 for v in (MC.FR, MC.T, MC.FD)]
-        qy = medium.values("QY", lam_x, *state)
+        here = [np.broadcast_to(np.asarray(v, dtype=np.float64), shape)[mask]
+                for v in (state if state is not None else (MC.FR, MC.T, MC.FD))]
+        qy = medium.values("QY", lam_x, *here)
         emitted = MC.NA[mask] * qy * (lam_x / lam_f)
         if medium.ES is not None:
-            es = medium.values("ES", lam_f, *state)
+            es = medium.values("ES", lam_f, *here)
             if np.any((es == 0) & (emitted > 0)):
                 raise ValueError(
                     f"Medium({medium.name!r}).ES is 0 at FMC.wavelength = {lam_f:g} nm where the "

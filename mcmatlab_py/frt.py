@@ -3,21 +3,26 @@
 MCmatlab evaluates such media on the voxels and splits them into ``n_bins`` sub-media
 (:mod:`mcmatlab_py.media_bins`). Two loops couple them to the simulations:
 
-* the fluence-rate loop of the Monte Carlo (MCmatlab's ``MC.FRdepIterations``,
-  :func:`fluence_rate_iterations`): run, set ``FR = P * NFR``, run again, with the
-  photon count doubling up to the requested one (Example 12);
+* the fluence-rate loop of the Monte Carlo (MCmatlab's ``MC.FRdepIterations``: set
+  ``MC.P`` and ``MC.fr_dep_iterations`` and ``model.run_monte_carlo()`` calls
+  :func:`fluence_rate_iterations`): run, set ``FR = P * NFR``, run again, with the photon
+  count doubling up to the requested one (Example 12);
 * the heat simulation (``HS.media_prop_recalc_period``, :class:`MediaCoupling`): every
   so many updates the voxel temperatures and damage ``1 - exp(-Omega)`` are put into
   the media; when a medium's optical sub-media change the Monte Carlo is re-run (with
-  ``FR = P * NFR``), and the thermal sub-media give new VHC and TC per element
-  (Examples 13-15, Test 1).
+  ``FR = P * NFR``, iterated as ``MC.fr_dep_iterations`` says), and after it the
+  fluorescence Monte Carlo if the model has one (also when only ``QY`` or ``ES``
+  depend on the state); the thermal sub-media give new VHC and TC per element
+  (Examples 13-15, Test 1), as MCmatlab's ``heatSimParamsRecalc``.
 """
 
 from __future__ import annotations
 
+from contextlib import contextmanager
+
 import numpy as np
 
-from .media import OPTICAL_FIELDS, THERMAL_FIELDS
+from .media import FLUORESCENCE_FIELDS, OPTICAL_FIELDS, THERMAL_FIELDS, check_positive
 from .media_bins import optical_media_properties, thermal_media_properties
 
 __all__ = ["MediaCoupling", "fluence_rate_iterations", "same_sub_media"]
@@ -31,16 +36,21 @@ def same_sub_media(a, b) -> bool:
     return all(np.array_equal(getattr(a, f), getattr(b, f), equal_nan=True) for f in names)
 
 
-def fluence_rate_iterations(model, power: float, n_iterations: int) -> None:
+def fluence_rate_iterations(model, power: float, n_iterations: int, *, client=None) -> None:
     """MCmatlab's fluence-rate iteration of the Monte Carlo (``MC.FRdepIterations``).
 
     ``n_iterations`` runs; run ``i`` has ``n_photons_requested / 2**(n_iterations - 1 - i)``
     photons (or that fraction of ``simulation_time_requested``), and between runs
     ``MC.FR = power * MC.NFR``, so that media given as ``f(wavelength, FR, T, FD)`` see
-    the fluence rate (W/cm^2) of ``power`` W. Fills ``model.MC`` as
-    :meth:`Model.run_monte_carlo` does.
+    the fluence rate (W/cm^2) of ``power`` W. The first run sees ``MC.FR`` as given.
+    Fills ``model.MC`` as :meth:`Model.run_monte_carlo` does (which calls this with
+    ``MC.P`` and ``MC.fr_dep_iterations``); ``client`` as there.
     """
+    from .model import check_energy_balance
+    from .monte_carlo import run_monte_carlo
+
     MC = model.MC
+    power = check_positive("fluence_rate_iterations", "power", power, allow_zero=True)
     n_iterations = int(n_iterations)
     if n_iterations < 1:
         raise ValueError(f"n_iterations must be >= 1, got {n_iterations!r}")
@@ -52,7 +62,8 @@ def fluence_rate_iterations(model, power: float, n_iterations: int) -> None:
                 MC.n_photons_requested = max(1, int(round(n0 * scale)))
             elif t0 is not None:
                 MC.simulation_time_requested = t0 * scale
-            model.run_monte_carlo()
+            run_monte_carlo(model, client=client)
+            check_energy_balance(MC)
             if i < n_iterations - 1:
                 MC.FR = power * MC.NFR
     finally:
@@ -70,9 +81,9 @@ class MediaCoupling:
         J cm^-3 K^-1 and W cm^-1 K^-1 per element (the sub-medium of the element's voxel).
     version : int
         Increases whenever ``vhc_e`` or ``tc_e`` change (the steppers are rebuilt).
-    thermal_dependent, optical_dependent : bool
-        Whether any medium's thermal (VHC, TC) or optical (mua, mus, g) properties depend
-        on the state.
+    thermal_dependent, optical_dependent, fluorescence_dependent : bool
+        Whether any medium's thermal (VHC, TC), optical (mua, mus, g) or fluorescence (QY,
+        ES) properties depend on the state.
     """
 
     def __init__(self, model, M: np.ndarray, setup):
@@ -80,6 +91,8 @@ class MediaCoupling:
         media = model.G.media
         self.thermal_dependent = any(m.depends_on_state(f) for m in media for f in THERMAL_FIELDS)
         self.optical_dependent = any(m.depends_on_state(f) for m in media for f in OPTICAL_FIELDS)
+        self.fluorescence_dependent = any(m.depends_on_state(f) for m in media
+                                          for f in FLUORESCENCE_FIELDS)
         self.thermal = None
         self.version = 0
         self.vhc_e = self.tc_e = None
@@ -104,7 +117,9 @@ class MediaCoupling:
         """Re-run the Monte Carlo if the optical sub-media at this temperature and damage
         differ from those it last ran on (MCmatlab's ``heatSimParamsRecalc``); True if it ran.
 
-        The new run sees ``MC.T``, ``MC.FD`` of the voxels and ``MC.FR = power * NFR``.
+        The new run sees ``MC.T``, ``MC.FD`` of the voxels and ``MC.FR = power * NFR``, and
+        with ``MC.fr_dep_iterations`` = n > 0 is iterated n times at ``power`` W as
+        :meth:`Model.run_monte_carlo` iterates (MCmatlab re-runs its ``runMonteCarlo``).
         """
         if not self.optical_dependent:
             return False
@@ -117,10 +132,40 @@ class MediaCoupling:
         MC.T, MC.FD = T_vox, FD
         if MC.NFR is not None:
             MC.FR = power * MC.NFR
-        progress = MC.progress
-        MC.progress = False
-        try:
-            model.run_monte_carlo()
-        finally:
-            MC.progress = progress
+        with _quiet(MC):
+            fluence_rate_iterations(model, power, max(1, MC.checked_fr_dep_iterations()))
         return True
+
+    def update_fluorescence(self, T_vox, Omega_vox, excitation_ran: bool) -> bool:
+        """Re-run the fluorescence Monte Carlo, if the model has run one, when its emitters
+        change: after a new excitation (``excitation_ran``), or when ``QY`` or ``ES`` depend
+        on the voxel temperature and damage and give new emitters. True if it ran.
+
+        MCmatlab re-runs its fluorescence after every excitation re-run; a run given its
+        own ``emitters`` (:meth:`Model.run_fluorescence_monte_carlo`) gets those of
+        ``model.MC`` here.
+        """
+        from .fluorescence import fluorescence_emitters
+
+        model = self.model
+        MC, FMC = model.MC, model.FMC
+        if FMC.simulation_time is None or not (excitation_ran or self.fluorescence_dependent):
+            return False
+        FD = -np.expm1(-np.asarray(Omega_vox))
+        emitters = fluorescence_emitters(model.G, MC, FMC.wavelength, self.M,
+                                         state=(MC.FR, T_vox, FD))
+        if not excitation_ran and np.array_equal(emitters, FMC.source_distribution):
+            return False
+        with _quiet(FMC):
+            model.run_fluorescence_monte_carlo(emitters=emitters)
+        return True
+
+
+@contextmanager
+def _quiet(sim):
+    """No progress bar for the runs inside a heat simulation (it has its own)."""
+    progress, sim.progress = sim.progress, False
+    try:
+        yield
+    finally:
+        sim.progress = progress

@@ -16,7 +16,8 @@ or damage are re-evaluated (the Monte Carlo re-run when their optics change, see
 :mod:`mcmatlab_py.frt`). A second call continues from where the first ended (the
 final temperatures, damage and clock; MCmatlab's Example 11); :meth:`HeatSimulation.reset`
 starts afresh. The time step is ``dt`` when given, else chosen from the mesh and media
-(:func:`auto_dt`, see ``docs/heat.md``).
+(:func:`auto_dt`, see ``docs/heat.md``), and chosen again (steps cut into sub-steps) when
+VHC or TC that depend on temperature or damage change.
 
 Beyond MCmatlab, the tissue may change while it is heated: ``HS.mua_t``,
 ``HS.mus_t``, ``HS.VHC_t`` and ``HS.TC_t`` are functions of time (s) that replace the
@@ -173,7 +174,7 @@ class HeatSimulation(StrictAttributes):
     snapshots: list | None = None
     movie_frames: np.ndarray | None = None
     mc_runs: int = 0
-    dt_used: np.ndarray | None = None  #: s, the distinct step lengths of the last run
+    dt_used: np.ndarray | None = None  #: s, the distinct step lengths of the last run (sub-steps too)
 
     _owner_label = "HS"
     _renamed = {"Tinitial": "T_initial", "sensorsTimeVector": "sensor_times",

@@ -18,7 +18,7 @@ import numpy as np
 
 from .progress import Progress
 
-__all__ = ["BOILING_WARNING_C", "run_heat", "voxels_to_nodes"]
+__all__ = ["BOILING_WARNING_C", "heat_source", "run_heat", "voxels_to_nodes"]
 
 BOILING_WARNING_C = 100.0  #: deg C: MCmatlab warns when a medium gets hotter (water boils)
 
@@ -93,6 +93,10 @@ def run_heat(model) -> None:  # noqa: C901  (one loop with its callbacks)
     vm = HS.varying_medium
     if not 0 <= vm < len(media):
         raise ValueError(f"HS.varying_medium must index G.media, got {vm!r}")
+    if MC.P is not None and not callable(HS.P) and HS.P != MC.P:
+        warnings.warn(f"MC.P = {MC.P:g} W and HS.P = {HS.P:g} W differ: the heat simulation "
+                      "heats with HS.P, and its Monte Carlo re-runs see FR = HS.P * NFR "
+                      "(MCmatlab has one power, MC.P, for both): set HS.P = MC.P", stacklevel=4)
 
     S = _Setup(G, HS, M)
     mesh, L = S.mesh, S.L
@@ -131,6 +135,10 @@ def run_heat(model) -> None:  # noqa: C901  (one loop with its callbacks)
     if HS.dt is None:
         dt_max = auto_dt(S.mesh_grid.spacing, vhc0, tc0, HS.theta, HS.large_time_steps)
     sched = HS.schedule(dt_max)
+    # the bound of the automatic step for the current thermal sub-media: a step of the
+    # schedule longer than it (the media became more diffusive) is taken in sub-steps
+    bound = {"dt": dt_max}
+    dt_taken = set()
     times = sched.times
     boundary = fem.HeatBoundary.from_mcmatlab(
         HS.heat_boundary_type,
@@ -164,7 +172,7 @@ def run_heat(model) -> None:  # noqa: C901  (one loop with its callbacks)
         src["NA"], src["f"] = NA, L @ np.asarray(NA, float).ravel()
 
     if MC.NA is not None:
-        set_absorption(MC.NA)
+        set_absorption(heat_source(model))
     HS.mc_runs = 0 if not chained else HS.mc_runs
 
     def absorption_load(t):
@@ -208,7 +216,14 @@ def run_heat(model) -> None:  # noqa: C901  (one loop with its callbacks)
     n_update = 0
 
     def step(T, t0, t1):
+        n_sub = 1 if bound["dt"] is None else max(1, math.ceil((t1 - t0) / bound["dt"] - 1e-9))
+        for i in range(n_sub):
+            T = substep(T, t0 + (t1 - t0) * i / n_sub, t0 + (t1 - t0) * (i + 1) / n_sub)
+        return T
+
+    def substep(T, t0, t1):
         dt = t1 - t0
+        dt_taken.add(round(dt, 15))
         t_mid = t0 + 0.5 * dt  # sources and properties at mid-step
         if HS.VHC_t is not None or HS.TC_t is not None:
             vhc, tc = element_props(t_mid)
@@ -245,17 +260,21 @@ def run_heat(model) -> None:  # noqa: C901  (one loop with its callbacks)
             period = HS.media_prop_recalc_period
             if period and n_update % period == 0:
                 T_vox, Om_vox = S.to_voxels(T_new), Omega_vox.reshape(M.shape)
-                if coupling.update_optics(T_vox, Om_vox, HS.peak_power(t1)):
-                    HS.mc_runs += 1
-                    set_absorption(MC.NA)
-                coupling.update_thermal(T_vox, Om_vox)
+                ran = coupling.update_optics(T_vox, Om_vox, HS.peak_power(t1))
+                HS.mc_runs += ran
+                if coupling.update_fluorescence(T_vox, Om_vox, ran) or ran:
+                    set_absorption(heat_source(model))
+                if coupling.update_thermal(T_vox, Om_vox) and dt_max is not None:
+                    vhc, tc = element_props(t1)
+                    bound["dt"] = auto_dt(S.mesh_grid.spacing, vhc, tc, HS.theta,
+                                          HS.large_time_steps)
         bar.update(k)
 
     T, sensor = fem.march(step, T0, times, probes, on_step)
     bar.close()
     _store(HS, S, T, Omega, times + t_offset, sensor, chained, coupling)
     HS.Omega_voxels = Omega_vox.reshape(M.shape)
-    HS.dt_used = np.unique(np.round(np.diff(times), 15))
+    HS.dt_used = np.unique(np.fromiter(dt_taken, float))
     if monitor is not None:
         monitor.finish(HS)
     for i, m in enumerate(media):
@@ -263,6 +282,21 @@ def run_heat(model) -> None:  # noqa: C901  (one loop with its callbacks)
             warnings.warn(f"medium {m.name!r} gets hotter than {BOILING_WARNING_C:g} deg C "
                           f"({HS.max_media_temps[i]:.4g} deg C): water in it would boil, "
                           "which this heat model does not include", stacklevel=4)
+
+
+def heat_source(model) -> np.ndarray:
+    """(nx, ny, nz) power turned into heat per W incident, W/cm^3/W: ``MC.NA``, and with a
+    fluorescence run (``FMC.NA`` set) minus the fluorescence emitted plus the fluorescence
+    absorbed (MCmatlab's ``calcdTdtArrays``): the energy re-emitted as light leaves the
+    voxel, and heats where it is absorbed."""
+    MC, FMC = model.MC, model.FMC
+    if FMC.NA is None:
+        return MC.NA
+    if np.shape(FMC.NA) != np.shape(MC.NA):
+        raise ValueError(f"FMC holds a run on another grid ({np.shape(FMC.NA)}, MC.NA "
+                         f"{np.shape(MC.NA)}): run model.run_monte_carlo('fluorescence') again, "
+                         "or set model.FMC = FluorescenceMonteCarloSimulation()")
+    return MC.NA - FMC.source_distribution + FMC.NA
 
 
 def _store(HS, S, T, Omega, times, sensor, chained, coupling) -> None:

@@ -27,8 +27,13 @@ OPTICAL_FIELDS = ("mua", "mus", "g")  #: may depend on (wavelength, FR, T, FD)
 THERMAL_FIELDS = ("VHC", "TC")  #: may depend on (T, FD)
 #: upper limits of user-given fields, far beyond any tissue or laser but small enough that
 #: no product in the simulations overflows (G.Lz = 1e300 or mua = 1e300 gave tracebacks
-#: and nonsense): cm^-1, J cm^-3 K^-1, W cm^-1 K^-1, J/mol, 1/s, cm, W, s, W cm^-2 K^-1
-LIMITS = {"mua": 1e6, "mus": 1e6, "VHC": 1e3, "TC": 1e3, "E": 1e8, "A": 1e250,
+#: and nonsense): cm^-1, J cm^-3 K^-1, W cm^-1 K^-1, J/mol, 1/s, cm, W, s, W cm^-2 K^-1.
+#: They are sanity bounds against unit mistakes, not physics. VHC: water has 4.19 and no
+#: solid or liquid much over 5, but MCmatlab's Example 14 gives 2000 to a material on
+#: purpose (slow heating); 1e5 lets such choices through and still refuses SI units
+#: (J m^-3 K^-1: water 4.19e6). TC: diamond, the best bulk conductor, has 22 (water 0.0058);
+#: 1e4 leaves room for idealised heat sinks (a region held near one temperature).
+LIMITS = {"mua": 1e6, "mus": 1e6, "VHC": 1e5, "TC": 1e4, "E": 1e8, "A": 1e250,
           "Lx": 1e3, "Ly": 1e3, "Lz": 1e3, "radius": 1e3, "P": 1e6, "duration_on": 1e7,
           "duration_off": 1e7, "dt": 1e7, "heat_transfer_coefficient": 1e3}
 

@@ -1,8 +1,6 @@
 """The MCmatlab-style model: ``model.G`` (geometry), ``model.MC`` (Monte Carlo), ``model.HS`` (heat);
 ``model.FMC`` (fluorescence Monte Carlo) is in :mod:`mcmatlab_py.fluorescence`.
 
-__all__ = ["EnergyBalanceError", "Geometry", "LightSource", "Model", "MonteCarloSimulation"]
-
 Names follow MCmatlab in snake_case (``nPhotonsRequested`` -> ``n_photons_requested``).
 Users set attributes, then call ``model = model.run_monte_carlo()`` as in MCmatlab;
 everything is validated when a simulation starts, and a bad value raises a
@@ -29,9 +27,14 @@ from .light_source import (
 from .media import Medium, check_positive, n_arguments
 from .media_bins import state_field
 
+__all__ = ["EnergyBalanceError", "Geometry", "LightSource", "Model", "MonteCarloSimulation",
+           "check_energy_balance"]
+
 #: every launched packet is accounted for in fixed point: the balance is 1 to rounding
 ENERGY_TOLERANCE = 1e-9
 MIN_VOXEL_SIZE = 1e-7  #: cm: smaller voxels make the kernel's face distances underflow
+#: the first of n fluence-rate iterations has 2^-(n-1) of the photons: more is pointless
+MAX_FR_DEP_ITERATIONS = 64
 BOUNDARY_TYPES = {
     0: "no escaping boundaries",
     1: "all cuboid boundaries escape",
@@ -259,8 +262,16 @@ class MonteCarloSimulation(StrictAttributes):
     #: nm; selects the value of media given as functions of wavelength (one wavelength;
     #: MCmatlab's default 800 nm)
     wavelength: float | None = 800.0
+    #: W, incident (pulse peak) power, for media that depend on the fluence rate: the runs of
+    #: ``fr_dep_iterations`` see ``FR = P * NFR``; for a plane wave, the power on the top face
+    P: float | None = None
+    #: MCmatlab's FRdepIterations: with n > 0, ``model.run_monte_carlo()`` runs n times with
+    #: ``FR = P * NFR`` of the run before, the photon count (or time) doubling up to the
+    #: requested one (:func:`mcmatlab_py.frt.fluence_rate_iterations`); needs ``P``
+    fr_dep_iterations: int = 0
     # the voxel state seen by media that depend on it: a number or an (nx, ny, nz) array.
-    # MCmatlab takes them from MC.P * MC.NFR, HS.T and 1 - exp(-HS.Omega); here they are given.
+    # MCmatlab takes them from MC.P * MC.NFR, HS.T and 1 - exp(-HS.Omega); here they are given
+    # (FR: the first run's, MCmatlab's FRinitial; the iterations and the heat run set them).
     FR: float | np.ndarray = 0.0  #: W/cm^2, fluence rate
     T: float | np.ndarray = 37.0  #: deg C, temperature
     FD: float | np.ndarray = 0.0  #: fractional damage, 0..1
@@ -324,12 +335,12 @@ class MonteCarloSimulation(StrictAttributes):
     _renamed = {"LS": "light_source", "normalizedAbsorption": "NA",
                 "normalizedFluenceRate": "NFR", "silentMode": "progress (= not silentMode)",
                 "useAllCPUs": "n_threads", "LC": "light_collector",
+                "FRinitial": "FR (the fluence rate the first run sees)",
                 **{f"normalizedIrradiance_{s}": f"NI_{s}"
                    for s in ("xpos", "xneg", "ypos", "yneg", "zpos", "zneg")}}
     _not_built = (
         "calcNormalizedFluenceRate", "calcNFR",
-        "interfaceNormals", "P", "spectrumFunc",
-        "spectrum", "FRinitial", "FRdepIterations", "CDFs",
+        "interfaceNormals", "spectrumFunc", "spectrum", "CDFs",
     )
 
     @property
@@ -382,11 +393,25 @@ class MonteCarloSimulation(StrictAttributes):
                                     "is not built yet")
             self.wavelength = check_positive(o, "wavelength", self.wavelength)
         self._validate_outputs(G)
+        self.checked_fr_dep_iterations()
         shape = (G.nx, G.ny, G.nz)
         self.FR = state_field(f"{o}.FR", self.FR, shape, lower=0.0)
         self.T = state_field(f"{o}.T", self.T, shape)
         self.FD = state_field(f"{o}.FD", self.FD, shape, lower=0.0, upper=1.0)
 
+    def checked_fr_dep_iterations(self) -> int:
+        """``fr_dep_iterations`` validated (with ``P``, which the iterations need)."""
+        o = self._owner_label
+        if self.P is not None:
+            self.P = check_positive(o, "P", self.P)
+        n = self.fr_dep_iterations = _check_int(o, "fr_dep_iterations", self.fr_dep_iterations,
+                                                minimum=0, maximum=MAX_FR_DEP_ITERATIONS)
+        if n and self.P is None:
+            # MCmatlab 3 stopped here too; MCmatlab 4 silently takes 1 W
+            raise ValueError(f"{o}.fr_dep_iterations = {n} but {o}.P is None: the iterations give "
+                             f"the media the fluence rate FR = P * NFR, so give {o}.P, the "
+                             "incident power in W")
+        return n
 
     def _validate_outputs(self, G: Geometry) -> None:
         o = self._owner_label
@@ -457,16 +482,25 @@ class Model(StrictAttributes):
         ``runMonteCarlo(model, 'fluorescence')``, :meth:`run_fluorescence_monte_carlo`).
         ``client``: a ``dask.distributed`` client (:func:`mcmatlab_py.distributed.connect`)
         to spread the photon batches over a cluster; the same seed gives the same ``NA``.
+        With ``MC.fr_dep_iterations`` = n > 0 the excitation is run n times, each seeing the
+        fluence rate ``MC.P * NFR`` of the one before (MCmatlab's ``FRdepIterations``,
+        :func:`mcmatlab_py.frt.fluence_rate_iterations`).
         """
         if kind == "fluorescence":
             return self.run_fluorescence_monte_carlo(client=client)
         if kind != "excitation":
             raise ValueError(f"model.run_monte_carlo takes 'excitation' or 'fluorescence', "
                              f"got {kind!r}")
-        from .monte_carlo import run_monte_carlo
+        n = self.MC.checked_fr_dep_iterations()
+        if n:
+            from .frt import fluence_rate_iterations
 
-        run_monte_carlo(self, client=client)
-        _check_energy_balance(self.MC)
+            fluence_rate_iterations(self, self.MC.P, n, client=client)
+        else:
+            from .monte_carlo import run_monte_carlo
+
+            run_monte_carlo(self, client=client)
+            check_energy_balance(self.MC)
         return self
 
     def run_fluorescence_monte_carlo(self, *, client=None, emitters=None) -> Model:
@@ -476,7 +510,7 @@ class Model(StrictAttributes):
         from .fluorescence import run_fluorescence_monte_carlo
 
         run_fluorescence_monte_carlo(self, client=client, emitters=emitters)
-        _check_energy_balance(self.FMC)
+        check_energy_balance(self.FMC)
         return self
 
     def simulate_heat_distribution(self) -> Model:
@@ -495,7 +529,8 @@ class Model(StrictAttributes):
         return plot_model(self, what, path, interactive=interactive)
 
 
-def _check_energy_balance(sim: MonteCarloSimulation) -> None:
+def check_energy_balance(sim: MonteCarloSimulation) -> None:
+    """Raise :class:`EnergyBalanceError` unless the run's energy balance is 1 to rounding."""
     balance = sim.energy_balance
     if not abs(balance - 1.0) <= ENERGY_TOLERANCE:
         raise EnergyBalanceError(

@@ -260,6 +260,12 @@ def test_combine_models_weights_by_photons_and_by_power():
     c = all_outputs(c).run_monte_carlo()
     ac = combine_models([a, c], powers=[1.0, 3.0])  # two beams, the second 3 W
     np.testing.assert_allclose(ac.MC.NA, (a.MC.NA + 3 * c.MC.NA) / 4)  # per W of the total
+    assert ac.MC.P == 4.0
+    with pytest.raises(ValueError, match=r"light sources or powers differ: set every model's "
+                                         r"MC.P"):
+        combine_models([a, c])
+    a.MC.P, c.MC.P = 1.0, 3.0  # MCmatlab's way: the weights are each model's MC.P
+    np.testing.assert_array_equal(combine_models([a, c]).MC.NA, ac.MC.NA)
     other = block(2000, shape=(10, 12, 6)).run_monte_carlo()
     with pytest.raises(ValueError, match="G.nx"):
         combine_models([a, other])

@@ -154,6 +154,21 @@ def test_g_one_and_n_inf_are_accepted_out_of_range_is_not():
         Medium("x", mua=math.inf, mus=1.0)
 
 
+def test_thermal_limits_pass_mcmatlabs_values_and_refuse_si_units():
+    """The limits guard against unit mistakes only: MCmatlab's Example 14 gives VHC = 2000
+    J cm^-3 K^-1 on purpose; water's VHC in J m^-3 K^-1 (4.19e6) is refused, naming the field,
+    also when a function of (T, FD) returns it."""
+    Medium("slow", mua=1.0, mus=1.0, VHC=2000.0, TC=5e-3)
+    Medium("diamond", mua=1.0, mus=1.0, VHC=1.8, TC=22.0)
+    with pytest.raises(ValueError, match=r"Medium\('x'\)\.VHC must be <= 100000, got 4190000"):
+        Medium("x", mua=1.0, mus=1.0, VHC=4.19e6)
+    with pytest.raises(ValueError, match=r"\.TC must be <= 10000, got 100000"):
+        Medium("x", mua=1.0, mus=1.0, TC=1e5)
+    m = Medium("x", mua=1.0, mus=1.0, VHC=lambda T, FD: 4.19e6 + 0 * T, TC=0.006)
+    with pytest.raises(ValueError, match=r"VHC\(T, FD\) returned 4190000.0: VHC must be <= 100000"):
+        m.values("VHC", None, np.zeros(2), np.full(2, 37.0), np.zeros(2))
+
+
 @pytest.mark.parametrize("kwargs, message", [
     ({"mua": lambda wl, FR: 1.0}, r"mua must be a number or a function of \(wavelength\) or "
                                   r"\(wavelength, FR, T, FD\)"),

@@ -12,10 +12,9 @@ intense, are absorbed first, so it narrows with depth.
 
     python examples/mcmatlab/ex12_saturable_absorber.py [--quick] [--out DIR]
 
-Differences from MCmatlab: a fixed photon count instead of 0.2 min of simulation; the
-iteration is :func:`mcmatlab_py.frt.fluence_rate_iterations` ``(model, P, n)``, since
-``MC.P`` and ``MC.FRdepIterations`` are not settings of ``model.MC`` here (MCmatlab's
-``MC.FRinitial = 0`` is the default ``MC.FR = 0``).
+Differences from MCmatlab: a fixed photon count instead of 0.2 min of simulation;
+MCmatlab's ``MC.FRinitial = 0`` is the default ``MC.FR = 0`` (the fluence rate the first
+run sees).
 """
 
 from __future__ import annotations
@@ -28,10 +27,9 @@ from pathlib import Path
 import numpy as np
 
 from mcmatlab_py import Medium, Model
-from mcmatlab_py.frt import fluence_rate_iterations
 
 ABSORBER_DEPTH = 0.03  #: cm, air above
-POWER = 5.0  #: W, incident on the top face (MCmatlab's MC.P)
+POWER = 5.0  #: W, incident on the top face (MC.P)
 LOW_POWER = 0.5  #: W, the comparison run of the check
 FR_ITERATIONS = 15  #: MCmatlab's MC.FRdepIterations
 
@@ -81,14 +79,15 @@ def build(quick: bool = False) -> Model:
     src.angular_intensity_distribution.radial_width = 0.0  # ... of zero width: collimated
     src.x_focus, src.y_focus, src.z_focus = 0.0, 0.0, G.Lz / 2
     src.theta = src.phi = 0.0
+    MC.FR = 0.0  # W/cm^2, the first run's fluence rate (MCmatlab's FRinitial)
+    MC.P = POWER  # W, incident on the top face
+    MC.fr_dep_iterations = FR_ITERATIONS
     return model
 
 
 def run(quick: bool = False) -> Model:
-    """Build the model and iterate the Monte Carlo at ``POWER``."""
-    model = build(quick)
-    fluence_rate_iterations(model, POWER, FR_ITERATIONS)
-    return model
+    """Build the model and run the Monte Carlo, iterated on the fluence rate at ``POWER``."""
+    return build(quick).run_monte_carlo()
 
 
 def transmission(model, half: int = 0) -> float:
@@ -104,8 +103,8 @@ def transmission(model, half: int = 0) -> float:
 def check(model) -> dict:
     """The transmission rises with the power, and more behind the more saturable absorber."""
     low = copy.deepcopy(model)
-    low.MC.FR = 0.0
-    fluence_rate_iterations(low, LOW_POWER, FR_ITERATIONS)
+    low.MC.FR, low.MC.P = 0.0, LOW_POWER
+    low.run_monte_carlo()
     t_hi, t_lo = transmission(model), transmission(low)
     t1, t2 = transmission(model, -1), transmission(model, +1)
     n = model.MC.n_photons

@@ -3,15 +3,15 @@ and combined.
 
 Standard tissue (mua = 1, mus = 100 cm^-1, g = 0.9) under 0.3 mm of air, 532 nm, as in
 Example 1. Two pencil beams along +z enter at y = -0.1 mm (power 1 W) and y = +0.1 mm
-(0.2 W); each is run on its own, then :func:`mcmatlab_py.combine.combine_models` adds
-them with weights given by their powers. The combined ``NA`` and ``NFR`` are per W of
-the total 1.2 W, as MCmatlab's ``combineModels``.
+(0.2 W), each model's ``MC.P``; each is run on its own, then
+:func:`mcmatlab_py.combine.combine_models` adds them with weights given by their powers.
+The combined ``NA`` and ``NFR`` are per W of the total 1.2 W (its ``MC.P``), as MCmatlab's
+``combineModels``.
 
     python examples/mcmatlab/ex22_combining_model_objects.py [--quick] [--out DIR]
 
-Differences from MCmatlab: the powers are passed to ``combine_models(models, powers)``
-(MCmatlab reads them from each model's ``MC.P``, which this port's ``MC`` does not
-have); fixed photon counts and seeds instead of ``simulationTimeRequested = 0.1`` min.
+Differences from MCmatlab: fixed photon counts and seeds instead of
+``simulationTimeRequested = 0.1`` min.
 """
 
 from __future__ import annotations
@@ -26,7 +26,7 @@ from mcmatlab_py import Medium, Model
 from mcmatlab_py.combine import combine_models
 
 Z_SURFACE = 0.03  #: cm, the tissue surface under the air
-POWERS = (1.0, 0.2)  #: W, the two beams (MCmatlab's MC.P)
+POWERS = (1.0, 0.2)  #: W, the two beams (their MC.P)
 Y_BEAMS = (-0.01, 0.01)  #: cm
 
 
@@ -35,7 +35,7 @@ def geometry(X, Y, Z):
     return np.where(Z > Z_SURFACE, 1, 0)
 
 
-def build(quick: bool = False, y_focus: float = Y_BEAMS[0]) -> Model:
+def build(quick: bool = False, y_focus: float = Y_BEAMS[0], power: float = POWERS[0]) -> Model:
     """One beam's model; ``quick``: 21 x 21 x 30 voxels and 2 x 10^4 photons."""
     model = Model()
     G = model.G
@@ -51,6 +51,7 @@ def build(quick: bool = False, y_focus: float = Y_BEAMS[0]) -> Model:
     MC.matched_interfaces = True
     MC.boundary_type = 1
     MC.wavelength = 532  # nm
+    MC.P = power  # W
     src = MC.light_source
     src.source_type = 0  # pencil beam
     src.x_focus, src.y_focus, src.z_focus = 0.0, y_focus, G.Lz / 2
@@ -60,11 +61,11 @@ def build(quick: bool = False, y_focus: float = Y_BEAMS[0]) -> Model:
 def run(quick: bool = False) -> dict:
     """``{"models": [beam 1, beam 2], "combined": model}``."""
     models = []
-    for i, y in enumerate(Y_BEAMS):
-        m = build(quick, y)
+    for i, (y, power) in enumerate(zip(Y_BEAMS, POWERS, strict=True)):
+        m = build(quick, y, power)
         m.MC.seed = 220 + i
         models.append(m.run_monte_carlo())
-    return {"models": models, "combined": combine_models(models, powers=list(POWERS))}
+    return {"models": models, "combined": combine_models(models)}  # weights: each MC.P
 
 
 def side_powers(model) -> tuple[float, float, float]:
