@@ -21,7 +21,6 @@ import numpy as np
 
 from enkf.paper import (
     CAMERA,
-    TRACKED_DEPTHS,
     TruthConfig,
     camera_image,
     emulator_for,
@@ -29,7 +28,7 @@ from enkf.paper import (
     generate_truth,
     noisy_sensor,
 )
-from enkf.tissue import identify
+from enkf.tissue import TRACKED_DEPTHS, identify
 
 
 def noisy_images(images: np.ndarray, seed: int, variance: float = 0.01) -> np.ndarray:
@@ -59,27 +58,32 @@ def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--seeds", type=int, nargs="+", default=[0, 1, 2, 3, 4])
     ap.add_argument("--scenarios", nargs="+", default=["constant", "time-varying"])
+    ap.add_argument("--model-error", choices=["white", "structured"], default="white",
+                    help="the filters' model error (white: the paper's C; structured: issue #18)")
     ap.add_argument("--out", default=str(Path(__file__).parent / "reports" / "image_vs_point.md"))
     args = ap.parse_args(argv)
+    me = {"model_error": args.model_error}
     emu = emulator_for(progress=False)
     camera = camera_image(CAMERA)
     lines = ["# The whole thermal image against one surface point", "",
              f"Command: `python validation/image_vs_point.py --seeds "
-             f"{' '.join(map(str, args.seeds))}`", "",
+             f"{' '.join(map(str, args.seeds))} --scenarios {' '.join(args.scenarios)} "
+             f"--model-error {args.model_error}`", "",
              f"Camera: {camera.shape[0]} x {camera.shape[1]} pixels over x, y in "
              f"[{CAMERA[0]}, {CAMERA[1]}] cm (fine-grid truth averaged over each footprint), "
              "noise variance 0.01 per pixel. Filter: N = 50, ETKF, the paper's priors and "
-             "walks, on the 20 x 20 x 10 model. Mean over the seeds; errors and spreads of "
-             "the parameters relative to the truth at t = 15 s.", ""]
+             f"walks, model error {args.model_error!r}, on the 20 x 20 x 10 model. Mean over "
+             "the seeds; errors and spreads of the parameters relative to the truth at t = 15 s.",
+             ""]
     for sc in args.scenarios:
         truth = generate_truth(TruthConfig(scenario=sc, camera=CAMERA))
         rows = {"point": [], "image": []}
         for seed in args.seeds:
-            point = filter_setup(sc, emu, seed=seed)
+            point = filter_setup(sc, emu, seed=seed, **me)
             est = identify(point, truth.times[1:], noisy_sensor(truth, seed)[:, None])
             rows["point"].append(metrics(est, truth))
             image = filter_setup(sc, emu, seed=seed, sensor_positions=np.zeros((0, 3)),
-                                 image=camera)
+                                 image=camera, **me)
             est = identify(image, truth.times[1:], noisy_images(truth.images, seed))
             rows["image"].append(metrics(est, truth))
             print(sc, seed, {k: {m: round(float(v), 4) for m, v in r[-1].items()}
