@@ -36,7 +36,7 @@ variances; ``E_rw`` random-walk covariance. See docs/enkf.md.
 
 from importlib.metadata import PackageNotFoundError, version
 
-from .adaptive import AdaptiveInflation, InflationEstimator
+from .adaptive import AdaptiveInflation, InflationEstimator, innovation_loglik
 from .analysis import enkf_perturbed_obs, etkf, inflate, random_rotation
 from .health import HealthCheck
 from .loop import run_filter
@@ -73,6 +73,7 @@ __all__ = [
     "enkf_perturbed_obs",
     "etkf",
     "inflate",
+    "innovation_loglik",
     "random_rotation",
     "run_filter",
     "uniform_prior",

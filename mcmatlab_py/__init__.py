@@ -18,7 +18,9 @@ TC : thermal conductivity, W cm^-1 K^-1
 NA : normalized absorption, absorbed power per volume per W incident, W cm^-3 W^-1
 NFR : normalized fluence rate, W cm^-2 W^-1
 E, A : Arrhenius activation energy (J/mol) and frequency factor (1/s)
-wavelength : nm (``MC.wavelength``), selects media given as functions of wavelength
+wavelength : nm (``MC.wavelength``), selects media given as functions of wavelength; an
+    array of them runs a broadband simulation (:mod:`mcmatlab_py.broadband`)
+spectrum : power share of each wavelength of a broadband run (``MC.spectrum_func`` normalised)
 FR, T, FD : fluence rate (W cm^-2), temperature (deg C), fractional damage (0..1)
 n_bins : sub-media a FR-, T- or FD-dependent medium is split into
 theta, phi : polar angle and azimuth of a light source's axis, rad (theta = 0: along +z)

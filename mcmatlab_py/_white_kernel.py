@@ -28,7 +28,21 @@ differences of successive ``q_k``, so a packet's deposits plus its escape add up
 launch weight exactly for every ``k``, and the integer sums make the result for a seed
 bit-identical for any number of threads. Voxel walk, sources, Fresnel reflection at the
 escaping faces (mismatched interfaces), the boundary types and the kill range are those
-of :mod:`mcmatlab_py._mc_kernel`; only one medium (the grid's) is supported.
+of :mod:`mcmatlab_py._mc_kernel`.
+
+Several media (issue #19, part 2): the scattering path then depends on every medium's
+``mus`` and ``g`` but still on no ``mua``, so one run per scattering state of the media
+gives every ``mua_k`` of one medium (the *estimated* one) with the others' ``mua`` fixed.
+The weight after partial path lengths ``L_m`` in medium ``m`` is
+
+.. math:: W_k = w_k \\, \\exp\\Big(-\\sum_m \\mu_{a,m,k} L_m\\Big),
+
+with ``mua_tab[m, k]`` the ``mua_k`` of the estimated medium and the fixed value of every
+other medium. The deposits stay per voxel crossing (one medium per voxel). The roulette
+test uses the slowest decay rate of ``k`` over the media, ``rate[k]``: it is exact for one
+medium and, for several, only a conservative first check (the weight itself is then
+compared with the threshold). Refraction between media is not built (the Python layer
+requires one refractive index for all media, or matched interfaces).
 """
 
 import math
@@ -73,7 +87,7 @@ def _exp_neg(x):
 
 
 @numba.njit(cache=True, inline="always", fastmath=_FASTMATH)
-def _flush(q, w, e, mua, ds, dst):
+def _flush(q, w, e, mua, ds, dst):  # mua: (K,) the decay rates of the current medium
     """Advance each live weight by a path ``ds``: ``e_k *= exp(-mua_k ds)``, then
     ``q_k = W_ONE w_k e_k``; add what it lost into ``dst`` (K,). Returns the number of
     weights still above the fixed-point resolution."""
@@ -102,16 +116,21 @@ def _next_check(q, lr):
 
 @numba.njit(cache=True, fastmath=_FASTMATH)
 def white_batch(
-    b, mua, mus, g, nref, nx, ny, nz, dx, dy, dz,
+    b, mua_tab, rate, Mf, mus, g, nref, nx, ny, nz, dx, dy, dz,
     boundary_type, n_out, matched, roulette, weight_threshold, chance,
     si, sf, stab, svox, fold, seed, batch_size, n_total, acc, tally,
 ):  # fmt: skip
-    """Run the photons of batch ``b`` for all absorptions ``mua`` (K,) at once.
+    """Run the photons of batch ``b`` for all absorptions ``mua_tab[:, k]`` at once.
 
     Parameters
     ----------
-    mua : (K,) float64 absorption coefficients (cm^-1), all > 0.
-    mus, g, nref : the medium's scattering coefficient (cm^-1), anisotropy, refractive index.
+    mua_tab : (n_media, K) float64 absorption coefficient (cm^-1) of each medium for each
+        ``k``, all > 0: the estimated medium's row holds the ``mua_k``, the others' rows
+        their fixed value.
+    rate : (K,) the smallest ``mua_tab[m, k]`` over the media in the grid (cm^-1).
+    Mf : (nx*ny*nz,) int32 medium index of each voxel (C order).
+    mus, g : (n_media,) scattering coefficient (cm^-1) and anisotropy of each medium.
+    nref : the refractive index of every medium (one value).
     boundary_type, n_out, matched, roulette, weight_threshold, chance : as
         :func:`mcmatlab_py._mc_kernel.transport_batch`.
     si, sf, stab, svox : the source (:mod:`mcmatlab_py._sources`).
@@ -121,7 +140,8 @@ def white_batch(
     acc : (n_rows, K) int64 absorbed fixed-point weight per row and ``mua_k``.
     tally : (N_TALLY, K) int64, the ``T_*`` totals of :mod:`mcmatlab_py._mc_kernel` per ``k``.
     """
-    K = mua.size
+    K = rate.size
+    multi = mus.size > 1
     Lx = nx * dx
     Ly = ny * dy
     Lz = nz * dz
@@ -153,6 +173,10 @@ def white_batch(
             for k in range(K):
                 tally[T_MISSED, k] += W_ONE
             continue
+        ix = _clamp(int(math.floor(px / dx)), nx)
+        iy = _clamp(int(math.floor(py / dy)), ny)
+        iz = _clamp(int(math.floor(pz / dz)), nz)
+        m = Mf[(ix * ny + iy) * nz + iz]
         w_start = np.int64(W_ONE)
         if not matched:
             if surface:
@@ -176,11 +200,8 @@ def white_batch(
             q[k] = w_start
             e[k] = 1.0
             w[k] = w_start / W_ONE
-            lr[k] = math.log(w[k] / weight_threshold) / mua[k]
+            lr[k] = math.log(w[k] / weight_threshold) / rate[k]
         check = _next_check(q, lr)
-        ix = _clamp(int(math.floor(px / dx)), nx)
-        iy = _clamp(int(math.floor(py / dy)), ny)
-        iz = _clamp(int(math.floor(pz / dz)), nz)
         L = 0.0  # path length travelled
         pend = 0.0  # path length since the last deposit
         inside = True
@@ -189,6 +210,8 @@ def white_batch(
             s0, s1, s2, s3, r1 = next_double(s0, s1, s2, s3)
             tau = -math.log(1.0 - r1)  # scattering optical depth to the next event
             while True:
+                m = Mf[(_clamp(ix, nx) * ny + _clamp(iy, ny)) * nz + _clamp(iz, nz)]
+                mus_m = mus[m]
                 d0 = _plane_distance(px, ux, ix, nx, dx)
                 d1 = _plane_distance(py, uy, iy, ny, dy)
                 d2 = _plane_distance(pz, uz, iz, nz, dz)
@@ -201,8 +224,8 @@ def white_batch(
                 else:
                     axis = 2
                     dmin = d2
-                if tau < mus * dmin:  # scattering before the plane
-                    s = tau / mus
+                if tau < mus_m * dmin:  # scattering before the plane
+                    s = tau / mus_m
                     px += s * ux
                     py += s * uy
                     pz += s * uz
@@ -210,13 +233,13 @@ def white_batch(
                     pend += s
                     break
                 if dmin == _INF:  # outside, moving away: lost
-                    _flush(q, w, e, mua, pend, tally[T_OUTSIDE_ABSORBED])
+                    _flush(q, w, e, mua_tab[m], pend, tally[T_OUTSIDE_ABSORBED])
                     pend = 0.0
                     for k in range(K):
                         tally[T_KILLED, k] += q[k]
                     alive = False
                     break
-                tau -= mus * dmin
+                tau -= mus_m * dmin
                 px += dmin * ux
                 py += dmin * uy
                 pz += dmin * uz
@@ -224,10 +247,11 @@ def white_batch(
                 pend += dmin
                 # leaving this voxel (or this stretch outside): deposit what was lost in it
                 if inside:
-                    n_alive = _flush(q, w, e, mua, pend, acc[fold[(ix * ny + iy) * nz + iz]])
+                    n_alive = _flush(q, w, e, mua_tab[m], pend,
+                                     acc[fold[(ix * ny + iy) * nz + iz]])
                     pend = 0.0
                 else:
-                    n_alive = _flush(q, w, e, mua, pend, tally[T_OUTSIDE_ABSORBED])
+                    n_alive = _flush(q, w, e, mua_tab[m], pend, tally[T_OUTSIDE_ABSORBED])
                     pend = 0.0
                 if n_alive == 0:  # every weight below the fixed-point resolution
                     alive = False
@@ -247,7 +271,7 @@ def white_batch(
                     pz = (iz + 1) * dz if sgn > 0 else iz * dz
                     inew = iz + sgn
                     nax = nz
-                if (not inside) or 0 <= inew < nax:  # one medium: no interface inside
+                if (not inside) or 0 <= inew < nax:  # one refractive index: no refraction
                     if axis == 0:
                         ix = inew
                     elif axis == 1:
@@ -303,14 +327,14 @@ def white_batch(
                 or abs(py / Ly - 0.5) > 0.5 * KILLRANGE
                 or abs(pz / Lz - 0.5) > 0.5 * KILLRANGE
             ):
-                _flush(q, w, e, mua, pend, tally[T_OUTSIDE_ABSORBED])
+                _flush(q, w, e, mua_tab[m], pend, tally[T_OUTSIDE_ABSORBED])
                 pend = 0.0
                 for k in range(K):
                     tally[T_KILLED, k] += q[k]
                 break
             s0, s1, s2, s3, r1 = next_double(s0, s1, s2, s3)
             s0, s1, s2, s3, r2 = next_double(s0, s1, s2, s3)
-            ux, uy, uz = _spin(ux, uy, uz, _hg_cos(g, r1), 2.0 * math.pi * r2)
+            ux, uy, uz = _spin(ux, uy, uz, _hg_cos(g[m], r1), 2.0 * math.pi * r2)
             if L > check:
                 # some weights fell below the threshold: settle the deposits up to here,
                 # then roulette each of those weights on its own
@@ -318,16 +342,23 @@ def white_batch(
                     dst = acc[fold[(ix * ny + iy) * nz + iz]]
                 else:
                     dst = tally[T_OUTSIDE_ABSORBED]
-                _flush(q, w, e, mua, pend, dst)
+                _flush(q, w, e, mua_tab[m], pend, dst)
                 pend = 0.0
                 for k in range(K):
                     if q[k] == 0 or L <= lr[k]:
+                        continue
+                    if multi and w[k] * e[k] >= weight_threshold:
+                        # decayed slower than the bound: check again where it can be below
+                        lr[k] = L + math.log(w[k] * e[k] / weight_threshold) / rate[k]
                         continue
                     if roulette:
                         s0, s1, s2, s3, r1 = next_double(s0, s1, s2, s3)
                         if r1 < chance:
                             w[k] /= chance
-                            lr[k] = math.log(w[k] / weight_threshold) / mua[k]
+                            if multi:
+                                lr[k] = L + math.log(w[k] * e[k] / weight_threshold) / rate[k]
+                            else:  # as before several media (the same numbers)
+                                lr[k] = math.log(w[k] / weight_threshold) / rate[k]
                             qn = np.int64(W_ONE * w[k] * e[k])
                             tally[T_ROULETTE, k] += qn - q[k]
                             q[k] = qn
@@ -344,7 +375,7 @@ def white_batch(
 
 @numba.njit(cache=True, parallel=True)
 def run_white_batches(
-    mua, mus, g, nref, nx, ny, nz, dx, dy, dz,
+    mua_tab, rate, Mf, mus, g, nref, nx, ny, nz, dx, dy, dz,
     boundary_type, n_out, matched, roulette, weight_threshold, chance,
     si, sf, stab, svox, fold, seed, batch_size, n_total, batch_start, batch_stop, acc, tally,
 ):  # fmt: skip
@@ -363,7 +394,7 @@ def run_white_batches(
             if b >= batch_stop:
                 break
             white_batch(
-                b, mua, mus, g, nref, nx, ny, nz, dx, dy, dz,
+                b, mua_tab, rate, Mf, mus, g, nref, nx, ny, nz, dx, dy, dz,
                 boundary_type, n_out, matched, roulette, weight_threshold, chance,
                 si, sf, stab, svox, fold, seed, batch_size, n_total, acc[kw], tally[kw],
             )  # fmt: skip

@@ -105,13 +105,17 @@ def combine_models(models: list, powers: list[float] | None = None):
     for name in _AVERAGED:
         v = mix(lambda m, name=name: getattr(m.MC, name))
         setattr(MC, name, v if v is None or np.ndim(v) else float(v))
-    MC.escaped = {k: float(sum(wi * m.MC.escaped[k] for wi, m in zip(w, models, strict=True)))
-                  for k in first.MC.escaped}
+    MC.escaped = {}
+    for k in first.MC.escaped:
+        v = mix(lambda m, k=k: m.MC.escaped[k])
+        MC.escaped[k] = v if np.ndim(v) else float(v)  # (n,) in broadband runs
     if MC.use_light_collector:
         img = mix(lambda m: m.MC.light_collector.image)
         MC.light_collector.image = img if np.ndim(img) else float(img)
         MC.n_photons_collected = sum(m.MC.n_photons_collected or 0 for m in models)
     MC.n_photons = sum(m.MC.n_photons for m in models)
+    if first.MC.n_photons_per_wavelength is not None:
+        MC.n_photons_per_wavelength = sum(m.MC.n_photons_per_wavelength for m in models)
     MC.simulation_time = sum(m.MC.simulation_time for m in models)
     paths = [m.MC.example_paths for m in models if m.MC.example_paths is not None]
     MC.example_paths = np.hstack(paths) if paths else None

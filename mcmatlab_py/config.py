@@ -208,6 +208,12 @@ def model_from_config(cfg: dict) -> Model:
               "light_collector": (_COLLECTOR_KEYS, model.MC.light_collector),
               "deposition_criteria": (_CRITERIA_KEYS, model.MC.deposition_criteria)}
     _set(model.MC, "MC", MC_cfg, skip=tuple(tables))
+    if isinstance(MC_cfg.get("wavelength"), list):
+        # the media of a config are constants: a broadband run would repeat one run
+        raise ConfigError(f"MC.wavelength must be one number (nm) in a config file, got "
+                          f"{shorten(repr(MC_cfg['wavelength']))}: broadband runs (an array of "
+                          "wavelengths) are for the Python API, with media given as functions "
+                          "of the wavelength")
     for name, (keys, obj) in tables.items():
         _set(obj, f"MC.{name}", check_keys(f"MC.{name}", MC_cfg.get(name, {}), keys))
     if "HS" in cfg:

@@ -69,8 +69,10 @@ def default_cache_dir() -> Path:
 class EmulatorSpec:
     """Everything that changes the tabulated maps (hashed into the cache key).
 
-    The geometry must be a single medium whose ``mua`` and ``mus`` are replaced by the
-    table values; ``g`` and ``n`` are fixed.
+    The geometry is a single medium whose ``mua`` and ``mus`` are replaced by the table
+    values (``g`` and ``n`` fixed), or, with ``media`` and ``medium_map`` (issue #19), a
+    voxel map of several media of which one, ``estimated``, takes the table's ``mua`` and
+    ``mus`` while the others keep theirs.
     """
 
     nx: int
@@ -101,6 +103,12 @@ class EmulatorSpec:
     #: ``n_photons * clip((100 / mus)^0.7, 0.5, 5)`` (see :meth:`photons_at`)
     n_photons: int = 250_000
     seed: int = 12345
+    #: several media: ``(mua, mus, g, n)`` of each medium of ``medium_map`` (cm^-1), the
+    #: estimated one's ``mua`` and ``mus`` None (the table's); None: one medium (g, n above)
+    media: tuple | None = None
+    estimated: int = 0  #: the medium whose mua and mus the table varies
+    #: (nx, ny, nz) medium index of every voxel with ``media`` (its hash is in the key)
+    medium_map: np.ndarray | None = field(default=None, compare=False, repr=False)
 
     def __post_init__(self):
         for name in ("n_mua", "n_mus"):
@@ -119,6 +127,30 @@ class EmulatorSpec:
                 raise ValueError("EmulatorSpec.mesh_divisions must be three integers >= 1, "
                                  f"got {self.mesh_divisions!r}")
             self.mesh_divisions = md
+        if self.media is not None:
+            self._check_media()
+
+    def _check_media(self) -> None:
+        media = tuple(tuple(None if v is None else float(v) for v in m) for m in self.media)
+        if len(media) < 2 or any(len(m) != 4 for m in media):
+            raise ValueError(f"EmulatorSpec.media must hold (mua, mus, g, n) of two or more "
+                             f"media, got {self.media!r}")
+        if not 0 <= int(self.estimated) < len(media):
+            raise ValueError(f"EmulatorSpec.estimated must be a medium index in 0..{len(media) - 1}"
+                             f", got {self.estimated!r}")
+        self.estimated = int(self.estimated)
+        mua, mus, self.g, self.n = media[self.estimated]
+        media = tuple((None, None, *m[2:]) if i == self.estimated else m
+                      for i, m in enumerate(media))
+        M = np.asarray(self.medium_map)
+        if M.shape != (self.nx, self.ny, self.nz) or M.dtype.kind not in "iu":
+            raise ValueError(f"EmulatorSpec.medium_map must be integer indices of shape "
+                             f"{(self.nx, self.ny, self.nz)}, got {M.dtype} {M.shape}")
+        if M.min() < 0 or M.max() >= len(media) or not (M == self.estimated).any():
+            raise ValueError(f"EmulatorSpec.medium_map must hold indices in 0..{len(media) - 1} "
+                             f"and at least one voxel of the estimated medium {self.estimated}")
+        self.media = media
+        self.medium_map = np.ascontiguousarray(M, dtype=np.int32)
 
     @property
     def field_shape(self) -> tuple[int, int, int]:
@@ -136,13 +168,18 @@ class EmulatorSpec:
         return NA_OFFSET * self.Lx * self.Ly * self.Lz / (mx * my * mz)
 
     @classmethod
-    def from_model(cls, model, **kw) -> EmulatorSpec:
-        """The spec of a single-medium model (its G and MC.light_source)."""
+    def from_model(cls, model, medium: int | None = None, **kw) -> EmulatorSpec:
+        """The spec of a model (its G and MC.light_source): one medium, or several with
+        ``medium``, the index in ``G.media`` of the one whose mua and mus are tabulated."""
         G, MC = model.G, model.MC
         G.validate()
-        if len(G.media) != 1:
-            raise ValueError("the emulator needs a homogeneous block: G.media must have one "
-                             f"medium, got {len(G.media)}")
+        if len(G.media) != 1 and medium is None:
+            raise ValueError(f"G.media has {len(G.media)} media: name the one whose mua and mus "
+                             "the emulator varies (medium = its index)")
+        medium = 0 if medium is None else int(medium)
+        if not 0 <= medium < len(G.media):
+            raise ValueError(f"medium must be an index of G.media (0..{len(G.media) - 1}), "
+                             f"got {medium}")
         src = MC.light_source
         unsupported = [f"MC.light_source.{k}" for k in ("theta", "phi", "psi", "emitter_length")
                        if getattr(src, k)]
@@ -151,25 +188,34 @@ class EmulatorSpec:
             unsupported.append(f"MC.light_source.source_type = {src.source_type!r}")
         if MC.source_distribution is not None:
             unsupported.append("MC.source_distribution")
-        m = G.media[0]
-        for k in ("mua", "mus", "g", "n"):
-            if callable(getattr(m, k)):
-                unsupported.append(f"G.media[0].{k} as a function")
-        if getattr(m, "custom_phase_func", None) is not None:
-            unsupported.append("G.media[0].custom_phase_func")
+        for i, m in enumerate(G.media):
+            for k in ("mua", "mus", "g", "n"):
+                if callable(getattr(m, k)):
+                    unsupported.append(f"G.media[{i}].{k} as a function")
+            if getattr(m, "custom_phase_func", None) is not None:
+                unsupported.append(f"G.media[{i}].custom_phase_func")
         if unsupported:
             # the table would silently be that of a straight, plain beam in a plain medium
             raise NotBuiltError(f"the absorption emulator supports straight pencil, top-hat, "
                                 f"Gaussian, plane-wave and point sources in a plain medium; "
                                 f"not built for {', '.join(unsupported)}")
-        return cls(nx=G.nx, ny=G.ny, nz=G.nz, Lx=G.Lx, Ly=G.Ly, Lz=G.Lz, g=G.media[0].g,
-                   n=G.media[0].n, source_type=src.source_type, radius=src.radius,
+        if len(G.media) > 1:
+            kw.update(media=tuple((m.mua, m.mus, m.g, m.n) for m in G.media), estimated=medium,
+                      medium_map=G.medium_map())
+        return cls(nx=G.nx, ny=G.ny, nz=G.nz, Lx=G.Lx, Ly=G.Ly, Lz=G.Lz, g=G.media[medium].g,
+                   n=G.media[medium].n, source_type=src.source_type, radius=src.radius,
                    x_focus=src.x_focus, y_focus=src.y_focus, z_focus=src.z_focus,
                    boundary_type=MC.boundary_type, matched_interfaces=MC.matched_interfaces,
                    n_outside=MC.n_outside, **kw)
 
     def key(self) -> str:
         d = {k: getattr(self, k) for k in self.__dataclass_fields__}
+        if self.media is None:  # one medium: the key of the tables cached before media
+            for k in ("media", "estimated", "medium_map"):
+                del d[k]
+        else:
+            d["medium_map"] = [self.medium_map.shape, hashlib.sha256(
+                self.medium_map.tobytes()).hexdigest()]
         d["version"] = CACHE_VERSION
         d["batch_size"] = MonteCarloSimulation().batch_size
         d["weight_threshold"] = MonteCarloSimulation().weight_threshold
@@ -184,6 +230,17 @@ class EmulatorSpec:
         a, b, _ = (self.nx, self.ny, self.nz) if voxels else self.field_shape
         swap = (self.x_focus == self.y_focus and self.nx == self.ny and self.Lx == self.Ly
                 and a == b)
+        if self.medium_map is not None:  # the media must share the mirror symmetries
+            if not voxels and self.mesh_divisions is not None:
+                # a thin absorbing layer puts its power into the top mesh cells, where the
+                # Kuhn triangulation's asymmetric P1 loads differ from their mirror average by
+                # 5% (rel. L2, the 80 um epidermis of examples/two_layer.toml on 20 x 20 x 10):
+                # keep the exact loads on every node (the voxels are still averaged)
+                return False, False, False
+            M = self.medium_map
+            sx = sx and np.array_equal(M, M[::-1])
+            sy = sy and np.array_equal(M, M[:, ::-1])
+            swap = swap and np.array_equal(M, M.transpose(1, 0, 2))
         return sx, sy, swap
 
     def orbits(self, voxels: bool = False) -> tuple[np.ndarray, np.ndarray]:
@@ -229,6 +286,11 @@ class EmulatorSpec:
         m = Model()
         m.G = Geometry(nx=self.nx, ny=self.ny, nz=self.nz, Lx=self.Lx, Ly=self.Ly, Lz=self.Lz,
                        media=[Medium("tissue", mua=mua, mus=mus, g=self.g, n=self.n)])
+        if self.media is not None:
+            m.G.media = [Medium(f"medium {i}", mua=mua if i == self.estimated else p[0],
+                                mus=mus if i == self.estimated else p[1], g=p[2], n=p[3])
+                         for i, p in enumerate(self.media)]
+            m.G.geom_func, m.G.geom_func_params = _voxel_map, self.medium_map
         MC = m.MC
         MC.n_photons_requested = int(n_photons or self.n_photons)
         MC.seed = self.seed if seed is None else seed
@@ -366,6 +428,11 @@ class AbsorptionEmulator:
                    build_seconds=seconds)
 
 
+def _voxel_map(X, Y, Z, M):
+    """``G.geom_func`` of a spec with several media: its stored voxel map (picklable)."""
+    return M
+
+
 _OPERATORS: dict = {}
 
 
@@ -427,9 +494,10 @@ def symmetrize(na: np.ndarray, spec: EmulatorSpec, voxels: bool = False) -> np.n
     block under x <-> y as well: averaging over these images is an exact variance
     reduction (up to 8 times fewer photons for the same noise). The field is on the
     spec's voxels, or (``voxels=False`` with ``mesh_divisions``) on its mesh nodes, where
-    the average also evens out the O(h^2) asymmetry of the Kuhn triangulation's quadrature.
+    the average also evens out the O(h^2) asymmetry of the Kuhn triangulation's quadrature
+    (not with several media: :meth:`EmulatorSpec.symmetric_axes`).
     """
-    sx, sy, swap = spec.symmetric_axes()
+    sx, sy, swap = spec.symmetric_axes(voxels and spec.media is not None)
     if voxels:
         swap = swap and spec.nx == spec.ny
     if sx:

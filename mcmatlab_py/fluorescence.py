@@ -17,10 +17,19 @@ emitted power is the absorbed power times ``QY`` times the ratio of the photon e
 field, collector image) are per W of *incident excitation*, as MCmatlab's; its fractions
 (``absorbed_fraction``, ``escaped``, ...) are fractions of the emitted fluorescence.
 
-One fluorescence wavelength per run: the emission spectrum ``Medium.ES`` only tells
-whether a medium emits at ``FMC.wavelength``. MCmatlab's broadband runs (arrays of
-wavelengths, its Example 23) are not built; ``examples/mcmatlab/ex23_broadband_monte_carlo.py``
-sums monochromatic runs instead.
+Broadband (MCmatlab's Example 23; :mod:`mcmatlab_py.broadband`): with an array of
+excitation wavelengths :math:`\\lambda_k` (``MC.NA`` then (nx, ny, nz, n_x), slice k per W
+incident in all) and an array of fluorescence wavelengths :math:`\\lambda_j`, each voxel
+emits the photons absorbed at every :math:`\\lambda_k` times :math:`QY(\\lambda_k)`, spread
+over the :math:`\\lambda_j` by its emission spectrum normalised over them,
+
+.. math:: E_j(\\mathbf{r}) = \\sum_k NA_k(\\mathbf{r})\\, QY(\\lambda_k)\\,
+          \\frac{\\lambda_k}{\\lambda_j}\\; \\frac{ES(\\lambda_j)}{\\sum_{j'} ES(\\lambda_{j'})}
+
+(``ES`` not given: equal shares), as MCmatlab's ``runMonteCarlo``. ``FMC.source_distribution``
+is then (nx, ny, nz, n_f), ``FMC.emitted_power`` (n_f,), and the fluorescence maps get the
+wavelength axis of :mod:`mcmatlab_py.broadband`, each wavelength run with its own emitters.
+With one fluorescence wavelength the spectrum only tells whether a medium emits there.
 """
 
 from __future__ import annotations
@@ -29,7 +38,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ._strict import NotBuiltError
+from .broadband import is_broadband
 from .model import MonteCarloSimulation
 
 __all__ = ["FluorescenceMonteCarloSimulation", "fluorescence_emitters",
@@ -57,10 +66,11 @@ class FluorescenceMonteCarloSimulation(MonteCarloSimulation):
       (see :mod:`mcmatlab_py.fluorescence`).
     """
 
-    #: nm, the fluorescence wavelength (MCmatlab's FMC.wavelength); one number
-    wavelength: float | None = None
-    #: W of fluorescence emitted in the cuboid per W of incident excitation (result)
-    emitted_power: float | None = None
+    #: nm, the fluorescence wavelength (MCmatlab's FMC.wavelength); a 1-D array: broadband
+    wavelength: float | np.ndarray | None = None
+    #: W of fluorescence emitted in the cuboid per W of incident excitation (result); (n_f,),
+    #: per fluorescence wavelength, in a broadband run
+    emitted_power: float | np.ndarray | None = None
 
     _owner_label = "FMC"
 
@@ -68,16 +78,12 @@ class FluorescenceMonteCarloSimulation(MonteCarloSimulation):
         if self.wavelength is None:
             raise ValueError("FMC.wavelength must be set: the fluorescence wavelength in nm "
                              "(MCmatlab's model.FMC.wavelength)")
-        if np.ndim(self.wavelength) > 0:
-            raise NotBuiltError(
-                "MCmatlab's broadband FMC.wavelength (an array of wavelengths) is not built yet: "
-                "run one fluorescence wavelength at a time and weight the runs by the emission "
-                "spectrum (examples/mcmatlab/ex23_broadband_monte_carlo.py)")
-        for name, default in (("P", None), ("fr_dep_iterations", 0)):
+        for name, default in (("P", None), ("fr_dep_iterations", 0), ("spectrum_func", None)):
             if getattr(self, name) != default:
                 raise ValueError(f"FMC.{name} = {getattr(self, name)!r}: the fluorescence run has "
                                  f"no power or fluence-rate iteration of its own (MCmatlab's "
-                                 f"neither); set MC.{name}, the excitation's")
+                                 f"neither; its spectrum is the media's ES); set MC.{name}, "
+                                 "the excitation's")
         super().validate(G)
 
 
@@ -86,9 +92,12 @@ def _check_excitation(G, MC) -> None:
     if MC.NA is None:
         raise ValueError("MC.NA is empty: run the excitation, model.run_monte_carlo(), before "
                          "the fluorescence Monte Carlo")
+    if is_broadband(MC.wavelength):
+        shape = (*shape, np.size(MC.wavelength))
     if np.shape(MC.NA) != shape:
-        raise ValueError(f"MC.NA has shape {np.shape(MC.NA)}, not the geometry's {shape}: run "
-                         "model.run_monte_carlo() again after changing G")
+        raise ValueError(f"MC.NA has shape {np.shape(MC.NA)}, not {shape} ((nx, ny, nz), and "
+                         "len(MC.wavelength) in a broadband run): run model.run_monte_carlo() "
+                         "again after changing G or MC.wavelength")
     if not MC.deposition_criteria.is_default:
         raise ValueError("MC.deposition_criteria restrict where the excitation is deposited: the "
                          "excitation must be run without them to give the fluorescence emitters")
@@ -97,24 +106,29 @@ def _check_excitation(G, MC) -> None:
                          "wavelength (photon energies, lambda_x / lambda_f)")
 
 
-def fluorescence_emitters(G, MC, wavelength: float, M_raw: np.ndarray | None = None, *,
+def fluorescence_emitters(G, MC, wavelength, M_raw: np.ndarray | None = None, *,
                           state: tuple | None = None) -> np.ndarray:
-    """(nx, ny, nz) fluorescence emitted at ``wavelength`` (nm), W/cm^3 per W incident.
+    """Fluorescence emitted at ``wavelength`` (nm), W/cm^3 per W incident: (nx, ny, nz), or
+    (nx, ny, nz, n_f) for an array of n_f fluorescence wavelengths.
 
-    ``MC`` is the run excitation (``NA``, ``wavelength``, ``FR``, ``T``, ``FD``); each medium
-    with a ``QY`` emits :math:`NA \\cdot QY(\\lambda_x) \\cdot \\lambda_x / \\lambda_f`
-    (photons emitted per photon absorbed, times their energy ratio). ``M_raw``: the media
-    map of ``G`` (computed when not given). ``state``: the voxel ``(FR, T, FD)`` seen by
-    ``QY`` and ``ES`` instead of ``MC``'s (a heat run's state, the excitation unchanged).
-    A medium whose ``ES`` is 0 at ``wavelength`` where it absorbed light raises
-    ``ValueError``: with one fluorescence wavelength all its emission would be put where
-    its spectrum says there is none.
+    ``MC`` is the run excitation (``NA``, ``wavelength``, one or an array, ``FR``, ``T``,
+    ``FD``); each medium with a ``QY`` emits :math:`\\sum_k NA_k \\cdot QY(\\lambda_k) \\cdot
+    \\lambda_k / \\lambda_f` (photons emitted per photon absorbed, times their energy ratio),
+    spread over an array of fluorescence wavelengths by its ``ES`` normalised over them (see
+    the module docstring). ``M_raw``: the media map of ``G`` (computed when not given).
+    ``state``: the voxel ``(FR, T, FD)`` seen by ``QY`` and ``ES`` instead of ``MC``'s (a heat
+    run's state, the excitation unchanged). A medium whose ``ES`` is 0 at every fluorescence
+    wavelength where it absorbed light raises ``ValueError``: all its emission would be put
+    where its spectrum says there is none.
     """
     _check_excitation(G, MC)
     M_raw = G.medium_map() if M_raw is None else M_raw
     shape = M_raw.shape
-    lam_x, lam_f = float(MC.wavelength), float(wavelength)
-    out = np.zeros(shape, dtype=np.float64)
+    lam_x = np.atleast_1d(np.asarray(MC.wavelength, dtype=np.float64))
+    lam_f = np.atleast_1d(np.asarray(wavelength, dtype=np.float64))
+    NA = np.asarray(MC.NA).reshape(*shape, lam_x.size)  # a last axis also for one wavelength
+    ratio = lam_x[:, None] / lam_f[None, :]  # (n_x, n_f) photon energy ratios
+    out = np.zeros((*shape, lam_f.size), dtype=np.float64)
     for i, medium in enumerate(G.media):
         if medium.QY is None:
             continue
@@ -123,17 +137,26 @@ def fluorescence_emitters(G, MC, wavelength: float, M_raw: np.ndarray | None = N
             continue
         here = [np.broadcast_to(np.asarray(v, dtype=np.float64), shape)[mask]
                 for v in (state if state is not None else (MC.FR, MC.T, MC.FD))]
-        qy = medium.values("QY", lam_x, *here)
-        emitted = MC.NA[mask] * qy * (lam_x / lam_f)
-        if medium.ES is not None:
-            es = medium.values("ES", lam_f, *here)
-            if np.any((es == 0) & (emitted > 0)):
+        # (n_voxels, n_x): absorbed power times QY at each excitation wavelength
+        absorbed_qy = np.column_stack([NA[mask, k] * medium.values("QY", lx, *here)
+                                       for k, lx in enumerate(lam_x)])
+        emitted = absorbed_qy @ ratio  # (n_voxels, n_f): all emitted at each lambda_f
+        if medium.ES is None:
+            share = np.full(lam_f.size, 1.0 / lam_f.size)
+        else:
+            es = np.column_stack([medium.values("ES", lf, *here) for lf in lam_f])
+            norm = es.sum(axis=1, keepdims=True)
+            silent = (norm[:, 0] == 0) & (emitted[:, 0] > 0)
+            if silent.any():
+                where = (f"FMC.wavelength = {lam_f[0]:g} nm" if lam_f.size == 1 else
+                         f"every FMC.wavelength ({lam_f[0]:g}..{lam_f[-1]:g} nm)")
                 raise ValueError(
-                    f"Medium({medium.name!r}).ES is 0 at FMC.wavelength = {lam_f:g} nm where the "
-                    "medium absorbed excitation light: it does not emit there; choose a "
-                    "fluorescence wavelength inside its emission band")
-        out[mask] = emitted
-    return out
+                    f"Medium({medium.name!r}).ES is 0 at {where} where the medium absorbed "
+                    "excitation light: it does not emit there; choose fluorescence wavelengths "
+                    "inside its emission band")
+            share = np.divide(es, norm, out=np.zeros_like(es), where=norm > 0)
+        out[mask] = emitted * share
+    return out if is_broadband(wavelength) else out[..., 0]
 
 
 def run_fluorescence_monte_carlo(model, client=None, emitters: np.ndarray | None = None) -> None:
@@ -149,18 +172,26 @@ def run_fluorescence_monte_carlo(model, client=None, emitters: np.ndarray | None
     if not isinstance(FMC, FluorescenceMonteCarloSimulation):
         raise ValueError(f"model.FMC must be a FluorescenceMonteCarloSimulation, got {FMC!r}")
     M_raw = G.medium_map()
+    FMC.source_distribution = None  # a result: the last run's emitters
     FMC.validate(G)
+    broadband = is_broadband(FMC.wavelength)
     if emitters is None:
         emitters = fluorescence_emitters(G, MC, FMC.wavelength, M_raw)
     else:
-        from .light_source import check_source_distribution
-
-        emitters = check_source_distribution(emitters, M_raw.shape)
-    power = float(emitters.sum() * G.dx * G.dy * G.dz)
+        emitters = np.asarray(emitters, dtype=np.float64)
+        want = (*M_raw.shape, FMC.wavelength.size) if broadband else M_raw.shape
+        if emitters.shape != want or not np.all(np.isfinite(emitters)) or np.any(emitters < 0):
+            raise ValueError(f"emitters must be finite, >= 0 and of shape {want} "
+                             f"((nx, ny, nz{', len(FMC.wavelength)' if broadband else ''})), got "
+                             f"shape {emitters.shape}")
+    dV = G.dx * G.dy * G.dz
+    per_wavelength = emitters.reshape(-1, emitters.shape[3]).sum(axis=0) * dV if broadband \
+        else None
+    power = float(emitters.sum() * dV)
     if not power > 0:
         raise ValueError("no fluorescence emitters: no medium with a quantum yield (Medium.QY "
                          "> 0) absorbed excitation light")
     FMC.FR, FMC.T, FMC.FD = MC.FR, MC.T, MC.FD
     FMC.source_distribution = emitters
     run_simulation(G, FMC, client=client, power=power)
-    FMC.emitted_power = power
+    FMC.emitted_power = per_wavelength if broadband else power

@@ -22,6 +22,7 @@ from contextlib import contextmanager
 
 import numpy as np
 
+from .broadband import total
 from .media import FLUORESCENCE_FIELDS, OPTICAL_FIELDS, THERMAL_FIELDS, check_positive
 from .media_bins import optical_media_properties, thermal_media_properties
 
@@ -65,7 +66,7 @@ def fluence_rate_iterations(model, power: float, n_iterations: int, *, client=No
             run_monte_carlo(model, client=client)
             check_energy_balance(MC)
             if i < n_iterations - 1:
-                MC.FR = power * MC.NFR
+                MC.FR = power * total(MC.NFR)
     finally:
         MC.n_photons_requested, MC.simulation_time_requested = n0, t0
 
@@ -131,7 +132,7 @@ class MediaCoupling:
             return False
         MC.T, MC.FD = T_vox, FD
         if MC.NFR is not None:
-            MC.FR = power * MC.NFR
+            MC.FR = power * total(MC.NFR)
         with _quiet(MC):
             fluence_rate_iterations(model, power, max(1, MC.checked_fr_dep_iterations()))
         return True

@@ -16,6 +16,8 @@ import warnings
 
 import numpy as np
 
+from ._strict import NotBuiltError
+from .broadband import is_broadband, total
 from .progress import Progress
 
 __all__ = ["BOILING_WARNING_C", "heat_source", "run_heat", "voxels_to_nodes"]
@@ -99,6 +101,7 @@ def run_heat(model) -> None:  # noqa: C901  (one loop with its callbacks)
                       "(MCmatlab has one power, MC.P, for both): set HS.P = MC.P", stacklevel=4)
 
     S = _Setup(G, HS, M)
+    present_media = np.unique(M)
     mesh, L = S.mesh, S.L
     npts = mesh.p.shape[1]
     chained = HS.max_media_temps is not None
@@ -164,6 +167,9 @@ def run_heat(model) -> None:  # noqa: C901  (one loop with its callbacks)
 
     # absorbed power: MC.NA, the emulator, or Monte Carlo runs for time-varying optics
     if varying_optics or callable(HS.absorption):
+        if is_broadband(MC.wavelength):
+            raise NotBuiltError("HS.mua_t, HS.mus_t and HS.absorption with a broadband "
+                                "MC.wavelength are not built: give one wavelength")
         mua, mus, g, nref = optical_arrays(media, MC.wavelength)
     current_optics = None
     src = {"NA": MC.NA, "f": None}  # the voxel map and its nodal load per W
@@ -265,7 +271,13 @@ def run_heat(model) -> None:  # noqa: C901  (one loop with its callbacks)
                 if coupling.update_fluorescence(T_vox, Om_vox, ran) or ran:
                     set_absorption(heat_source(model))
                 if coupling.update_thermal(T_vox, Om_vox) and dt_max is not None:
-                    vhc, tc = element_props(t1)
+                    if HS.VHC_t is None and HS.TC_t is None:
+                        # the sub-media on the voxels: the elements' values, not 6 per voxel
+                        th = coupling.thermal
+                        on = np.isin(th.parent, present_media)
+                        vhc, tc = th.VHC[on], th.TC[on]
+                    else:
+                        vhc, tc = element_props(t1)
                     bound["dt"] = auto_dt(S.mesh_grid.spacing, vhc, tc, HS.theta,
                                           HS.large_time_steps)
         bar.update(k)
@@ -290,13 +302,14 @@ def heat_source(model) -> np.ndarray:
     absorbed (MCmatlab's ``calcdTdtArrays``): the energy re-emitted as light leaves the
     voxel, and heats where it is absorbed."""
     MC, FMC = model.MC, model.FMC
+    NA = total(MC.NA)  # broadband runs heat with the sum over their wavelengths, as MCmatlab
     if FMC.NA is None:
-        return MC.NA
-    if np.shape(FMC.NA) != np.shape(MC.NA):
+        return NA
+    if np.shape(FMC.NA)[:3] != np.shape(NA):
         raise ValueError(f"FMC holds a run on another grid ({np.shape(FMC.NA)}, MC.NA "
                          f"{np.shape(MC.NA)}): run model.run_monte_carlo('fluorescence') again, "
                          "or set model.FMC = FluorescenceMonteCarloSimulation()")
-    return MC.NA - FMC.source_distribution + FMC.NA
+    return NA - total(FMC.source_distribution) + total(FMC.NA)
 
 
 def _store(HS, S, T, Omega, times, sensor, chained, coupling) -> None:

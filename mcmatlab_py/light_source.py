@@ -232,17 +232,28 @@ def _beam_distributions(src, kind: str):
     return [None, None, None, None]
 
 
-def check_source_distribution(value, shape: tuple[int, int, int]) -> np.ndarray | None:
-    """``MC.source_distribution`` as a float64 (nx, ny, nz) array, or None; ValueError if bad."""
+def check_source_distribution(value, shape: tuple[int, int, int], n_wavelengths: int | None = None,
+                              *, owner: str = "MC") -> np.ndarray | None:
+    """``MC.source_distribution`` as a float64 (nx, ny, nz) array, or None; ValueError if bad.
+
+    A broadband run (``n_wavelengths`` given) also takes (nx, ny, nz, n_wavelengths), the
+    emitters of each wavelength (MCmatlab's 4-D sourceDistribution): each wavelength's share
+    of the power is its slice's share of the sum.
+    """
     if value is None:
         return None
     arr = np.asarray(value, dtype=np.float64)
-    if arr.shape != tuple(shape):
-        raise ValueError(f"MC.source_distribution must have the shape (nx, ny, nz) = {tuple(shape)}, "
+    name = f"{owner}.source_distribution"
+    shapes = [tuple(shape)]
+    if n_wavelengths is not None:
+        shapes.append((*shape, n_wavelengths))
+    if arr.shape not in shapes:
+        broadband = f" or (nx, ny, nz, len({owner}.wavelength)) = {shapes[1]}" \
+            if n_wavelengths is not None else ""
+        raise ValueError(f"{name} must have the shape (nx, ny, nz) = {tuple(shape)}{broadband}, "
                          f"got shape {arr.shape}")
     if not np.all(np.isfinite(arr)) or np.any(arr < 0) or not arr.sum() > 0:
-        raise ValueError("MC.source_distribution must be finite and non-negative with a positive "
-                         "sum")
+        raise ValueError(f"{name} must be finite and non-negative with a positive sum")
     return arr
 
 

@@ -16,7 +16,8 @@ import numpy as np
 
 from fem.checks import check_number
 
-from ._strict import NotBuiltError, StrictAttributes
+from ._strict import StrictAttributes
+from .broadband import check_wavelengths, is_broadband
 from .light_collector import DepositionCriteria, LightCollector
 from .light_source import (
     SOURCE_TYPES,  # noqa: F401  (re-exported)
@@ -259,9 +260,13 @@ class MonteCarloSimulation(StrictAttributes):
     gpu_device: int = 0  #: index of the CUDA device used with ``use_gpu`` (MCmatlab's GPUdevice)
     progress: bool = True  #: progress bar on stderr for runs longer than a few seconds
     light_source: LightSource = field(default_factory=LightSource)
-    #: nm; selects the value of media given as functions of wavelength (one wavelength;
-    #: MCmatlab's default 800 nm)
-    wavelength: float | None = 800.0
+    #: nm; selects the value of media given as functions of wavelength (MCmatlab's default
+    #: 800 nm); a 1-D array runs each wavelength in turn (broadband, MCmatlab's Example 23):
+    #: the maps get a last axis of ``len(wavelength)`` (:mod:`mcmatlab_py.broadband`)
+    wavelength: float | np.ndarray | None = 800.0
+    #: broadband runs: the spectral power ``S(wavelength)`` (one number >= 0; not normalised:
+    #: the shares ``S / sum(S)`` become ``spectrum``); None: equal power at every wavelength
+    spectrum_func: Callable | None = None
     #: W, incident (pulse peak) power, for media that depend on the fluence rate: the runs of
     #: ``fr_dep_iterations`` see ``FR = P * NFR``; for a plane wave, the power on the top face
     P: float | None = None
@@ -305,6 +310,10 @@ class MonteCarloSimulation(StrictAttributes):
     missed_fraction: float | None = None
     roulette_gain_fraction: float | None = None
     n_photons: int | None = None
+    #: broadband runs: (n,) the power share of each wavelength (sums to 1; MCmatlab's spectrum)
+    spectrum: np.ndarray | None = None
+    #: broadband runs: (n,) packets launched at each wavelength (``n_photons`` is their sum)
+    n_photons_per_wavelength: np.ndarray | None = None
     photons_per_second: float | None = None
     simulation_time: float | None = None
     cores_used: float | None = None
@@ -340,12 +349,13 @@ class MonteCarloSimulation(StrictAttributes):
                    for s in ("xpos", "xneg", "ypos", "yneg", "zpos", "zneg")}}
     _not_built = (
         "calcNormalizedFluenceRate", "calcNFR",
-        "interfaceNormals", "spectrumFunc", "spectrum", "CDFs",
+        "interfaceNormals", "CDFs",
     )
 
     @property
-    def energy_balance(self) -> float:
-        """(absorbed + escaped + specular + outside + killed + missed - roulette gain), ~1."""
+    def energy_balance(self) -> float | np.ndarray:
+        """(absorbed + escaped + specular + outside + killed + missed - roulette gain), ~1;
+        (n,) for a broadband run, one per wavelength (NaN for one of zero power, not run)."""
         return (self.absorbed_fraction + sum(self.escaped.values()) + self.specular_reflectance
                 + self.absorbed_outside_fraction + self.killed_fraction + self.missed_fraction
                 - self.roulette_gain_fraction)
@@ -381,17 +391,18 @@ class MonteCarloSimulation(StrictAttributes):
         if not isinstance(self.light_source, LightSource):
             raise ValueError(f"{o}.light_source must be a LightSource, got {self.light_source!r}")
         self.light_source.validate(G)
-        self.source_distribution = check_source_distribution(self.source_distribution,
-                                                             (G.nx, G.ny, G.nz))
+        self.source_distribution = check_source_distribution(
+            self.source_distribution, (G.nx, G.ny, G.nz), np.size(self.wavelength)
+            if is_broadband(self.wavelength) else None, owner=o)
         if self.smoothing_length_scale is not None:
             self.smoothing_length_scale = check_positive(o, "smoothing_length_scale",
                                                          self.smoothing_length_scale,
                                                          allow_zero=True)
         if self.wavelength is not None:
-            if np.ndim(self.wavelength) > 0:
-                raise NotBuiltError(f"MCmatlab's broadband {o}.wavelength (an array of wavelengths) "
-                                    "is not built yet")
-            self.wavelength = check_positive(o, "wavelength", self.wavelength)
+            self.wavelength = check_wavelengths(o, self.wavelength)
+        if self.spectrum_func is not None and not callable(self.spectrum_func):
+            raise ValueError(f"{o}.spectrum_func must be a function of the wavelength (nm) or "
+                             f"None, got {self.spectrum_func!r}")
         self._validate_outputs(G)
         self.checked_fr_dep_iterations()
         shape = (G.nx, G.ny, G.nz)
@@ -530,11 +541,16 @@ class Model(StrictAttributes):
 
 
 def check_energy_balance(sim: MonteCarloSimulation) -> None:
-    """Raise :class:`EnergyBalanceError` unless the run's energy balance is 1 to rounding."""
-    balance = sim.energy_balance
-    if not abs(balance - 1.0) <= ENERGY_TOLERANCE:
+    """Raise :class:`EnergyBalanceError` unless the run's energy balance is 1 to rounding
+    (at every wavelength of a broadband run that ran)."""
+    balance = np.atleast_1d(np.asarray(sim.energy_balance, dtype=np.float64))
+    absorbed = np.atleast_1d(np.asarray(sim.absorbed_fraction, dtype=np.float64))
+    bad = ~np.isnan(balance) & ~(np.abs(balance - 1.0) <= ENERGY_TOLERANCE)
+    if np.isnan(balance).all() or bad.any():
+        k = int(np.flatnonzero(bad)[0]) if bad.any() else 0
+        at = f" at {sim._owner_label}.wavelength[{k}]" if is_broadband(sim.wavelength) else ""
         raise EnergyBalanceError(
-            f"the Monte Carlo lost track of its energy: absorbed + escaped + the rest = "
-            f"{balance!r} of the launched power, not 1 (absorbed fraction "
-            f"{sim.absorbed_fraction!r}); the inputs are beyond what the kernel "
-            "resolves: check the media's mua and mus and the geometry")
+            f"the Monte Carlo lost track of its energy{at}: absorbed + escaped + the rest = "
+            f"{float(balance[k])!r} of the launched power, not 1 (absorbed fraction "
+            f"{float(absorbed[k])!r}); the inputs are beyond what the kernel resolves: check "
+            "the media's mua and mus and the geometry")

@@ -12,6 +12,7 @@ import numpy as np
 from . import _mc_kernel as K
 from . import _mc_outputs as KO
 from ._strict import NotBuiltError
+from .broadband import is_broadband, run_broadband
 from .mc_outputs import OutputSpec, output_spec, store_outputs
 from .media_bins import optical_media_properties
 from .progress import Progress
@@ -23,6 +24,7 @@ __all__ = [
     "optical_arrays",
     "run_monte_carlo",
     "run_simulation",
+    "run_validated",
     "simulate",
     "store_results",
 ]
@@ -351,10 +353,20 @@ def run_simulation(G, MC, *, client=None, power: float = 1.0) -> None:
     ``NI_*``, far field, collector image, MCML bins) are multiplied by it; the fractions
     (``absorbed_fraction``, ``escaped``, ...) stay fractions of the launched power. The
     fluorescence run gives the fluorescence emitted per W of incident excitation, so its maps
-    are per W incident as MCmatlab's.
+    are per W incident as MCmatlab's. An array ``MC.wavelength`` runs each wavelength in
+    turn (:mod:`mcmatlab_py.broadband`).
     """
     M_raw = G.medium_map()  # validates G
     MC.validate(G)
+    if is_broadband(MC.wavelength):
+        run_broadband(G, MC, M_raw, client=client, power=power)
+        return
+    MC.spectrum = MC.n_photons_per_wavelength = None  # a broadband run's, if MC held one
+    run_validated(G, MC, M_raw, client=client, power=power)
+
+
+def run_validated(G, MC, M_raw: np.ndarray, *, client=None, power: float = 1.0) -> None:
+    """:func:`run_simulation` of one wavelength after ``G`` and ``MC`` were validated."""
     # media at MC.wavelength; media depending on FR, T, FD split into sub-media (new M)
     props = optical_media_properties(G.media, M_raw, MC.wavelength, MC.FR, MC.T, MC.FD)
     M, mua, mus, g, nref = props.M, props.mua, props.mus, props.g, props.n

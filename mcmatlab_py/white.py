@@ -17,9 +17,15 @@ it, and in deep voxels at high ``mua``, which only the rare long paths reach. Fo
 paper's block (``g = 0.9``) the emulator's table spans ``mua / (mus (1 - g))`` from
 5e-4 to 20; ``validation/emulator_accuracy.py --method white`` measures the error at
 off-grid points, and ``tests/test_white.py`` checks single ``mua`` values, the table's
-edges included, against direct Monte Carlo. A medium with several ``mus`` or ``n``
-(layers) changes the paths themselves and is not re-weighting: the kernel is for one
-medium only.
+edges included, against direct Monte Carlo.
+
+Several media (a spec with ``medium_map``, e.g. an epidermis over the dermis): one run per
+``mus`` of the estimated medium gives every ``mua`` of that medium with the other media's
+optics fixed (their ``mua`` is a fixed continuous loss in their voxels). A change of any
+medium's ``mus``, ``g`` or ``n`` changes the paths themselves, which weights do not undo:
+those stay in the spec (and its cache key). Refraction between media is not built: with
+mismatched interfaces all media need one refractive index (else ``NotBuiltError``; the
+``table`` build, one direct run per point, has no such limit).
 """
 
 from __future__ import annotations
@@ -65,7 +71,8 @@ def white_absorbed(spec, mua, mus: float, *, n_photons: int, seed: int,
     is then about 8 times smaller and stays in the caches (about twice as fast on 100 x
     100 x 50 voxels).
     """
-    from .monte_carlo import _kernel_args
+    from ._strict import NotBuiltError
+    from .monte_carlo import _kernel_args, optical_arrays
 
     mua = np.ascontiguousarray(np.atleast_1d(mua), dtype=np.float64)
     if mua.ndim != 1 or not np.all(np.isfinite(mua)) or np.any(mua <= 0):
@@ -75,10 +82,21 @@ def white_absorbed(spec, mua, mus: float, *, n_photons: int, seed: int,
     m = spec.model(float(mua[0]), float(mus), n_photons=n_photons, seed=seed)
     M = m.G.medium_map()
     m.MC.validate(m.G)
-    one = np.ones(1)
-    args = _kernel_args(m.G, m.MC, M, one * mua[0], one * mus, one * spec.g, one * spec.n,
-                        seed, int(n_photons))
-    (_, _, _, _, _, _, nx, ny, nz, dx, dy, dz, boundary_type, n_out, matched, roulette,
+    mua_m, mus_m, g_m, n_m = optical_arrays(m.G.media)
+    present = np.unique(M)
+    if not spec.matched_interfaces and np.unique(n_m[present]).size > 1:
+        raise NotBuiltError("the white build needs one refractive index for all media (or "
+                            f"matched interfaces), got n = {n_m[present].tolist()}: use the "
+                            "table build")
+    fixed = [i for i in present if i != spec.estimated and not mua_m[i] > 0]
+    if fixed:
+        raise ValueError(f"the white build needs mua > 0 in every fixed medium (the roulette "
+                         f"needs a decay), got mua = {mua_m[fixed[0]]!r} in medium {fixed[0]}")
+    mua_tab = np.repeat(mua_m[:, None], mua.size, axis=1)
+    mua_tab[spec.estimated] = mua
+    rate = np.ascontiguousarray(mua_tab[present].min(axis=0))
+    args = _kernel_args(m.G, m.MC, M, mua_m, mus_m, g_m, n_m, seed, int(n_photons))
+    (Mf, _, _, _, _, _, nx, ny, nz, dx, dy, dz, boundary_type, n_out, matched, roulette,
      w_thr, chance, si, sf, stab, svox, *_rest) = args
     bs = m.MC.batch_size
     n_threads = min(n_threads or numba.get_num_threads(), numba.config.NUMBA_NUM_THREADS)
@@ -91,7 +109,8 @@ def white_absorbed(spec, mua, mus: float, *, n_photons: int, seed: int,
     fold = np.ascontiguousarray(fold, dtype=np.int64)
     acc = np.zeros((n_threads, n_rows, K), dtype=np.int64)
     tally = np.zeros((n_threads, WK.N_TALLY, K), dtype=np.int64)
-    kargs = (mua, float(mus), float(spec.g), float(spec.n), nx, ny, nz, dx, dy, dz,
+    kargs = (np.ascontiguousarray(mua_tab), rate, Mf, mus_m, g_m,
+             float(n_m[spec.estimated]), nx, ny, nz, dx, dy, dz,
              boundary_type, n_out, matched, roulette, w_thr, chance, si, sf, stab, svox, fold,
              np.uint64(seed), bs, int(n_photons))
     old = numba.get_num_threads()

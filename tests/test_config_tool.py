@@ -137,6 +137,9 @@ def test_paper_configs_match_the_paper():
     assert c.setup_kw["sensor_noise_var"] == 0.01  # the paper's D
     assert tv.setup_kw["random_walk_when_off"] == 0.0
     assert ap.setup_kw["estimate"] == ("mua", "mus", "VHC", "TC")
+    assert {x.setup_kw["model_error"] for x in (c, tv, ap)} == {"white"}  # the paper's C
+    # measured data: the structured model error unless a config says otherwise
+    assert identify_config_from_dict(BASE).setup_kw["model_error"] == "structured"
     m = ap.model.G.media[0]
     assert (m.mua, m.mus, m.VHC, m.TC) == (1.0, 100.0, 3.76, 0.0037)
 

@@ -58,7 +58,7 @@ def test_mcmatlab_methods_point_to_ours():
 
 
 @pytest.mark.parametrize("label, name", [
-    ("MC", "spectrumFunc"),
+    ("MC", "interfaceNormals"),
     ("MC", "calcNormalizedFluenceRate"),
     ("HS", "useGPU"),
     ("Medium", "PY"),
@@ -82,12 +82,11 @@ def test_mcmatlab_camel_case_heat_names_point_to_ours():
             setattr(HS, camel, 1)
 
 
-def test_broadband_wavelength_is_not_built():
-    model = Model()
-    model.G.media = [Medium("t", mua=1.0, mus=10.0)]
-    model.MC.wavelength = [500.0, 600.0]
-    with pytest.raises(NotImplementedError, match="broadband MC.wavelength .* is not built yet"):
-        model.run_monte_carlo()
+def test_broadband_names_point_to_ours():
+    """MCmatlab's spectrumFunc (broadband runs, tests/test_broadband.py) is spectrum_func."""
+    MC = objects()["MC"]
+    with pytest.raises(AttributeError, match=r"MCmatlab's spectrumFunc is MC\.spectrum_func"):
+        MC.spectrumFunc = lambda wl: 1.0
 
 
 def test_fields_private_names_and_copies_work():

@@ -15,6 +15,7 @@ import numpy as np
 import pytest
 
 from mcmatlab_py import _mc_kernel as K
+from mcmatlab_py._strict import NotBuiltError
 from mcmatlab_py.emulator import AbsorptionEmulator, EmulatorSpec, cache_key, symmetrize
 from mcmatlab_py.white import white_absorbed, white_column
 
@@ -124,3 +125,41 @@ def test_white_build_is_cached_under_its_own_key(tmp_path):
     np.testing.assert_array_equal(again.log_na, emu.log_na)
     with pytest.raises(ValueError, match="method"):
         AbsorptionEmulator.build(spec, cache_dir=tmp_path, progress=False, method="fast")
+
+
+# ------------------------------------------------ several media (issue #19, part 2)
+
+def layered_spec_(**kw):
+    """A 2-voxel (0.05 cm) epidermis (medium 0, known) over the dermis (medium 1, estimated)."""
+    M = np.ones((8, 8, 10), dtype=np.int32)
+    M[:, :, :2] = 0
+    kw.setdefault("media", ((5.0, 150.0, 0.8, 1.3), (None, None, 0.9, 1.3)))
+    return spec_(nz=10, estimated=1, medium_map=M, **kw)
+
+
+@pytest.mark.parametrize("mus", [30.0, 300.0])
+def test_white_equals_direct_two_layers(mus):
+    """Exact-mode parity: one white run per dermis mus against direct Monte Carlo of the
+    layered model, at dermis mua at both edges of the two-layer example's table (0.3, 3)
+    and at its prior's centre, dermis mus at its table's edges."""
+    spec = layered_spec_()
+    n = 10000 if mus < 100 else 4000
+    compare(spec, np.array([0.3, 1.0, 3.0]), mus, n, n)
+
+
+def test_white_equals_direct_two_layers_fresnel():
+    """Mismatched outer interfaces (one refractive index inside): Fresnel at the surface."""
+    compare(layered_spec_(matched_interfaces=False), np.array([0.5, 2.0]), 100.0, 8000, 8000)
+
+
+def test_white_two_layers_energy_balance_and_refraction():
+    spec = layered_spec_(matched_interfaces=False)
+    res = white_absorbed(spec, [0.3, 3.0], 100.0, n_photons=2000, seed=3)
+    out = res.tally[[K.T_SPECULAR, K.T_TOP, K.T_BOTTOM, K.T_SIDES, K.T_OUTSIDE_ABSORBED,
+                     K.T_KILLED, K.T_MISSED]].sum(axis=0)
+    balance = res.absorbed.reshape(2, -1).sum(axis=1) + out - res.tally[K.T_ROULETTE]
+    np.testing.assert_allclose(balance, res.tally[K.T_LAUNCHED], rtol=1e-13)
+    other_n = layered_spec_(matched_interfaces=False, media=((5.0, 150.0, 0.8, 1.45),
+                                                             (None, None, 0.9, 1.3)))
+    with pytest.raises(NotBuiltError, match="one refractive index"):
+        white_absorbed(other_n, [1.0], 100.0, n_photons=100, seed=3)

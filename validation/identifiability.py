@@ -18,6 +18,11 @@ unbiased estimator meets the issue's targets on one seed.
 Writes validation/reports/identifiability.md.
 
     python validation/identifiability.py [--draws 200000]
+
+Any identification config (several media included, e.g. the dermis under a known
+epidermis of ``examples/two_layer.toml``): :class:`ConfigSensor` and :func:`config_bound`
+give the bound for its point sensors or for a camera (``validation/layered.py`` writes
+them into ``validation/reports/layered.md``).
 """
 
 from __future__ import annotations
@@ -73,6 +78,66 @@ class SensorModel:
             T = self.model(T, theta, float(t0), float(t1))
             out.append(self.probe @ T.T)
         return np.vstack(out)
+
+
+class ConfigSensor:
+    """The observed series of an identification setup's own coarse model (emulator + FEM):
+    its point sensors and camera pixels at ``n_steps`` readings ``dt`` apart, for batches of
+    constant parameters (the known ones at their nominal values)."""
+
+    def __init__(self, setup, dt: float = 0.1, n_steps: int = 150):
+        from enkf.tissue import TissueForwardModel, observation_operator
+
+        self.setup = setup
+        self.model = TissueForwardModel(setup)
+        self.P, self.noise_var, _ = observation_operator(setup, self.model.mesh)
+        self.times = np.round(np.arange(n_steps + 1) * dt, 10)
+
+    def readings(self, theta: np.ndarray) -> np.ndarray:
+        """(n_steps, p, M) observed temperatures for ``theta`` (M, n_par) in the order of
+        ``setup.parameter_names``."""
+        T = np.full((len(theta), self.model.mesh.p.shape[1]), float(self.setup.T_initial))
+        out = []
+        for t0, t1 in zip(self.times[:-1], self.times[1:], strict=True):
+            T = self.model(T, theta, float(t0), float(t1))
+            out.append(self.P @ T.T)
+        return np.stack(out)
+
+    def series(self, mua, mus, vhc, tc) -> np.ndarray:
+        """:meth:`SensorModel.series` for :func:`fisher`: (n_steps * p, M), constant optics."""
+        values = {"mua": mua(0.0), "mus": mus(0.0), "VHC": vhc, "TC": tc}
+        theta = np.column_stack([values[n] for n in self.setup.parameter_names])
+        Y = self.readings(theta)
+        # rows of equal noise: whiten each observation by its own sd (fisher uses 1)
+        Y = Y / np.sqrt(np.asarray(self.noise_var, float))[None, :, None]
+        return Y.reshape(-1, Y.shape[-1])
+
+
+def config_bound(sensor: ConfigSensor, truth: dict, prior_sd: float = PRIOR_LOG_SD
+                 ) -> np.ndarray:
+    """The Cramér-Rao bound (covariance of log mua, log mus) of a constant-optics setup at
+    ``truth`` ({"mua", "mus"} cm^-1), with the uniform prior as a Gaussian of log-sd
+    ``prior_sd``."""
+    estimate = tuple(sensor.setup.parameter_names)
+    if estimate != ("mua", "mus"):
+        raise ValueError(f"config_bound is built for the estimate (mua, mus), got {estimate}")
+    logphi = np.log([truth["mua"], truth["mus"]])
+    nominal = sensor.setup.nominal
+    F = fisher(_Constant(sensor, nominal), logphi, np.array([0.0]), ("mua", "mus"),
+               noise_var=1.0)
+    return bound(F, np.full(2, prior_sd))
+
+
+class _Constant:
+    """:func:`fisher` passes VHC and TC only when estimated: here their nominal values."""
+
+    def __init__(self, sensor, nominal):
+        self.sensor, self.nominal = sensor, nominal
+
+    def series(self, mua, mus, vhc, tc):
+        n = len(vhc)
+        return self.sensor.series(mua, mus, np.full(n, self.nominal["VHC"]),
+                                  np.full(n, self.nominal["TC"]))
 
 
 def layout(scenario: str, estimate, knots: int, thermal_prior: float = PRIOR_LOG_SD):

@@ -24,7 +24,7 @@ def _identify_one(cfg, absorption, seed, data_path, out_dir, quiet=True) -> dict
 
     setup = cfg.setup(absorption, seed=seed)
     times, data = cfg.read_data(data_path)
-    medium = cfg.model.G.media[0]
+    medium = cfg.model.G.media[cfg.medium]  # the estimated medium's damage law
     risk = None
     if medium.E and medium.A:  # MCmatlab's damage model: the risk of injury per node
         from ..tissue.risk import RiskTracker
@@ -207,7 +207,7 @@ def _follow(args, cfg, absorption, seed, t_emu) -> int:
     setup = cfg.setup(absorption, seed=seed)
     ident = OnlineIdentifier(setup, param_bounds=cfg.param_bounds,
                              dt_hint=1.0 / cfg.rate if cfg.rate else 0.1)
-    names = list(setup.estimate)
+    names = list(setup.parameter_names)
     cols = ["time_s"] + [f"{n}_{s}" for n in names for s in ("mean", "std")] + [
         f"T{j}_{s}" for j in range(len(setup.tracked_positions)) for s in ("mean", "std")]
     fh = open(out / "estimates.csv", "w", encoding="utf-8")
@@ -266,7 +266,7 @@ def _live_figure(out, ident, setup) -> None:
     if not h:
         return
     est = TissueEstimates(
-        times=np.array([e.time for e in h]), names=setup.estimate,
+        times=np.array([e.time for e in h]), names=setup.parameter_names,
         param_mean=np.array([e.param_mean for e in h]), param_std=np.array([e.param_std for e in h]),
         tracked_positions=setup.tracked_positions,
         tracked_mean=np.array([e.tracked_mean for e in h]),

@@ -19,10 +19,17 @@ Python API (``model.G``, ``model.MC``, ``model.HS`` as in MCmatlab, then
     n_members = 50
     method = "etkf"                 # or "enkf" (perturbed observations)
     estimate = ["mua", "mus"]       # or all four with "VHC", "TC"
+    medium = "dermis"               # with several media: the one estimated (name or index)
     grid = [20, 20, 10]             # the filter's coarse voxels
-    prior_range = [0.5, 2.0]        # uniform prior, times the values of G.media[0]
+    prior_range = [0.5, 2.0]        # uniform prior, times the estimated medium's values
     ...
+    [filter.coagulation]            # with parameter_model = "coagulation" (optics follow
+    E = 422.5e3                     # each member's damage): Arrhenius E J/mol, A 1/s,
+    A = 7.6e66                      # nominal coagulated (mua, mus) / native
+    nominal_factor = [1.5, 3.0]
+    weight_exponent = 2.0           # F weighs the nodes by (absorbed power)**this
     [filter.emulator]
+    method = "table"                # or "white" (one run per mus: docs/white_mc.md)
     n_photons = 250000
     n_mua = 12
     n_mus = 12
@@ -43,7 +50,13 @@ from mcmatlab_py.budget import check_filter, check_steps
 from mcmatlab_py.config import ConfigError, check_keys, model_from_config, read_toml
 
 from ..problem import DEFAULT_METHOD
-from ..tissue.parameters import ESTIMATES, PARAMETER_NAMES, TRACKED_DEPTHS, tracked_points
+from ..tissue.parameters import (
+    COAGULATION_NAMES,
+    ESTIMATES,
+    PARAMETER_NAMES,
+    TRACKED_DEPTHS,
+    tracked_points,
+)
 from .readers import apply_time_offset, load_frames, read_sensor_csv
 
 __all__ = ["DataSpec", "IdentifyConfig", "check_identify_keys", "identify_config_from_dict",
@@ -64,13 +77,14 @@ _FILTER_KEYS = {
     "n_members", "method", "estimate", "grid", "prior_range", "model_noise_std",
     "random_walk_std", "random_walk_when_off", "inflation", "mda", "seed", "parameter_model",
     "localization_radius", "heat_mass", "transforms", "emulator", "bounds", "prior",
-    "model_error", "adaptive_inflation",
+    "model_error", "adaptive_inflation", "coagulation", "medium",
 }
 _MODEL_ERROR_KEYS = {"kind", "rel_std", "time_scale", "length_xy", "length_z"}
 _ADAPTIVE_KEYS = {"enabled", "bounds", "time_scale"}
 _LASER_KEYS = ("P", "duration_on", "T_initial")
 _DATA_KEYS = {"file", "columns", "time_offset"}
-_EMULATOR_KEYS = {"n_photons", "n_mua", "n_mus", "mua_range", "mus_range", "seed", "exact"}
+_EMULATOR_KEYS = {"n_photons", "n_mua", "n_mus", "mua_range", "mus_range", "seed", "exact",
+                  "method"}
 
 
 @dataclass
@@ -86,6 +100,9 @@ class IdentifyConfig:
     param_bounds: np.ndarray | None = None  #: (n_par, 2) health-check range, None: default
     data: DataSpec = None  #: the [data] table
     rate: float | None = None  #: Hz, the sensor's nominal rate (sensors.rate)
+    medium: int = 0  #: index in G.media of the medium whose parameters are estimated
+    #: how the emulator's table is built: "table" (direct Monte Carlo per point) or "white"
+    emulator_method: str = "table"
 
     @property
     def n_obs(self) -> int:
@@ -122,12 +139,13 @@ class IdentifyConfig:
         """The absorption emulator of this model on the filter's mesh (cached)."""
         from mcmatlab_py.emulator import AbsorptionEmulator, DirectMonteCarloAbsorption, EmulatorSpec
 
-        spec = EmulatorSpec.from_model(self.model, mesh_divisions=tuple(self.grid),
-                                       **self.emulator_kw)
+        spec = EmulatorSpec.from_model(self.model, medium=self.medium,
+                                       mesh_divisions=tuple(self.grid), **self.emulator_kw)
         if self.exact:
             return DirectMonteCarloAbsorption(spec, client=client)
         return AbsorptionEmulator.build(spec, cache_dir=cache_dir, progress=progress,
-                                        out_of_range="clamp", client=client)
+                                        out_of_range="clamp", client=client,
+                                        method=self.emulator_method)
 
     def setup(self, absorption, seed: int | None = None):
         """The :class:`~enkf.tissue.TissueFilterSetup` with ``absorption``."""
@@ -136,7 +154,7 @@ class IdentifyConfig:
         from ..tissue import TissueFilterSetup
 
         G, HS = self.model.G, self.model.HS
-        m = G.media[0]
+        m = G.media[self.medium]  # the others keep their values (in the emulator's spec)
         nominal = {"mua": m.mua, "mus": m.mus, "VHC": m.VHC, "TC": m.TC}
         kw = dict(self.setup_kw)
         if seed is not None:
@@ -161,7 +179,9 @@ _LIMITS = {"sensors.noise_var": 1e4, "sensors.camera.noise_var": 1e4, "sensors.r
            "filter.inflation": 100.0, "filter.localization_radius": 1e3, "filter.mda": 100,
            "filter.seed": 2**63 - 1, "filter.emulator.n_photons": 10**11,
            "filter.emulator.n_mua": 1000, "filter.emulator.n_mus": 1000,
-           "filter.emulator.seed": 2**63 - 1, "data.time_offset": 1e9}
+           "filter.emulator.seed": 2**63 - 1, "data.time_offset": 1e9,
+           "filter.coagulation.E": 1e7, "filter.coagulation.A": 1e300,
+           "filter.coagulation.nominal_factor": 1e3, "filter.coagulation.weight_exponent": 10.0}
 
 
 def _num(key, v, *, positive=False, integer=False, lo=None, hi=None):
@@ -198,6 +218,14 @@ def _pair(key, v, positive=False):
 
 def identify_config_from_dict(cfg: dict) -> IdentifyConfig:
     """Validate a parsed config for ``tissue-enkf identify``."""
+    from .config_params import (  # it uses this module's number checks: no import cycle
+        bounds_settings,
+        coagulation_settings,
+        filtered_names,
+        prior_of,
+        prior_settings,
+    )
+
     _require_laser(cfg)
     model = model_from_config(cfg)
     G = model.G
@@ -205,13 +233,10 @@ def identify_config_from_dict(cfg: dict) -> IdentifyConfig:
         model.HS.validate(G)
     except ValueError as err:
         raise ConfigError(str(err)) from None
-    if len(G.media) != 1:
-        raise ConfigError(f"G.media must hold exactly one medium for identification (the "
-                          f"emulator varies its mua and mus), got {len(G.media)}")
-    m = G.media[0]
-    for k in ("VHC", "TC"):
-        if getattr(m, k) is None:
-            raise ConfigError(f"G.media[0].{k} is missing (needed by the heat model)")
+    flt = check_keys("filter", cfg.get("filter", {}), _FILTER_KEYS)
+    medium = _estimated_medium(flt.get("medium"), G)
+    m = G.media[medium]
+    where = f"G.media[{medium}]"
     sens = check_keys("sensors", cfg.get("sensors", {}), _SENSOR_KEYS)
     setup_kw: dict = {}
     positions = _points("sensors.positions", sens.get("positions", [[0.0, 0.0, 0.0]]), G)
@@ -247,7 +272,6 @@ def identify_config_from_dict(cfg: dict) -> IdentifyConfig:
     rate = None
     if "rate" in sens:
         rate = _num("sensors.rate", sens["rate"], positive=True)
-    flt = check_keys("filter", cfg.get("filter", {}), _FILTER_KEYS)
     if "n_members" in flt:
         setup_kw["n_members"] = _num("filter.n_members", flt["n_members"], integer=True, lo=2)
     if "method" in flt:
@@ -271,7 +295,14 @@ def identify_config_from_dict(cfg: dict) -> IdentifyConfig:
     grid = tuple(_num(f"filter.grid[{i}]", v, integer=True, lo=1) for i, v in enumerate(grid))
     if "prior_range" in flt:
         setup_kw["prior_range"] = _pair("filter.prior_range", flt["prior_range"], positive=True)
-    prior = _prior(flt.get("prior", {}), setup_kw)
+    if "parameter_model" in flt:  # before the priors: "coagulation" adds parameters
+        allowed = ("random_walk", "trend", "coagulation")
+        if flt["parameter_model"] not in allowed:
+            raise ConfigError(f"filter.parameter_model must be one of {allowed}, got "
+                              f"{shorten(repr(flt['parameter_model']))}")
+        setup_kw["parameter_model"] = flt["parameter_model"]
+    coagulation_settings(flt, setup_kw)
+    prior = prior_settings(flt.get("prior", {}), setup_kw)
     if prior:
         setup_kw["prior"] = prior
     for k, kw in (("model_noise_std", dict(lo=0)), ("random_walk_when_off", dict(lo=0)),
@@ -284,7 +315,7 @@ def identify_config_from_dict(cfg: dict) -> IdentifyConfig:
         setup_kw["seed"] = _num("filter.seed", flt["seed"], integer=True, lo=0)
     if "random_walk_std" in flt:
         rw = flt["random_walk_std"]
-        n = len(setup_kw.get("estimate", ESTIMATES[0]))
+        n = len(filtered_names(setup_kw))
         if isinstance(rw, list):
             if len(rw) != n:
                 raise ConfigError(f"filter.random_walk_std must be a number or {n} numbers "
@@ -294,8 +325,7 @@ def identify_config_from_dict(cfg: dict) -> IdentifyConfig:
         else:
             setup_kw["random_walk_std"] = _num("filter.random_walk_std", rw, lo=0)
     _model_error(flt, setup_kw)
-    for k, allowed in (("parameter_model", ("random_walk", "trend")),
-                       ("heat_mass", ("averaged", "lumped"))):
+    for k, allowed in (("heat_mass", ("averaged", "lumped")),):
         if k in flt:
             if flt[k] not in allowed:
                 raise ConfigError(f"filter.{k} must be one of {allowed}, got {shorten(repr(flt[k]))}")
@@ -311,11 +341,17 @@ def identify_config_from_dict(cfg: dict) -> IdentifyConfig:
             emulator_kw[k] = _pair(f"filter.emulator.{k}", emu[k], positive=True)
     for name, default in (("mua", (0.1, 20.0)), ("mus", (10.0, 2000.0))):  # EmulatorSpec's
         t_lo, t_hi = emulator_kw.get(f"{name}_range", default)
-        (p_lo, p_hi), where = _prior_of(name, setup_kw, m)
-        if not (t_lo <= p_lo and p_hi <= t_hi):
-            raise ConfigError(
-                f"filter.emulator.{name}_range = {[t_lo, t_hi]} must cover the prior of {name}, "
-                f"[{p_lo:g}, {p_hi:g}] cm^-1 ({where})")
+        # with damage-driven optics the effective values lie between native and coagulated
+        for par in [p for p in (name, f"{name}_coag") if p in filtered_names(setup_kw)]:
+            (p_lo, p_hi), source = prior_of(par, setup_kw, m, where)
+            if not (t_lo <= p_lo and p_hi <= t_hi):
+                raise ConfigError(
+                    f"filter.emulator.{name}_range = {[t_lo, t_hi]} must cover the prior of "
+                    f"{par}, [{p_lo:g}, {p_hi:g}] cm^-1 ({source})")
+    method = emu.get("method", "table")
+    if method not in ("table", "white"):
+        raise ConfigError(f"filter.emulator.method must be \"table\" or \"white\", got "
+                          f"{shorten(repr(method))}")
     exact = emu.get("exact", False)
     if not isinstance(exact, bool):
         raise ConfigError(f"filter.emulator.exact must be true or false, got {shorten(repr(exact))}")
@@ -325,11 +361,12 @@ def identify_config_from_dict(cfg: dict) -> IdentifyConfig:
                     f"{model.HS.dt:g} s over {model.HS.total_duration:g} s of laser pulses)",
                     "HS.dt")
     run_table(cfg)
-    bounds = _bounds(flt.get("bounds", {}), setup_kw, m)
+    bounds = bounds_settings(flt.get("bounds", {}), setup_kw, m, where)
     data = _data_spec(cfg.get("data", {}), len(positions) + (
         setup_kw["image"].n_pixels if "image" in setup_kw else 0))
     try:
-        out = IdentifyConfig(model, setup_kw, grid, emulator_kw, exact, cfg, bounds, data, rate)
+        out = IdentifyConfig(model, setup_kw, grid, emulator_kw, exact, cfg, bounds, data, rate,
+                             medium, method)
         out.setup(absorption=lambda mua, mus: None)  # validates the filter settings
         n_nodes = int(np.prod([n + 1 for n in grid]))
         table = 0 if exact else emulator_kw.get("n_mua", 12) * emulator_kw.get("n_mus", 12)
@@ -339,6 +376,52 @@ def identify_config_from_dict(cfg: dict) -> IdentifyConfig:
     except ValueError as err:
         raise ConfigError(str(err)) from None
     return out
+
+
+def _estimated_medium(value, G) -> int:
+    """``filter.medium``: the index in ``G.media`` of the medium whose parameters are
+    estimated (a name or an index; default the only medium). The heat model has one VHC
+    and TC for the whole block, so every medium must have the same."""
+    names = [m.name for m in G.media]
+    if value is None:
+        if len(names) > 1:
+            raise ConfigError(f"G.media holds {len(names)} media {names}: set filter.medium to "
+                              "the name (or index) of the one whose parameters are estimated")
+        i = 0
+    elif isinstance(value, str):
+        if names.count(value) != 1:
+            why = "is repeated in" if value in names else "is not a medium of"
+            raise ConfigError(f"filter.medium = {shorten(repr(value))} {why} G.media {names}")
+        i = names.index(value)
+    elif isinstance(value, int) and not isinstance(value, bool):
+        if not 0 <= value < len(names):
+            raise ConfigError(f"filter.medium = {value} is not an index of G.media "
+                              f"(0..{len(names) - 1}: {names})")
+        i = value
+    else:
+        raise ConfigError(f"filter.medium must be a medium's name or index, got "
+                          f"{shorten(repr(value))}")
+    for k in ("VHC", "TC"):
+        if getattr(G.media[i], k) is None:
+            raise ConfigError(f"G.media[{i}].{k} is missing (needed by the heat model)")
+    if len(names) > 1:
+        try:
+            M = G.medium_map()
+        except ValueError as err:
+            raise ConfigError(str(err)) from None
+        if not (M == i).any():
+            raise ConfigError(f"filter.medium = {names[i]!r} (G.media[{i}]) fills no voxel of "
+                              "the geometry (G.geom_func): nothing to estimate")
+        ref = G.media[i]
+        for j, other in enumerate(G.media):
+            for k in ("VHC", "TC"):
+                a, b = getattr(other, k), getattr(ref, k)
+                if callable(a) or callable(b) or a != b:
+                    raise ConfigError(
+                        f"G.media[{j}].{k} = {shorten(repr(a))} differs from the estimated "
+                        f"medium's {shorten(repr(b))}: the filter's heat model has one {k} for "
+                        "the whole block (give every medium the same VHC and TC)")
+    return i
 
 
 def _require_laser(cfg: dict) -> None:
@@ -351,52 +434,6 @@ def _require_laser(cfg: dict) -> None:
     if missing:
         raise ConfigError(f"HS.{missing[0]} is missing: identify needs the laser and the start "
                           f"temperature ({', '.join('HS.' + k for k in _LASER_KEYS)})")
-
-
-def _prior(table, setup_kw: dict) -> dict:
-    """``[filter.prior]``: a uniform prior [lo, hi] in physical units per parameter."""
-    names = setup_kw.get("estimate", ESTIMATES[0])
-    table = check_keys("filter.prior", table, set(PARAMETER_NAMES))
-    extra = sorted(set(table) - set(names))
-    if extra:
-        raise ConfigError(f"filter.prior.{extra[0]}: {extra[0]} is not estimated "
-                          f"(filter.estimate = {list(names)})")
-    return {name: _pair(f"filter.prior.{name}", table[name], positive=True) for name in table}
-
-
-def _prior_of(name: str, setup_kw: dict, medium) -> tuple[tuple[float, float], str]:
-    """The prior range of ``name`` and where it comes from (for error messages)."""
-    if name in setup_kw.get("prior", {}):
-        return setup_kw["prior"][name], f"filter.prior.{name}"
-    lo_f, hi_f = setup_kw.get("prior_range", (0.5, 2.0))
-    v = getattr(medium, name)
-    return (lo_f * v, hi_f * v), f"filter.prior_range times G.media[0].{name}"
-
-
-def _bounds(table, setup_kw: dict, medium) -> np.ndarray | None:
-    """``[filter.bounds]``: the physical range of each estimated parameter's mean."""
-    from ..tissue import default_bounds
-
-    names = setup_kw.get("estimate", ESTIMATES[0])
-    table = check_keys("filter.bounds", table, set(PARAMETER_NAMES))
-    if not table:
-        return None
-    extra = sorted(set(table) - set(names))
-    if extra:
-        raise ConfigError(f"filter.bounds.{extra[0]}: {extra[0]} is not estimated "
-                          f"(filter.estimate = {list(names)})")
-    out = []
-    for name in names:
-        nominal = getattr(medium, name)
-        (p_lo, p_hi), where = _prior_of(name, setup_kw, medium)
-        lo, hi = default_bounds([nominal], [p_lo], [p_hi])[0]
-        if name in table:
-            lo, hi = _pair(f"filter.bounds.{name}", table[name], positive=True)
-            if not (lo <= p_lo and p_hi <= hi):
-                raise ConfigError(f"filter.bounds.{name} = {[lo, hi]} must contain the prior "
-                                  f"[{p_lo:g}, {p_hi:g}] ({where})")
-        out.append((lo, hi))
-    return np.array(out)
 
 
 def _data_spec(table, n_obs: int) -> DataSpec:
@@ -424,11 +461,13 @@ def _data_spec(table, n_obs: int) -> DataSpec:
 def _model_error(flt: dict, setup_kw: dict) -> None:
     """[filter.model_error] and [filter.adaptive_inflation] into TissueFilterSetup arguments."""
     me = check_keys("filter.model_error", flt.get("model_error", {}), _MODEL_ERROR_KEYS)
-    if "kind" in me:
-        if me["kind"] not in ("structured", "white"):
-            raise ConfigError(f"filter.model_error.kind must be \"structured\" or \"white\", got "
-                              f"{shorten(repr(me['kind']))}")
-        setup_kw["model_error"] = me["kind"]
+    # structured unless the config says otherwise: measured data never come from the
+    # filter's own model (docs/enkf.md, validation/reports/model_error_coverage.md)
+    kind = me.get("kind", "structured")
+    if kind not in ("structured", "white"):
+        raise ConfigError(f"filter.model_error.kind must be \"structured\" or \"white\", got "
+                          f"{shorten(repr(kind))}")
+    setup_kw["model_error"] = kind
     for k, hi in (("rel_std", 10.0), ("time_scale", 1e6), ("length_xy", 1e3), ("length_z", 1e3)):
         if k in me:
             setup_kw[f"model_error_{k}"] = _num(f"filter.model_error.{k}", me[k], lo=0, hi=hi)
@@ -460,8 +499,10 @@ def check_identify_keys(cfg: dict) -> None:
         check_keys("sensors.camera", sens["camera"], _CAMERA_KEYS)
     flt = check_keys("filter", cfg.get("filter", {}), _FILTER_KEYS)
     check_keys("filter.emulator", flt.get("emulator", {}), _EMULATOR_KEYS)
-    check_keys("filter.bounds", flt.get("bounds", {}), set(PARAMETER_NAMES))
-    check_keys("filter.prior", flt.get("prior", {}), set(PARAMETER_NAMES))
+    check_keys("filter.bounds", flt.get("bounds", {}), set(PARAMETER_NAMES) | set(COAGULATION_NAMES))
+    check_keys("filter.prior", flt.get("prior", {}), set(PARAMETER_NAMES) | set(COAGULATION_NAMES))
+    check_keys("filter.coagulation", flt.get("coagulation", {}),
+               {"E", "A", "nominal_factor", "weight_exponent"})
     check_keys("filter.model_error", flt.get("model_error", {}), _MODEL_ERROR_KEYS)
     check_keys("filter.adaptive_inflation", flt.get("adaptive_inflation", {}), _ADAPTIVE_KEYS)
     check_keys("data", cfg.get("data", {}), _DATA_KEYS)

@@ -151,12 +151,25 @@ def write_identify_outputs(out: Path, setup, est, times, data, *, absorption=Non
         # members whose optics left the emulator's table (clamped to its edge), and what to do
         "emulator_clamped": getattr(est, "clamped", None),
         "final_time_s": float(est.times[k]),
+        # log-density of the readings under the filter's forecasts, summed: the difference
+        # of two runs on the same data (e.g. parameter_model "coagulation" against
+        # "random_walk") is their log Bayes factor under the filter's Gaussian approximation
+        "innovation_loglik": {
+            "sum": est.log_evidence() if hasattr(est, "log_evidence") else None,
+            "per_reading": est.log_evidence() / max(1, int(np.sum(est.analysed)))
+            if hasattr(est, "log_evidence") else None},
         "timing": {"filter_wall_s": float(est.filter_wall_s),
                    "step_latency_median_s": float(np.median(est.step_latency_s))
                    if len(est.step_latency_s) else 0.0,
                    "step_latency_max_s": float(np.max(est.step_latency_s))
                    if len(est.step_latency_s) else 0.0},
     }
+    if getattr(est, "effective_mean", None) is not None:
+        summary["effective_optics"] = {
+            n: {"estimate_final": float(est.effective_mean[k, i]),
+                "std_final": float(est.effective_std[k, i])} for i, n in enumerate(("mua", "mus"))}
+        summary["effective_optics"]["coagulated_fraction_final"] = float(
+            est.coagulated_fraction[k])
     if est.diverged:
         summary["rejected"] = {n: {"mean": float(est.param_mean[-1, i]),
                                    "std": float(est.param_std[-1, i])}

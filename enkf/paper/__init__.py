@@ -20,8 +20,9 @@ while the properties ramp.
 Modules: :mod:`~enkf.paper.scenarios` (Table 1, lasers, true optics, the MCmatlab-style
 model), :mod:`~enkf.paper.truth` (fine-grid and twin truths, the noisy sensor),
 :mod:`~enkf.paper.runner` (the filter of each scenario, one experiment end to end),
-:mod:`~enkf.paper.sensitivity` and :mod:`~enkf.paper.figures`. The paper uses the
-application (:mod:`enkf.tissue`), never the tool (:mod:`enkf.app`).
+:mod:`~enkf.paper.sensitivity`, :mod:`~enkf.paper.figures`, and, beyond the paper,
+:mod:`~enkf.paper.coagulation` (tissue whose optics follow its damage: its truths and
+filters). The paper uses the application (:mod:`enkf.tissue`), never the tool (:mod:`enkf.app`).
 """
 
 from .figures import plot_data, plot_results, plot_sensitivity

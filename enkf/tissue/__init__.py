@@ -26,18 +26,21 @@ Modules: :mod:`~enkf.tissue.parameters` (names, units, ranges, tracked depths: o
 each), :mod:`~enkf.tissue.absorption` (the :class:`Absorption` protocol of the emulator
 and the exact mode), :mod:`~enkf.tissue.setup` (:class:`TissueFilterSetup`),
 :mod:`~enkf.tissue.forward` (the forecast and the observation operator),
+:mod:`~enkf.tissue.coagulation` (optics that follow each member's own damage),
 :mod:`~enkf.tissue.identify` (:func:`identify`), :mod:`~enkf.tissue.online` (one reading
 at a time), :mod:`~enkf.tissue.image` (a thermal camera), :mod:`~enkf.tissue.risk`
 (damage-risk maps) and :mod:`~enkf.tissue.outputs` (files every run writes).
 """
 
 from .absorption import Absorption, FunctionAbsorption, as_absorption
+from .coagulation import Coagulation, CoagulationForwardModel, coagulated_fraction, effective_optics
 from .forward import TissueForwardModel, observation_operator
 from .identify import FilterPieces, TissueEstimates, assemble, identify
 from .image import ThermalImage
 from .model_error import StructuredModelError
 from .online import OnlineEstimate, OnlineIdentifier
 from .parameters import (
+    COAGULATION_NAMES,
     ESTIMATES,
     PARAMETER_LABELS,
     PARAMETER_NAMES,
@@ -45,6 +48,7 @@ from .parameters import (
     TRACKED_DEPTHS,
     column,
     default_bounds,
+    parameter_names,
     tracked_points,
 )
 from .risk import RiskTracker
@@ -52,6 +56,9 @@ from .setup import TissueFilterSetup
 
 __all__ = [
     "Absorption",
+    "COAGULATION_NAMES",
+    "Coagulation",
+    "CoagulationForwardModel",
     "ESTIMATES",
     "FilterPieces",
     "FunctionAbsorption",
@@ -69,9 +76,12 @@ __all__ = [
     "TissueForwardModel",
     "as_absorption",
     "assemble",
+    "coagulated_fraction",
     "column",
     "default_bounds",
+    "effective_optics",
     "identify",
     "observation_operator",
+    "parameter_names",
     "tracked_points",
 ]

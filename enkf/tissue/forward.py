@@ -142,12 +142,19 @@ class TissueForwardModel:
     def __call__(self, E_state: np.ndarray, theta: np.ndarray, t0: float, t1: float):
         """The filter's forecast from ``t0`` to ``t1``: :meth:`step` at the laser power of the
         interval's middle, in equal sub-steps no longer than ``setup.max_dt``."""
+        for a, b in self.substeps(t0, t1):
+            E_state = self.step(E_state, theta, a, b, self.setup.power(0.5 * (a + b)))
+        return E_state
+
+    def substeps(self, t0: float, t1: float) -> list[tuple[float, float]]:
+        """The heat steps ``(a, b)`` s of the interval ``t0 -> t1``: equal, no longer than
+        ``setup.max_dt`` (one step when it is None)."""
         max_dt = self.setup.max_dt
         n = 1 if max_dt is None else max(1, math.ceil((t1 - t0) / max_dt - 1e-9))
-        edges = np.linspace(t0, t1, n + 1) if n > 1 else (t0, t1)
-        for a, b in zip(edges[:-1], edges[1:], strict=True):
-            E_state = self.step(E_state, theta, float(a), float(b), self.setup.power(0.5 * (a + b)))
-        return E_state
+        if n == 1:
+            return [(float(t0), float(t1))]
+        edges = np.linspace(t0, t1, n + 1)
+        return [(float(a), float(b)) for a, b in zip(edges[:-1], edges[1:], strict=True)]
 
 
 def observation_operator(setup: TissueFilterSetup, mesh):

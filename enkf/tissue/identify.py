@@ -19,6 +19,7 @@ from ..health import HealthCheck
 from ..loop import run_filter
 from ..problem import FilterConfig, FilterDivergence, FilterProblem, FilterResult, StepReport, uniform_prior
 from ..transforms import IdentityTransform, LogTransform
+from .coagulation import CoagulationForwardModel
 from .forward import TissueForwardModel, observation_operator
 from .model_error import StructuredModelError
 from .setup import TissueFilterSetup
@@ -38,6 +39,12 @@ class TissueEstimates:
     recorded (then :meth:`param_band` takes them from a log-normal of the same moments).
     ``clamped``: how often the absorption model clamped a member's optics to its table
     (:meth:`TissueForwardModel.clamp_report`), None when never.
+    ``effective_mean``/``effective_std``: (M+1, 2) the ensemble's effective (mua, mus)
+    cm^-1 and ``coagulated_fraction`` (M+1,) its mean ``F``, with
+    ``parameter_model="coagulation"`` (:mod:`enkf.tissue.coagulation`); else None.
+    ``innovation_loglik``: (M,) log-density of each reading under the forecast (NaN where
+    none was analysed; :func:`enkf.adaptive.innovation_loglik`): the sums of two models on
+    the same data compare them.
     """
 
     times: np.ndarray
@@ -56,6 +63,16 @@ class TissueEstimates:
     param_q_high: np.ndarray | None = None
     method: str | None = None  #: "etkf" or "enkf"
     clamped: dict | None = None
+    effective_mean: np.ndarray | None = None
+    effective_std: np.ndarray | None = None
+    coagulated_fraction: np.ndarray | None = None
+    innovation_loglik: np.ndarray | None = None
+
+    def log_evidence(self) -> float:
+        """Sum of :attr:`innovation_loglik` over the analysed readings (NaN if not recorded)."""
+        if self.innovation_loglik is None:
+            return float("nan")
+        return float(np.nansum(self.innovation_loglik))
 
     def param_band(self, i: int) -> tuple[np.ndarray, np.ndarray]:
         """(low, high) of parameter ``i`` over time: the ensemble's 2.3 % and 97.7 %
@@ -74,7 +91,7 @@ class TissueEstimates:
 class FilterPieces:
     """What :func:`identify` and the online identifier build from a setup."""
 
-    model: TissueForwardModel
+    model: TissueForwardModel | CoagulationForwardModel
     P_obs: sp.csr_matrix
     noise_var: np.ndarray
     P_track: sp.csr_matrix
@@ -114,13 +131,15 @@ class FilterPieces:
 def assemble(setup: TissueFilterSetup, param_bounds=None, warm_dt: float | None = None
               ) -> FilterPieces:
     model = TissueForwardModel(setup)
+    names = setup.parameter_names
+    if setup.parameter_model == "coagulation":
+        model = CoagulationForwardModel(model, setup.coagulation, names)
     npts = model.mesh.p.shape[1]
     if warm_dt is not None:
         model.warm_up(warm_dt)
     P_obs, noise_var, obs_xyz = observation_operator(setup, model.mesh)
     P_track = fem.probe_matrix(model.mesh, setup.tracked_positions.T)
-    names = setup.estimate
-    nominal = np.array([setup.nominal[n] for n in names])
+    nominal = setup.nominal_values()
     prior = uniform_prior(np.full(npts, float(setup.T_initial)), *setup.prior_bounds())
     n = len(names)
     rw = np.broadcast_to(np.asarray(setup.random_walk_std, float), (n,)) ** 2
@@ -203,6 +222,10 @@ def identify(setup: TissueFilterSetup, times: np.ndarray, data: np.ndarray, *,
     tr_std = np.full_like(tr_mean, np.nan)
     q_lo = np.full((M + 1, n), np.nan)
     q_hi = np.full_like(q_lo, np.nan)
+    coag = isinstance(pieces.model, CoagulationForwardModel)
+    eff_mean = np.full((M + 1, 2), np.nan) if coag else None
+    eff_std = np.full((M + 1, 2), np.nan) if coag else None
+    frac = np.full(M + 1, np.nan) if coag else None
 
     def record(rep: StepReport):
         Y = (P_track @ rep.state_ensemble.T).T
@@ -211,6 +234,10 @@ def identify(setup: TissueFilterSetup, times: np.ndarray, data: np.ndarray, *,
         with np.errstate(invalid="ignore"):
             q_lo[rep.step], q_hi[rep.step] = np.quantile(
                 rep.param_ensemble[:, :n], [0.02275, 0.97725], axis=0)
+        if coag:  # the optics the members had at this time: their damage, their values
+            F, eff = pieces.model.effective(rep.param_ensemble[:, :n], rep.time)
+            eff_mean[rep.step], eff_std[rep.step] = eff.mean(axis=0), eff.std(axis=0, ddof=1)
+            frac[rep.step] = F.mean()
         if callback is not None:
             callback(rep)
 
@@ -232,9 +259,13 @@ def identify(setup: TissueFilterSetup, times: np.ndarray, data: np.ndarray, *,
                       f"forecast steps: {clamped['advice']}", RuntimeWarning, stacklevel=2)
     k = len(res.times)
     return TissueEstimates(
-        times=res.times, names=setup.estimate, param_mean=res.param_mean[:, :n],
+        times=res.times, names=setup.parameter_names, param_mean=res.param_mean[:, :n],
         param_std=res.param_std[:, :n],
         tracked_positions=setup.tracked_positions, tracked_mean=tr_mean[:k],
         tracked_std=tr_std[:k], analysed=res.analysed, step_latency_s=res.step_latency_s,
         filter_wall_s=wall, result=res, diverged=diverged, param_q_low=q_lo[:k],
-        param_q_high=q_hi[:k], method=setup.method, clamped=clamped)
+        param_q_high=q_hi[:k], method=setup.method, clamped=clamped,
+        effective_mean=None if eff_mean is None else eff_mean[:k],
+        effective_std=None if eff_std is None else eff_std[:k],
+        coagulated_fraction=None if frac is None else frac[:k],
+        innovation_loglik=res.innovation_loglik)

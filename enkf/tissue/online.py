@@ -50,7 +50,7 @@ class OnlineIdentifier:
         self._X, self._theta = self._pieces.prior(rng, setup.n_members)
         self.time = 0.0
         self.history: list[OnlineEstimate] = []
-        self.names = setup.estimate
+        self.names = setup.parameter_names
         self.n_obs = self._pieces.P_obs.shape[0]
         # the time-correlated model error and the inflation estimate run across readings
         self._noise = self._pieces.model_noise()

@@ -10,12 +10,20 @@ import numpy as np
 __all__ = ["jsonable", "write_estimates_csv", "write_json"]
 
 def write_estimates_csv(path, est, truth=None, data=None) -> None:
-    """``estimates.csv``: time; mean and std of each parameter and tracked temperature."""
+    """``estimates.csv``: time; mean and std of each parameter (then, with damage-driven
+    optics, of the effective mua and mus and the mean coagulated fraction) and of each
+    tracked temperature."""
     cols = ["time_s"]
     arrays = [est.times]
     for i, name in enumerate(est.names):
         cols += [f"{name}_mean", f"{name}_std"]
         arrays += [est.param_mean[:, i], est.param_std[:, i]]
+    if getattr(est, "effective_mean", None) is not None:  # damage-driven optics
+        for i, name in enumerate(("mua", "mus")):
+            cols += [f"{name}_eff_mean", f"{name}_eff_std"]
+            arrays += [est.effective_mean[:, i], est.effective_std[:, i]]
+        cols.append("coagulated_fraction_mean")
+        arrays.append(est.coagulated_fraction)
     for j, pos in enumerate(est.tracked_positions):
         tag = f"T_z{pos[2]:.2f}"
         cols += [f"{tag}_mean", f"{tag}_std"]

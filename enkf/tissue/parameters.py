@@ -8,6 +8,7 @@ from __future__ import annotations
 import numpy as np
 
 __all__ = [
+    "COAGULATION_NAMES",
     "ESTIMATES",
     "PARAMETER_LABELS",
     "PARAMETER_NAMES",
@@ -15,20 +16,36 @@ __all__ = [
     "TRACKED_DEPTHS",
     "column",
     "default_bounds",
+    "parameter_names",
     "tracked_points",
 ]
 
 #: every parameter the filter can estimate, in the order of the state's parameter block
 PARAMETER_NAMES = ("mua", "mus", "VHC", "TC")
+#: the coagulated optics the damage-driven model estimates beside the native ``mua``, ``mus``
+#: (``parameter_model = "coagulation"``, :mod:`enkf.tissue.coagulation`)
+COAGULATION_NAMES = ("mua_coag", "mus_coag")
 #: units of each parameter (MCmatlab's and the paper's)
-PARAMETER_UNITS = {"mua": "cm^-1", "mus": "cm^-1", "VHC": "J cm^-3 K^-1", "TC": "W cm^-1 K^-1"}
+PARAMETER_UNITS = {"mua": "cm^-1", "mus": "cm^-1", "VHC": "J cm^-3 K^-1", "TC": "W cm^-1 K^-1",
+                   "mua_coag": "cm^-1", "mus_coag": "cm^-1"}
 #: the same units for matplotlib labels
 PARAMETER_LABELS = {"mua": "cm$^{-1}$", "mus": "cm$^{-1}$", "VHC": "J cm$^{-3}$ K$^{-1}$",
-                    "TC": "W cm$^{-1}$ K$^{-1}$"}
+                    "TC": "W cm$^{-1}$ K$^{-1}$", "mua_coag": "cm$^{-1}$",
+                    "mus_coag": "cm$^{-1}$"}
 #: the parameter sets that can be estimated: the optics, or the optics and thermal properties
 ESTIMATES = (PARAMETER_NAMES[:2], PARAMETER_NAMES)
 #: cm, depths below the sensor whose temperature the paper reports (and the tool by default)
 TRACKED_DEPTHS = (0.0, 0.1, 0.2)
+
+
+def parameter_names(estimate, parameter_model: str = "random_walk") -> tuple:
+    """The filtered parameters, in the order of the state's parameter block: ``estimate``,
+    with the coagulated optics after ``mua``, ``mus`` when ``parameter_model`` is
+    ``"coagulation"`` (``mua``, ``mus`` are then the native values)."""
+    estimate = tuple(estimate)
+    if parameter_model != "coagulation":
+        return estimate
+    return estimate[:2] + COAGULATION_NAMES + estimate[2:]
 
 
 def column(names, name: str) -> int:

@@ -11,7 +11,14 @@ import fem
 
 from ..problem import DEFAULT_METHOD
 from .absorption import Absorption
-from .parameters import ESTIMATES, PARAMETER_NAMES, PARAMETER_UNITS, default_bounds, tracked_points
+from .parameters import (
+    ESTIMATES,
+    PARAMETER_NAMES,
+    PARAMETER_UNITS,
+    default_bounds,
+    parameter_names,
+    tracked_points,
+)
 
 __all__ = ["TissueFilterSetup"]
 
@@ -50,7 +57,11 @@ class TissueFilterSetup:
     prior : dict, optional
         ``{name: (lo, hi)}`` in the parameter's own units: the uniform prior of that
         parameter, in place of ``prior_range`` times its nominal value (e.g. a range
-        measured on similar tissue). Only estimated parameters may be named.
+        measured on similar tissue). Only estimated parameters may be named (with
+        ``parameter_model="coagulation"`` also ``mua_coag`` and ``mus_coag``).
+    coagulation : enkf.tissue.coagulation.Coagulation, optional
+        The Arrhenius law and nominal coagulated optics of
+        ``parameter_model="coagulation"`` (default: ``Coagulation()``).
     """
 
     grid: fem.BoxGrid
@@ -97,7 +108,11 @@ class TissueFilterSetup:
     #: with the rates v (1/s, in log units) filtered beside the parameters: a smooth
     #: drift (heating that changes the tissue steadily) is followed with a much smaller
     #: walk, so the data of many steps add up instead of being forgotten.
+    #: "coagulation": each member's optics move from native (mua, mus) to coagulated
+    #: (mua_coag, mus_coag) values with its own Arrhenius damage (enkf.tissue.coagulation);
+    #: the four are estimated, with the random walk on top
     parameter_model: str = "random_walk"
+    coagulation: object = None  #: enkf.tissue.coagulation.Coagulation (its defaults: None)
     trend_prior_std: float = 0.2  #: 1/s, prior spread of each rate v (mean 0)
     trend_noise_std: float | Sequence[float] = 0.02  #: 1/s per step, std of eta
     n_members: int = 50
@@ -133,10 +148,23 @@ class TissueFilterSetup:
         if not 0 < lo < hi:
             raise ValueError(f"prior_range must be (lo, hi) with 0 < lo < hi, got "
                              f"{self.prior_range!r}")
+        if self.parameter_model not in ("random_walk", "trend", "coagulation"):
+            raise ValueError(f"parameter_model must be 'random_walk', 'trend' or 'coagulation', "
+                             f"got {self.parameter_model!r}")
+        if self.parameter_model == "coagulation":
+            from .coagulation import Coagulation
+
+            if self.coagulation is None:
+                self.coagulation = Coagulation()
+            elif not isinstance(self.coagulation, Coagulation):
+                raise ValueError(f"coagulation must be an enkf.tissue.coagulation.Coagulation, "
+                                 f"got {type(self.coagulation).__name__}")
+        names = self.parameter_names
         self.prior = dict(self.prior or {})
         for name, rng in self.prior.items():
-            if name not in est:
-                raise ValueError(f"prior[{name!r}]: {name} is not estimated (estimate = {est})")
+            if name not in names:
+                raise ValueError(f"prior[{name!r}]: {name} is not estimated (parameters = "
+                                 f"{names})")
             try:
                 p_lo, p_hi = (float(v) for v in rng)
             except (TypeError, ValueError):
@@ -154,9 +182,6 @@ class TissueFilterSetup:
             raise ValueError(f"localization_radius must be > 0 (cm) or None, got "
                              f"{self.localization_radius!r}")
         self.tracked_positions = np.atleast_2d(np.asarray(self.tracked_positions, float))
-        if self.parameter_model not in ("random_walk", "trend"):
-            raise ValueError(f"parameter_model must be 'random_walk' or 'trend', got "
-                             f"{self.parameter_model!r}")
         if self.max_dt is not None and not (np.isfinite(self.max_dt) and self.max_dt > 0):
             raise ValueError(f"max_dt must be > 0 (s) or None, got {self.max_dt!r}")
         if self.model_error not in ("structured", "white"):
@@ -167,14 +192,27 @@ class TissueFilterSetup:
             if not (np.isfinite(getattr(self, name)) and getattr(self, name) >= 0):
                 raise ValueError(f"{name} must be >= 0, got {getattr(self, name)!r}")
 
+    @property
+    def parameter_names(self) -> tuple:
+        """The filtered parameters in the state's order (:func:`parameter_names`):
+        ``estimate``, with ``mua_coag``, ``mus_coag`` after the optics under coagulation."""
+        return parameter_names(self.estimate, self.parameter_model)
+
+    def nominal_values(self) -> np.ndarray:
+        """Nominal value of each filtered parameter, in :attr:`parameter_names` order (the
+        coagulated ones from :meth:`Coagulation.nominal`)."""
+        nominal = dict(self.nominal)
+        if self.parameter_model == "coagulation":
+            nominal.update(self.coagulation.nominal(self.nominal))
+        return np.array([nominal[n] for n in self.parameter_names], float)
+
     def prior_bounds(self) -> tuple[np.ndarray, np.ndarray]:
-        """(lo, hi) of the uniform prior of each estimated parameter, in ``estimate`` order."""
+        """(lo, hi) of the uniform prior of each filtered parameter (:attr:`parameter_names`)."""
         lo_f, hi_f = self.prior_range
-        pairs = [self.prior.get(n, (lo_f * self.nominal[n], hi_f * self.nominal[n]))
-                 for n in self.estimate]
+        pairs = [self.prior.get(n, (lo_f * v, hi_f * v))
+                 for n, v in zip(self.parameter_names, self.nominal_values(), strict=True)]
         return np.array([p[0] for p in pairs]), np.array([p[1] for p in pairs])
 
     def default_param_bounds(self) -> np.ndarray:
         """(n_par, 2) health-check range of each mean (:func:`default_bounds`)."""
-        return default_bounds(np.array([self.nominal[n] for n in self.estimate]),
-                              *self.prior_bounds())
+        return default_bounds(self.nominal_values(), *self.prior_bounds())

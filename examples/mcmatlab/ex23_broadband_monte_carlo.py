@@ -3,24 +3,22 @@
 The blood-vessel geometry of example 4 (air, epidermis, dermis, a blood vessel along y)
 with a sphere of stained cancerous tissue in the dermis and a droplet of Lucifer Yellow
 CH in water on the skin; the tissues' mua and mus follow Jacques' spectra (``calc_mua``,
-``calc_mus``). A Gaussian beam (1/e^2 radius 0.3 mm) with a Gaussian spectrum (400 nm,
-1/e half-width 40 nm) over 300..550 nm excites both fluorescers: the stain (QY a Gaussian
-of the excitation wavelength around 450 nm, emission around 650 nm) and Lucifer Yellow
-(QY = 0.21). The fluorescence is followed over 450..750 nm.
+``calc_mus``). A Gaussian beam (1/e^2 radius 0.3 mm) with a Gaussian spectrum
+(``MC.spectrum_func``: 400 nm, 1/e half-width 40 nm) at 51 wavelengths over 300..550 nm
+(``MC.wavelength`` an array) excites both fluorescers: the stain (QY a Gaussian of the
+excitation wavelength around 450 nm, emission around 650 nm) and Lucifer Yellow (QY =
+0.21). The fluorescence is followed at 61 wavelengths over 450..750 nm (``FMC.wavelength``).
+Each wavelength's maps are a slice of ``NA`` and ``NFR`` (nx, ny, nz, n_wavelengths);
+``model.plot`` draws their sums over the wavelengths and the power per wavelength.
 
     python examples/mcmatlab/ex23_broadband_monte_carlo.py [--quick] [--out DIR]
 
-Differences from MCmatlab: arrays of wavelengths (``MC.wavelength``, ``FMC.wavelength``)
-are not built in ``mcmatlab_py``; light transport being linear, the script sums
-monochromatic runs, as MCmatlab does inside: one excitation run per wavelength weighted by
-the normalised spectrum, the fluorescence emitters of each run (``fluorescence_emitters``)
-summed with each medium's emission spectrum normalised over the fluorescence wavelengths,
-then one fluorescence run per fluorescence wavelength (``run_fluorescence_monte_carlo(
-emitters=...)``). Full size: 11 excitation and 7 fluorescence wavelengths (MCmatlab: 51 and
-61) and fixed photon counts instead of one minute each. Lucifer Yellow's absorption and
-emission, which MCmatlab reads from omlc.org tables, are Gaussians here (absorption peak
-428 nm, 1/e half-width 48 nm, 110 cm^-1 at 10 mM; emission peak 536 nm, half-width 54 nm).
-The figures show the sums over wavelengths and the emitted fluorescence spectrum.
+Differences from MCmatlab: fixed photon counts (3.06 x 10^6 excitation and 2.44 x 10^6
+fluorescence packets, split over the wavelengths as MCmatlab splits them) instead of one
+minute each; no lambda slider on the figures (sums over wavelengths, and a spectrum
+figure). Lucifer Yellow's absorption and emission, which MCmatlab reads from omlc.org
+tables, are Gaussians here (absorption peak 428 nm, 1/e half-width 48 nm, 110 cm^-1 at
+10 mM; emission peak 536 nm, half-width 54 nm).
 """
 
 from __future__ import annotations
@@ -32,7 +30,6 @@ from pathlib import Path
 import numpy as np
 
 from mcmatlab_py import Medium, Model, calc_mua, calc_mus
-from mcmatlab_py.fluorescence import fluorescence_emitters
 
 Z_SURFACE = 0.02  #: cm
 EPIDERMIS = 0.006  #: cm, thickness
@@ -51,9 +48,9 @@ def geometry(X, Y, Z):
     return M
 
 
-def spectrum(wavelength):
-    """Spectral power of the excitation (not normalised): a Gaussian at 400 nm."""
-    return np.exp(-((np.asarray(wavelength) - 400.0) / 40.0) ** 2)
+def spectrum(wavelength: float) -> float:
+    """Spectral power of the excitation (``MC.spectrum_func``, not normalised): a Gaussian."""
+    return math.exp(-(((wavelength - 400.0) / 40.0) ** 2))
 
 
 def _gauss(centre: float, width: float, height: float = 1.0):
@@ -87,27 +84,33 @@ def media() -> list[Medium]:
 
 
 def wavelengths(quick: bool) -> tuple[np.ndarray, np.ndarray]:
-    """nm: the excitation and the fluorescence wavelengths simulated."""
+    """nm: the excitation and the fluorescence wavelengths (MCmatlab's 51 and 61)."""
     if quick:
-        return np.array([380.0, 430.0]), np.array([540.0, 650.0])
-    return np.linspace(300.0, 550.0, 11), np.linspace(450.0, 750.0, 7)
+        return np.linspace(300.0, 550.0, 3), np.linspace(450.0, 750.0, 4)
+    return np.linspace(300.0, 550.0, 51), np.linspace(450.0, 750.0, 61)
 
 
 def build(quick: bool = False) -> Model:
-    """The model of Example 23 (wavelengths set by ``run``); ``quick``: 24^3 voxels."""
+    """The model of Example 23; ``quick``: 24^3 voxels, 3 and 4 wavelengths, few photons."""
     model = Model()
     G = model.G
     G.nx = G.ny = G.nz = 24 if quick else 100
     G.Lx = G.Ly = G.Lz = 0.1  # cm
     G.media = media()
     G.geom_func = geometry
-    for sim, seed in ((model.MC, 1), (model.FMC, 1001)):
-        sim.n_photons_requested = 4_000 if quick else 200_000  # per wavelength
+    wl_x, wl_f = wavelengths(quick)
+    MC, FMC = model.MC, model.FMC
+    MC.wavelength, MC.spectrum_func = wl_x, spectrum
+    FMC.wavelength = wl_f
+    # photons in all, split equally over the wavelengths (60000 and 40000 each at full size)
+    MC.n_photons_requested = 12_000 if quick else 60_000 * wl_x.size
+    FMC.n_photons_requested = 12_000 if quick else 40_000 * wl_f.size
+    for sim, seed in ((MC, 1), (FMC, 1001)):
         sim.seed = seed
         sim.progress = not quick
         sim.matched_interfaces = True
         sim.boundary_type = 1
-    src = model.MC.light_source
+    src = MC.light_source
     src.source_type = 4  # radial-factorizable beam
     src.focal_plane_intensity_distribution.radial_distr = 1  # Gaussian
     src.focal_plane_intensity_distribution.radial_width = 0.03  # cm, 1/e^2 radius
@@ -118,126 +121,54 @@ def build(quick: bool = False) -> Model:
     return model
 
 
-def _es_weights(model, wl_f: np.ndarray) -> np.ndarray:
-    """(n_media, n_f) each medium's emission spectrum normalised over ``wl_f`` (no ES: flat)."""
-    out = np.full((len(model.G.media), wl_f.size), 1.0 / wl_f.size)
-    for i, m in enumerate(model.G.media):
-        if m.ES is not None:
-            es = np.array([m.value("ES", w) for w in wl_f])
-            out[i] = es / es.sum()
-    return out
+def run(quick: bool = False) -> Model:
+    """The broadband excitation, then the broadband fluorescence (MCmatlab's two calls)."""
+    model = build(quick).run_monte_carlo()
+    return model.run_monte_carlo("fluorescence")
 
 
-def run(quick: bool = False) -> dict:
-    """Excitation runs over the spectrum, then fluorescence runs over the emission band."""
-    model = build(quick)
-    G, M = model.G, model.G.medium_map()
-    wl_x, wl_f = wavelengths(quick)
-    s = spectrum(wl_x) / spectrum(wl_x).sum()  # W per W incident at each wavelength
-    es_map = _es_weights(model, wl_f)[M]  # (nx, ny, nz, n_f)
-    NA = np.zeros(M.shape)
-    emitters = np.zeros((*M.shape, wl_f.size))
-    balances, absorbed = [], []
-    emitter_var = 0.0  # bound on the variance of the emitters' x-imbalance, see mirror_z_score
-    for k, (wl, weight) in enumerate(zip(wl_x, s, strict=True)):
-        model.MC.wavelength = wl
-        model.MC.seed = 1 + k
-        model.run_monte_carlo()
-        balances.append(model.MC.energy_balance)
-        absorbed.append(model.MC.absorbed_fraction)
-        NA += weight * model.MC.NA
-        c_max = max(m.value("QY", wl) for m in G.media if m.QY is not None) * wl / wl_f.min()
-        emitted = 0.0  # W of fluorescence per W of this run
-        for j, wf in enumerate(wl_f):
-            E = fluorescence_emitters(G, model.MC, wf, M) * es_map[..., j]
-            emitted += E.sum() * G.dx * G.dy * G.dz
-            emitters[..., j] += weight * E
-        emitter_var += weight**2 * c_max * emitted / model.MC.n_photons
-    fmc = []
-    for j, wf in enumerate(wl_f):
-        model.FMC.wavelength = wf
-        model.FMC.seed = 1001 + j
-        model.run_fluorescence_monte_carlo(emitters=emitters[..., j])
-        F = model.FMC
-        fmc.append({"wavelength": wf, "emitted_power": F.emitted_power, "NA": F.NA,
-                    "NFR": F.NFR, "absorbed_fraction": F.absorbed_fraction,
-                    "n_photons": F.n_photons, "energy_balance": F.energy_balance})
-        balances.append(F.energy_balance)
-    return {"model": model, "excitation_wavelengths": wl_x, "spectrum": s, "NA": NA,
-            "absorbed_fractions": np.array(absorbed), "emitters": emitters.sum(axis=-1),
-            "fluorescence": fmc, "energy_balances": np.array(balances),
-            "emitter_var": emitter_var}
+def mirror_z_score(model) -> float:
+    """|fluorescence absorbed at x > 0 - at x < 0|, summed over the fluorescence wavelengths,
+    in standard errors. Geometry and beam are symmetric under x -> -x.
 
-
-def mirror_z_score(result) -> float:
-    """|fluorescence absorbed at x > 0 - at x < 0|, summed over the fluorescence runs, in
-    standard errors. Geometry and beam are symmetric under x -> -x. Each run launching P
-    (W per W incident) adds a difference with standard error at most P sqrt(f / N) (a
-    packet's share on either side lies in [0, 1]). The excitation runs' imbalance of the
-    emitters adds its own: a packet of run k makes fluorescence d in [0, c_k], c_k = max
-    QY(lambda_k) lambda_k / min lambda_f, so E[d^2] <= c_k E[d] = c_k e_k (e_k: emitted per
-    W of run k), and the variance is at most the sum of s_k^2 c_k e_k / N (``emitter_var``);
-    at most all of the imbalance is absorbed again."""
-    G = result["model"].G
+    Fluorescence wavelength j launches P_j (W per W incident) in N_j packets: its difference
+    has standard error at most P_j sqrt(A_j / N_j) (a packet's share on either side lies in
+    [0, 1], A_j its absorbed fraction). The excitation adds the emitters' own imbalance: a
+    packet of excitation wavelength k (share s_k, N_k packets) absorbs a_p in [0, 1] in the
+    fluorescers and emits at most c_k a_p there, c_k = max QY(lambda_k) lambda_k / min
+    lambda_f, so that imbalance has variance at most s_k c_k^2 F_k / N_k (F_k = s_k E[a_p],
+    the absorbed power in the fluorescers, W/W incident); at most all of it is absorbed
+    again."""
+    G, MC, FMC = model.G, model.MC, model.FMC
     dV = G.dx * G.dy * G.dz
+    right, left = G.x > 1e-12, G.x < -1e-12
     diff, var = 0.0, 0.0
-    for r in result["fluorescence"]:
-        a = r["NA"] * dV
-        diff += a[G.x > 1e-12].sum() - a[G.x < -1e-12].sum()
-        var += r["emitted_power"] ** 2 * r["absorbed_fraction"] / r["n_photons"]
-    var += result["emitter_var"]
+    for j in range(FMC.wavelength.size):
+        a = FMC.NA[..., j] * dV
+        diff += a[right].sum() - a[left].sum()
+        var += (FMC.emitted_power[j] ** 2 * FMC.absorbed_fraction[j]
+                / FMC.n_photons_per_wavelength[j])
+    M = G.medium_map()
+    fluorescers = [i for i, m in enumerate(G.media) if m.QY is not None]
+    in_fl = np.isin(M, fluorescers)
+    for k, wl in enumerate(MC.wavelength):
+        c = max(G.media[i].value("QY", wl) for i in fluorescers) * wl / FMC.wavelength.min()
+        F = MC.NA[..., k][in_fl].sum() * dV
+        var += MC.spectrum[k] * c**2 * F / MC.n_photons_per_wavelength[k]
     return abs(diff) / math.sqrt(var)
 
 
-def check(result) -> dict:
-    """Every run's energy balance, and the x-mirror symmetry of the summed fluorescence."""
+def check(model) -> dict:
+    """Every wavelength's energy balance, and the x-mirror symmetry of the fluorescence."""
+    balances = np.concatenate([model.MC.energy_balance, model.FMC.energy_balance])
     return {
         "energy_balance": {
-            "value": float(np.max(np.abs(result["energy_balances"] - 1.0))), "expected": 0.0,
-            "tol": 1e-9, "what": "largest |balance - 1| over all excitation and fluorescence runs"},
+            "value": float(np.max(np.abs(balances - 1.0))), "expected": 0.0, "tol": 1e-9,
+            "what": "largest |balance - 1| over the excitation and fluorescence wavelengths"},
         "fluorescence_mirror_symmetry": {
-            "value": mirror_z_score(result), "expected": 0.0, "tol": 4.0,
+            "value": mirror_z_score(model), "expected": 0.0, "tol": 4.0,
             "what": "|fluorescence absorbed x > 0 - x < 0| in standard errors (bound)"},
     }
-
-
-def spectra_figure(result):
-    """The excitation spectrum and the emitted fluorescence spectrum (W per W incident)."""
-    import matplotlib.pyplot as plt
-
-    fig, ax = plt.subplots(figsize=(7, 3.6), layout="constrained")
-    wl_x = result["excitation_wavelengths"]
-    ax.plot(wl_x, result["spectrum"], "o-", label="excitation (incident, W/W)")
-    ax.plot(wl_x, result["spectrum"] * result["absorbed_fractions"], "s-",
-            label="excitation absorbed in the cuboid (W/W)")
-    fl = result["fluorescence"]
-    ax.plot([r["wavelength"] for r in fl], [r["emitted_power"] for r in fl], "^-",
-            label="fluorescence emitted (W/W incident)")
-    ax.set(xlabel="wavelength [nm]", ylabel="power per simulated wavelength", yscale="log",
-           title="Broadband excitation and fluorescence")
-    ax.grid(True, alpha=0.4)
-    ax.legend(loc="best", fontsize=8)
-    return fig
-
-
-def sums_figure(result):
-    """Slices of the broadband NFR of the excitation and of the fluorescence."""
-    import matplotlib.pyplot as plt
-
-    from mcmatlab_py.plotting.figures import positive_log_norm
-    from mcmatlab_py.plotting.slices import orthogonal_slices
-
-    G = result["model"].G
-    fig = plt.figure(figsize=(10, 6.6), layout="constrained")
-    top, bottom = fig.subfigures(2, 1)
-    for sub, data, title in (
-            (top, result["NA"], "Excitation: NA summed over wavelengths [W/cm$^3$/W]"),
-            (bottom, sum(r["NA"] for r in result["fluorescence"]),
-             "Fluorescence: NA summed over wavelengths [W/cm$^3$/W incident]")):
-        orthogonal_slices(sub, np.where(data > 0, data, np.nan), G, (0.5, 0.2, 0.4),
-                          cmap="inferno", norm=positive_log_norm(data), label="NA",
-                          title=title)
-    return fig
 
 
 if __name__ == "__main__":
@@ -246,17 +177,22 @@ if __name__ == "__main__":
     ap.add_argument("--out", type=Path, default=Path(__file__).parent / "out",
                     help="folder for the figures (default: examples/mcmatlab/out)")
     args = ap.parse_args()
-    result = run(args.quick)
-    s, f = result["spectrum"], result["absorbed_fractions"]
-    print(f"{100 * float(s @ f):.3g}% of the incident light was absorbed within the cuboid")
-    emitted = sum(r["emitted_power"] for r in result["fluorescence"])
-    print(f"{100 * emitted / float(s @ f):.3g}% of the absorbed incident light was re-emitted "
-          "as fluorescence")
-    for name, c in check(result).items():
+    model = run(args.quick)
+    G, MC, FMC = model.G, model.MC, model.FMC
+    dV = G.dx * G.dy * G.dz
+    absorbed = MC.NA.sum() * dV  # W per W incident, all wavelengths
+    emitted = FMC.source_distribution.sum() * dV
+    print(f"{100 * absorbed:.3g}% of incident light was absorbed within the cuboid")
+    print(f"{100 * emitted / absorbed:.3g}% of absorbed incident light was re-emitted as "
+          "fluorescence")
+    print(f"{100 * FMC.NA.sum() * dV / emitted:.3g}% of fluorescence light was absorbed "
+          "within the cuboid")
+    print(f"{MC.n_photons} excitation packets in {MC.simulation_time:.1f} s, "
+          f"{FMC.n_photons} fluorescence packets in {FMC.simulation_time:.1f} s")
+    for name, c in check(model).items():
         print(f"{name}: {c['value']:.6g} ({c['what']})")
     args.out.mkdir(parents=True, exist_ok=True)
-    model = result["model"]
     model.plot("G", args.out / "ex23")
-    spectra_figure(result).savefig(args.out / "ex23_spectra.png", dpi=100)
-    sums_figure(result).savefig(args.out / "ex23_NA.png", dpi=100)
+    model.plot("MC", args.out / "ex23")  # media properties over wavelength, NA, NFR, spectrum
+    model.plot("FMC", args.out / "ex23_FMC")  # emitters, NA, NFR, spectrum
     print(f"figures in {args.out}")

@@ -6,6 +6,8 @@ from pathlib import Path
 
 import numpy as np
 
+from ..broadband import total
+
 __all__ = ["plot_na_slices"]
 
 
@@ -18,7 +20,7 @@ def plot_na_slices(model, path: str | Path, *, field: str = "NA") -> None:
     from matplotlib.colors import LogNorm
 
     G, MC = model.G, model.MC
-    data = getattr(MC, field)
+    data = total(getattr(MC, field))  # broadband: summed over the wavelengths
     src = MC.light_source
     iy = int(np.clip(np.searchsorted(G.y, src.y_focus), 0, G.ny - 1))
     positive = data[data > 0]

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..broadband import is_broadband, total
 from .slices import orthogonal_slices
 
 __all__ = ["fluorescence_figures", "geometry_figures", "heat_figures", "media_properties_figure",
@@ -64,10 +65,15 @@ def _ranges(values, parent, n_media):
 def media_properties_figure(model, M=None):
     """MCmatlab's media-properties figure: each property of each medium at ``MC.wavelength``,
     a bar to its largest value over the voxels and a tick at its smallest (they differ for
-    FR-, T- or FD-dependent media)."""
+    FR-, T- or FD-dependent media); over the wavelengths when ``MC`` or ``FMC`` is broadband
+    (:func:`mcmatlab_py.plotting.spectral.media_properties_vs_wavelength`)."""
     from ..media_bins import optical_media_properties, thermal_media_properties
 
     G, MC, HS = model.G, model.MC, model.HS
+    if is_broadband(MC.wavelength) or is_broadband(model.FMC.wavelength):
+        from .spectral import media_properties_vs_wavelength
+
+        return media_properties_vs_wavelength(model, M)
     M = G.medium_map() if M is None else M
     opt = MC.media_properties
     if opt is None or opt.M.shape != M.shape:
@@ -99,15 +105,27 @@ def media_properties_figure(model, M=None):
     return fig
 
 
+def _summed(sim) -> str:
+    """How the maps of a run are drawn: summed over the wavelengths of a broadband run."""
+    n = np.size(sim.wavelength)
+    return f", summed over {n} wavelengths" if is_broadband(sim.wavelength) else ""
+
+
 def monte_carlo_figures(model) -> dict:
-    """``media_properties``, ``NA`` and ``NFR`` (log colour scales) of ``model.MC``."""
+    """``media_properties``, ``NA`` and ``NFR`` (log colour scales) of ``model.MC``; a
+    broadband run's maps summed over its wavelengths, and its ``spectrum``."""
     G, MC = model.G, model.MC
     if MC.NA is None:
         raise ValueError("MC.NA is empty: run model.run_monte_carlo() before plot('MC')")
     figs = {"media_properties": media_properties_figure(model)}
+    s = _summed(MC)
     figs.update(_log_slice_figures(G, (
-        ("NA", MC.NA, "normalized absorbed power per volume", "W/cm$^3$/W"),
-        ("NFR", MC.NFR, "normalized fluence rate", "W/cm$^2$/W"))))
+        ("NA", total(MC.NA), f"normalized absorbed power per volume{s}", "W/cm$^3$/W"),
+        ("NFR", total(MC.NFR), f"normalized fluence rate{s}", "W/cm$^2$/W"))))
+    if is_broadband(MC.wavelength):
+        from .spectral import spectrum_figure
+
+        figs["spectrum"] = spectrum_figure(model, "MC")
     return figs
 
 
@@ -128,18 +146,23 @@ def fluorescence_figures(model) -> dict:
     """MCmatlab's ``plot(model, 'FMC')``: ``emitters`` (the fluorescence emitted), ``NA`` and
     ``NFR`` of the fluorescence (log colour scales, per W of incident excitation), and the
     outputs the run has: ``light_collector``, ``far_field``, ``NI`` (boundary irradiance),
-    ``example_paths``."""
+    ``example_paths``; a broadband run's maps summed over its wavelengths, and its
+    ``spectrum``."""
     from . import outputs
 
     G, FMC = model.G, model.FMC
     if FMC.NA is None:
         raise ValueError("FMC.NA is empty: run model.run_monte_carlo('fluorescence') before "
                          "plot('FMC')")
-    wl = f" at {FMC.wavelength:g} nm"
+    wl = _summed(FMC) or f" at {FMC.wavelength:g} nm"
     figs = _log_slice_figures(G, (
-        ("emitters", FMC.source_distribution, f"fluorescence emitted{wl}", "W/cm$^3$/W"),
-        ("NA", FMC.NA, f"normalized fluorescence absorbed per volume{wl}", "W/cm$^3$/W"),
-        ("NFR", FMC.NFR, f"normalized fluorescence fluence rate{wl}", "W/cm$^2$/W")))
+        ("emitters", total(FMC.source_distribution), f"fluorescence emitted{wl}", "W/cm$^3$/W"),
+        ("NA", total(FMC.NA), f"normalized fluorescence absorbed per volume{wl}", "W/cm$^3$/W"),
+        ("NFR", total(FMC.NFR), f"normalized fluorescence fluence rate{wl}", "W/cm$^2$/W")))
+    if is_broadband(FMC.wavelength):
+        from .spectral import spectrum_figure
+
+        figs["spectrum"] = spectrum_figure(model, "FMC")
     if FMC.use_light_collector:
         figs["light_collector"] = outputs.plot_light_collector(model, "FMC")
     if FMC.far_field_res:

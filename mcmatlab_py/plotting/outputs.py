@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..broadband import is_broadband
 from ..layered import absorption_vs_depth, radial_reflectance_transmittance
 
 __all__ = ["plot_az_fz", "plot_boundary_irradiance", "plot_example_paths", "plot_far_field",
@@ -33,6 +34,13 @@ def _run(model, simulation: str):
     if simulation not in ("MC", "FMC"):
         raise ValueError(f"simulation must be 'MC' or 'FMC', got {simulation!r}")
     return getattr(model, simulation), ("Fluorescence: " if simulation == "FMC" else "")
+
+
+def _all_wavelengths(sim, value):
+    """An output summed over the last, wavelength axis of a broadband run (as given else)."""
+    if value is None or not is_broadband(sim.wavelength):
+        return value
+    return np.asarray(value).sum(axis=-1)
 
 
 def _split_paths(P: np.ndarray) -> list[np.ndarray]:
@@ -76,7 +84,7 @@ def plot_far_field(model, simulation: str = "MC"):
     import matplotlib.pyplot as plt
 
     MC, prefix = _run(model, simulation)
-    FF = _need(MC.far_field, "far field (MC.far_field_res)")
+    FF = _all_wavelengths(MC, _need(MC.far_field, "far field (MC.far_field_res)"))
     fig, ax = plt.subplots(figsize=(6, 4), constrained_layout=True)
     im = ax.pcolormesh(np.degrees(MC.far_field_phi), np.degrees(MC.far_field_theta), FF,
                        shading="nearest", cmap="inferno")
@@ -86,12 +94,14 @@ def plot_far_field(model, simulation: str = "MC"):
 
 
 def plot_light_collector(model, simulation: str = "MC"):
-    """The lens image (summed over time bins) or the fiber's power (over time)."""
+    """The lens image (summed over time bins) or the fiber's power (over time); summed over
+    the wavelengths of a broadband run (as the far field and the ``NI`` maps)."""
     import matplotlib.pyplot as plt
 
     MC, prefix = _run(model, simulation)
     LC = MC.light_collector
-    img = np.asarray(_need(LC.image, "light collector image (MC.use_light_collector)"))
+    img = np.asarray(_all_wavelengths(MC, _need(LC.image,
+                                                "light collector image (MC.use_light_collector)")))
     fig, ax = plt.subplots(figsize=(5, 4), constrained_layout=True)
     if LC.is_fiber:
         if img.ndim == 0:
@@ -122,8 +132,8 @@ def plot_boundary_irradiance(model, simulation: str = "MC"):
            "z": [-G.Lx / 2, G.Lx / 2, -G.Ly / 2, G.Ly / 2]}
     for ax, face in zip(axes.T.ravel(), ("xpos", "xneg", "ypos", "yneg", "zpos", "zneg"),
                         strict=True):
-        im = ax.imshow(getattr(MC, f"NI_{face}").T, extent=ext[face[0]], aspect="auto",
-                       cmap="inferno", origin="lower" if face[0] == "z" else "upper")
+        im = ax.imshow(_all_wavelengths(MC, getattr(MC, f"NI_{face}")).T, extent=ext[face[0]],
+                       aspect="auto", cmap="inferno", origin="lower" if face[0] == "z" else "upper")
         ax.set_title(f"{prefix}NI_{face}")
         fig.colorbar(im, ax=ax)
     return fig

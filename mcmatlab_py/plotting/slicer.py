@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..broadband import total
+
 __all__ = ["interactive_slicer", "voxel_image"]
 
 
@@ -30,7 +32,7 @@ def interactive_slicer(model, what: str, show: bool = True):
     if what == "G":
         name, data = "medium", G.medium_map()
     elif what in ("MC", "FMC"):
-        nfr = getattr(model, what).NFR
+        nfr = total(getattr(model, what).NFR)  # broadband: summed over the wavelengths
         name, data = "log10 NFR", np.log10(np.where(nfr > 0, nfr, np.nan))
     else:
         name, data = "T [deg C]", model.HS.T_voxels

@@ -1,0 +1,115 @@
+"""The parameters of an identification config: their names, priors, bounds and the
+damage-driven optics (``[filter.prior]``, ``[filter.bounds]``, ``[filter.coagulation]``).
+
+Split from :mod:`enkf.app.config`, whose number checks (``_num``, ``_pair``) it uses.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from fem.checks import shorten
+from mcmatlab_py.config import ConfigError, check_keys
+
+from ..tissue.parameters import COAGULATION_NAMES, ESTIMATES, PARAMETER_NAMES, parameter_names
+from . import config as _cfg
+
+#: keys of [filter.coagulation] (enkf.tissue.coagulation.Coagulation)
+COAGULATION_KEYS = {"E", "A", "nominal_factor", "weight_exponent"}
+
+__all__ = ["COAGULATION_KEYS", "bounds_settings", "coagulation_settings", "filtered_names", "nominal_of",
+           "prior_of", "prior_settings"]
+
+
+def filtered_names(setup_kw: dict) -> tuple:
+    """The filtered parameters of these settings (``estimate``, with the coagulated optics
+    under ``parameter_model = "coagulation"``)."""
+    return parameter_names(setup_kw.get("estimate", ESTIMATES[0]),
+                           setup_kw.get("parameter_model", "random_walk"))
+
+
+def _not_estimated(key: str, name: str, setup_kw: dict) -> ConfigError:
+    why = (" (only with filter.parameter_model = \"coagulation\")" if name in COAGULATION_NAMES
+           else f" (filter.estimate = {list(setup_kw.get('estimate', ESTIMATES[0]))})")
+    return ConfigError(f"{key}.{name}: {name} is not estimated{why}")
+
+
+def coagulation_settings(flt: dict, setup_kw: dict) -> None:
+    """``[filter.coagulation]``: the Arrhenius law and nominal coagulated optics."""
+    table = check_keys("filter.coagulation", flt.get("coagulation", {}), COAGULATION_KEYS)
+    if setup_kw.get("parameter_model") != "coagulation":
+        if table:
+            raise ConfigError("[filter.coagulation] is given but filter.parameter_model is "
+                              f"{setup_kw.get('parameter_model', 'random_walk')!r}: set "
+                              "filter.parameter_model = \"coagulation\" or drop the table")
+        return
+    from ..tissue.coagulation import Coagulation
+
+    kw = {k: _cfg._num(f"filter.coagulation.{k}", table[k], positive=True)
+          for k in ("E", "A", "weight_exponent") if k in table}
+    if "nominal_factor" in table:
+        f = table["nominal_factor"]
+        if not (isinstance(f, list) and len(f) == 2):
+            raise ConfigError(f"filter.coagulation.nominal_factor must be [mua, mus] (coagulated "
+                              f"over native), got {shorten(repr(f))}")
+        kw["nominal_factor"] = tuple(_cfg._num(f"filter.coagulation.nominal_factor[{i}]", v,
+                                          positive=True) for i, v in enumerate(f))
+    setup_kw["coagulation"] = Coagulation(**kw)
+
+
+def prior_settings(table, setup_kw: dict) -> dict:
+    """``[filter.prior]``: a uniform prior [lo, hi] in physical units per parameter."""
+    names = filtered_names(setup_kw)
+    table = check_keys("filter.prior", table, set(PARAMETER_NAMES) | set(COAGULATION_NAMES))
+    extra = sorted(set(table) - set(names))
+    if extra:
+        raise _not_estimated("filter.prior", extra[0], setup_kw)
+    return {name: _cfg._pair(f"filter.prior.{name}", table[name], positive=True) for name in table}
+
+
+def prior_of(name: str, setup_kw: dict, medium, where: str = "G.media[0]"
+             ) -> tuple[tuple[float, float], str]:
+    """The prior range of ``name`` and where it comes from (for error messages);
+    ``where``: the estimated medium's place in the config."""
+    if name in setup_kw.get("prior", {}):
+        return setup_kw["prior"][name], f"filter.prior.{name}"
+    lo_f, hi_f = setup_kw.get("prior_range", (0.5, 2.0))
+    v = nominal_of(name, setup_kw, medium)
+    if name in COAGULATION_NAMES:
+        return (lo_f * v, hi_f * v), (f"filter.prior_range times filter.coagulation."
+                                      f"nominal_factor times {where}.{name[:3]}")
+    return (lo_f * v, hi_f * v), f"filter.prior_range times {where}.{name}"
+
+
+def nominal_of(name: str, setup_kw: dict, medium) -> float:
+    """The nominal value of ``name``: the medium's, or its coagulated multiple."""
+    if name in COAGULATION_NAMES:
+        native = {"mua": medium.mua, "mus": medium.mus}
+        return setup_kw["coagulation"].nominal(native)[name]
+    return getattr(medium, name)
+
+
+def bounds_settings(table, setup_kw: dict, medium, where: str = "G.media[0]"
+                    ) -> np.ndarray | None:
+    """``[filter.bounds]``: the physical range of each estimated parameter's mean."""
+    from ..tissue import default_bounds
+
+    names = filtered_names(setup_kw)
+    table = check_keys("filter.bounds", table, set(PARAMETER_NAMES) | set(COAGULATION_NAMES))
+    if not table:
+        return None
+    extra = sorted(set(table) - set(names))
+    if extra:
+        raise _not_estimated("filter.bounds", extra[0], setup_kw)
+    out = []
+    for name in names:
+        nominal = nominal_of(name, setup_kw, medium)
+        (p_lo, p_hi), source = prior_of(name, setup_kw, medium, where)
+        lo, hi = default_bounds([nominal], [p_lo], [p_hi])[0]
+        if name in table:
+            lo, hi = _cfg._pair(f"filter.bounds.{name}", table[name], positive=True)
+            if not (lo <= p_lo and p_hi <= hi):
+                raise ConfigError(f"filter.bounds.{name} = {[lo, hi]} must contain the prior "
+                                  f"[{p_lo:g}, {p_hi:g}] ({source})")
+        out.append((lo, hi))
+    return np.array(out)
