@@ -134,7 +134,7 @@ def innovation_loglik(Y: np.ndarray, y: np.ndarray, R: np.ndarray, rho: float = 
     et al. 2017, "Estimating model evidence using data assimilation", QJRMS 143): two
     models run on the same data are compared by the difference of their sums. Evaluated
     with the whitened anomalies :math:`\tilde S = B L^{-\mathsf T}\sqrt{\rho/(N-1)}`
-    and the determinant lemma, so only an ``(N, N)`` system is solved.
+    and the determinant lemma, so only a ``min(N, p)`` square system is solved.
     """
     ok = ~np.isnan(y)
     p = int(ok.sum())
@@ -155,11 +155,16 @@ def innovation_loglik(Y: np.ndarray, y: np.ndarray, R: np.ndarray, rho: float = 
         S = np.linalg.solve(L, B.T).T
         logdet_R = 2.0 * float(np.sum(np.log(np.diag(L))))
     S = S * np.sqrt(rho / max(N - 1, 1))
-    # C = L (I_p + S'S) L';  det(I_p + S'S) = det(I_N + SS'); Woodbury for the solve
-    G = np.eye(N) + S @ S.T
-    c = np.linalg.cholesky(G)
-    Sd = np.linalg.solve(c, S @ dt)
-    quad = float(dt @ dt - Sd @ Sd)
+    # C = L (I_p + S'S) L': factor the smaller of I_p + S'S and I_N + SS' (equal
+    # determinants; Woodbury for the solve), so a large ensemble or many pixels stay cheap
+    if p <= N:
+        c = np.linalg.cholesky(np.eye(p) + S.T @ S)
+        z = np.linalg.solve(c, dt)
+        quad = float(z @ z)
+    else:
+        c = np.linalg.cholesky(np.eye(N) + S @ S.T)
+        Sd = np.linalg.solve(c, S @ dt)
+        quad = float(dt @ dt - Sd @ Sd)
     logdet = logdet_R + 2.0 * float(np.sum(np.log(np.diag(c))))
     return -0.5 * (quad + logdet + p * np.log(2.0 * np.pi))
 

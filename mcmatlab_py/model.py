@@ -241,6 +241,15 @@ class MonteCarloSimulation(StrictAttributes):
       also hold what lies beyond, as in MCML.
     * ``example_paths`` (4, k): x, y, z (cm) and weight of the first ``n_example_paths``
       packets, each path preceded by a NaN column (MCmatlab's layout).
+
+    Broadband runs (``wavelength`` a 1-D array of n, :mod:`mcmatlab_py.broadband`): every map
+    gets a last axis of n wavelengths, ``NA`` and ``NFR`` (nx, ny, nz, n), ``NI_*`` (.., ..,
+    n), ``far_field`` (res, res, n), ``light_collector.image`` with a last axis of n, each
+    slice per W incident in all (slice k is ``spectrum[k]`` times a monochromatic run's
+    map, so the sum over the last axis is the broadband total, as MCmatlab's); the
+    fractions, ``escaped``'s values and ``energy_balance`` are (n,), each a fraction of its
+    own wavelength's power (NaN for a wavelength of zero power, not run);
+    ``n_photons_per_wavelength`` (n,) and ``spectrum`` (n,) are set.
     """
 
     n_photons_requested: int | None = None

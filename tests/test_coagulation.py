@@ -161,6 +161,10 @@ def test_innovation_loglik_is_the_gaussian_predictive_density():
         Y.mean(0)[keep], np.cov(Y[:, keep].T) + Rf[np.ix_(keep, keep)]).logpdf(y[keep]),
         rel=1e-12)
     assert innovation_loglik(Y, np.full(3, np.nan), R) == 0.0
+    # more observations than members: the (N, N) form of the same density
+    Y, y, R = rng.normal(size=(3, 7)), rng.normal(size=7), rng.uniform(0.2, 1.0, 7)
+    assert innovation_loglik(Y, y, R, rho=1.5) == pytest.approx(multivariate_normal(
+        Y.mean(0), 1.5 * np.cov(Y.T) + np.diag(R)).logpdf(y), rel=1e-12)
 
 
 # ------------------------------------------------------------------ config

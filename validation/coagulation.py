@@ -232,6 +232,8 @@ def main(argv=None):
 
 
 def write_report(out: Path, args, results: dict, truths: dict, wall: float) -> None:
+    runs_wall = sum(r["wall_s"] for res in results.values() for rows in res.values()
+                    for r in rows)
     cmd = "python validation/coagulation.py --seeds " + " ".join(map(str, args.seeds))
     if list(args.cases) != list(CASES):
         cmd += " --cases " + " ".join(f'"{c}"' for c in args.cases)
@@ -240,8 +242,8 @@ def write_report(out: Path, args, results: dict, truths: dict, wall: float) -> N
     if args.model_error != "white":
         cmd += f" --model-error {args.model_error}"
     L = ["# Damage-driven optics against the random walk (issue #21)", "",
-         f"Command: `{cmd}` ({len(args.seeds)} seeds; wall {wall:.0f} s on the shared 2-core "
-         "machine, the cached truths not counted).", "",
+         f"Command: `{cmd}` ({len(args.seeds)} seeds; the filter runs took {runs_wall:.0f} s "
+         "in all on the shared 2-core machine, the cached truths not counted).", "",
          f"Filters (the same data, N = {args.n_members}, ETKF, the paper's coarse model and "
          f"priors, {args.model_error} model error): **coagulation** = optics driven by each "
          "member's Arrhenius damage, native and coagulated mua, mus estimated (walk 0.005 "
@@ -249,13 +251,14 @@ def write_report(out: Path, args, results: dict, truths: dict, wall: float) -> N
          "the project's walk for drifting optics, [0.03, 0.10] per step with the laser on."
          , "",
          "The damage truths have no single (mua, mus): the numbers compare with the "
-         "*effective* optics, native + F (coagulated - native), F the absorbed-power-weighted "
-         "coagulated fraction of the truth's damage at the filter's nodes "
-         "(enkf.paper.coagulation). Lag: the shift tau (s) in [-2, 4] with est(t) closest to "
-         "truth(t - tau) while the laser is on (positive: behind). Brier: P(Omega > 1) at "
-         "4,851 nodes x 10 times against the truth's damage. Log evidence: the sum of the "
-         "innovations' log-likelihood over the 150 readings. Numbers: mean over seeds "
-         "(median in brackets).", ""]
+         "*effective* optics, native + F (coagulated - native), F the coagulated fraction of "
+         "the truth's damage at the filter's nodes weighted as the filter weighs it (the "
+         "square of the native absorbed power; enkf.paper.coagulation). Lag: the shift tau "
+         "(s) in [-2, 4] with est(t) closest to truth(t - tau) while the laser is on "
+         "(positive: behind; at -2 no shift brings them together: the estimate stays "
+         "above). Brier: P(Omega > 1) at 4,851 nodes x 10 times against the truth's "
+         "damage. Log evidence: the sum of the innovations' log-likelihood over the 150 "
+         "readings. Numbers: mean over seeds (median in brackets).", ""]
     for case, res in results.items():
         tr = truths[case]
         sc = SCENARIO[case]
@@ -332,8 +335,9 @@ def summary_section(results: dict) -> list[str]:
     L += ["", "Recommendation (what `identify` users should do when they do not know whether "
           "the optics follow the damage): run both models on the same data and compare "
           "`innovation_loglik.sum` in the two `summary.json` files (docs/coagulation.md). "
-          "Where the filter's model can represent the truth (the identical twins above) the "
-          "evidence picked the right model on every seed. It measures the fit to the "
+          "Where the filter's model can represent the truth (the identical twins of "
+          "validation/reports/coagulation.md) the evidence picked the right model on every "
+          "seed. It measures the fit to the "
           "surface sensor only: where neither model can represent the truth (the fine-grid "
           "truths, whose coagulated surface layer no single (mua, mus) describes) the "
           "better-fitting model need not have the better optics, and both filters' bands "

@@ -68,6 +68,7 @@ recomputed from the damage at the start, never added twice: a step's damage is k
 from __future__ import annotations
 
 import math
+import numbers
 from dataclasses import dataclass
 
 import numpy as np
@@ -129,7 +130,7 @@ class Coagulation:
     def __post_init__(self):
         for name in ("E", "A", "weight_exponent"):
             v = getattr(self, name)
-            if not (isinstance(v, (int, float)) and math.isfinite(v) and v > 0):
+            if not (isinstance(v, numbers.Real) and math.isfinite(v) and v > 0):
                 unit = {"E": " (J/mol)", "A": " (1/s)"}.get(name, "")
                 raise ValueError(f"coagulation.{name} must be a finite number > 0{unit}, "
                                  f"got {v!r}")
