@@ -25,7 +25,7 @@ sys.path.insert(0, str(Path(__file__).parents[1] / "validation"))
 def adding_doubling(mua, mus, g, d, n):
     """iadpython's R (specular included) and T at 48 points, and |AD(48) - AD(32)|.
 
-    iadpython 0.6 goes wrong at n = 1 exactly and at some quadrature orders (64, 96):
+    iadpython 0.5.3 goes wrong at n = 1 exactly and at some quadrature orders (64, 96):
     n = 1 + 1e-9 stands in for a matched slab."""
     iad = pytest.importorskip("iadpython")
     out = []

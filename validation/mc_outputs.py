@@ -159,7 +159,7 @@ def fpw(n_photons, k):
 def _ad_rt(mua, mus, g, d, n):
     """iadpython's total R (specular included) and T, and its own quadrature error.
 
-    iadpython 0.6 is unstable at some quadrature orders (64 and 96 points gave R off by
+    iadpython 0.5.3 is unstable at some quadrature orders (64 and 96 points gave R off by
     0.1-100%) and at n = 1 exactly: we take 48 points, n = 1 + 1e-9 for a matched slab,
     and report |AD(48) - AD(32)| as AD's own error."""
     import iadpython as iad

@@ -111,8 +111,11 @@ def spectrum_figure(model, simulation: str = "MC"):
         raise ValueError(f"{simulation} holds no broadband run: set {simulation}.wavelength to an "
                          "array and run it first")
     wl = np.asarray(sim.wavelength, float)
+    per = "incident"
     if simulation == "MC":
-        launched, what = np.asarray(sim.spectrum), "incident"
+        # a distributed source (example 26) emits inside the cuboid: there is no incident beam
+        per = "emitted" if sim.source_distribution is not None else "incident"
+        launched, what = np.asarray(sim.spectrum), per
     else:
         launched, what = np.asarray(sim.emitted_power), "fluorescence emitted"
     escaped = np.nansum(np.vstack(list(sim.escaped.values())), axis=0)
@@ -125,10 +128,10 @@ def spectrum_figure(model, simulation: str = "MC"):
     values = np.concatenate(list(lines.values()))
     positive = values[values > 0]
     floor = max(positive.min(), positive.max() * 1e-6) if positive.size else 1e-12
-    ax.set(xlabel="wavelength [nm]", ylabel="power per wavelength [W/W incident]", yscale="log",
-           ylim=(floor / 2, None),
-           title=f"{'Fluorescence' if simulation == 'FMC' else 'Excitation'}: power at each of "
-                 f"the {wl.size} wavelengths")
+    kind = "Fluorescence" if simulation == "FMC" else ("Excitation" if per == "incident"
+                                                       else "Emission")
+    ax.set(xlabel="wavelength [nm]", ylabel=f"power per wavelength [W/W {per}]", yscale="log",
+           ylim=(floor / 2, None), title=f"{kind}: power at each of the {wl.size} wavelengths")
     ax.grid(True, which="both", alpha=0.4)
     ax.legend(loc="best", fontsize=8)
     return fig
