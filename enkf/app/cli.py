@@ -185,9 +185,12 @@ def main(argv=None) -> int:
     report.command_line = ["tissue-enkf", *(sys.argv[1:] if argv is None else argv)]
     if not args.debug:  # a warning is one line for the user, not a source excerpt
         warnings.formatwarning = lambda message, *a, **k: f"warning: {message}\n"
-    old = None
+    old = old_int = None
     if threading.current_thread() is threading.main_thread():
         old = signal.signal(signal.SIGTERM, _on_sigterm)
+        # Ctrl-C raises KeyboardInterrupt (exit 130, what was kept said) even when a library
+        # imported earlier in this process (a Dask cluster, a notebook) replaced the handler
+        old_int = signal.signal(signal.SIGINT, signal.default_int_handler)
     try:
         seed = getattr(args, "seed", None)
         if seed is not None:
@@ -218,6 +221,8 @@ def main(argv=None) -> int:
     finally:
         if old is not None:
             signal.signal(signal.SIGTERM, old)
+        if old_int is not None:
+            signal.signal(signal.SIGINT, old_int)
 
 
 if __name__ == "__main__":
