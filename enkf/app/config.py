@@ -357,9 +357,12 @@ def identify_config_from_dict(cfg: dict) -> IdentifyConfig:
         raise ConfigError(f"filter.emulator.exact must be true or false, got {shorten(repr(exact))}")
     if "dt" in cfg.get("HS", {}) and model.HS.dt is not None:
         setup_kw["max_dt"] = float(model.HS.dt)  # the filter's longest heat step
-        check_steps(model.HS.total_duration / model.HS.dt, "the filter's heat steps (HS.dt = "
-                    f"{model.HS.dt:g} s over {model.HS.total_duration:g} s of laser pulses)",
-                    "HS.dt")
+        try:
+            check_steps(model.HS.total_duration / model.HS.dt, "the filter's heat steps (HS.dt = "
+                        f"{model.HS.dt:g} s over {model.HS.total_duration:g} s of laser pulses)",
+                        "HS.dt")
+        except ValueError as err:  # a ConfigError, as every other bad key
+            raise ConfigError(str(err)) from None
     run_table(cfg)
     bounds = bounds_settings(flt.get("bounds", {}), setup_kw, m, where)
     data = _data_spec(cfg.get("data", {}), len(positions) + (
