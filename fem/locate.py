@@ -14,6 +14,7 @@ from __future__ import annotations
 import numpy as np
 
 from . import _kernels
+from .mesh import KUHN_PATHS, structured_grid
 
 __all__ = ["locate"]
 
@@ -56,8 +57,6 @@ def locate(mesh, points, tol: float = 1e-10) -> tuple[np.ndarray, np.ndarray]:
         (0 where ``elem == -1``).
     """
     x = np.ascontiguousarray(points, dtype=np.float64)
-    from .mesh import structured_grid
-
     grid = structured_grid(mesh)
     if grid is not None:
         return _locate_structured(mesh, grid, x, tol)
@@ -77,15 +76,11 @@ def locate(mesh, points, tol: float = 1e-10) -> tuple[np.ndarray, np.ndarray]:
 
 # KUHN_PATHS[s] is the axis order of simplex s: the code 3 * first + second -> s
 _PATH_OF_ORDER = np.full(9, -1, dtype=np.int64)
+_PATH_OF_ORDER[3 * KUHN_PATHS[:, 0] + KUHN_PATHS[:, 1]] = np.arange(len(KUHN_PATHS))
 
 
 def _locate_structured(mesh, grid, x: np.ndarray, tol: float):
     """:func:`locate` on ``box_mesh(grid)``: voxel and Kuhn simplex from the coordinates."""
-    from .mesh import KUHN_PATHS
-
-    if _PATH_OF_ORDER[0] < 0:
-        for s_, path in enumerate(KUHN_PATHS):
-            _PATH_OF_ORDER[3 * path[0] + path[1]] = s_
     n = x.shape[1]
     u = (x - grid.lower[:, None]) / np.asarray(grid.spacing)[:, None]  # voxel units
     shape = np.asarray(grid.shape)[:, None]

@@ -156,7 +156,7 @@ def fpw(n_photons, k):
                   "scatterings), so there the independent Monte Carlo is the reference.", ""]
 
 
-def _ad_rt(mua, mus, g, d, n):
+def ad_rt(mua, mus, g, d, n):
     """iadpython's total R (specular included) and T, and its own quadrature error.
 
     iadpython 0.5.3 is unstable at some quadrature orders (64 and 96 points gave R off by
@@ -187,7 +187,7 @@ def adding_doubling(n_photons, k):
                                                                  dz=a[3] / 4, nr=1), k)
         R, sR = mean_se([r.escaped["top"] + r.specular_reflectance for r in res])
         T, sT = mean_se([r.escaped["bottom"] for r in res])
-        ur1, ut1, eR, eT = _ad_rt(mua, mus, g, d, n)
+        ur1, ut1, eR, eT = ad_rt(mua, mus, g, d, n)
         zR, zT = (R - ur1) / math.hypot(sR, eR), (T - ut1) / math.hypot(sT, eT)
         worst = max(worst, abs(zR), abs(zT))
         out.append(f"| {mua} | {mus} | {g} | {d} | {n} | {R:.5f} | {sR:.5f} | {ur1:.5f} | "
