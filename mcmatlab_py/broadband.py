@@ -52,7 +52,7 @@ FRACTIONS = ("absorbed_fraction", "specular_reflectance", "absorbed_outside_frac
 MAPS = ("NA", "NFR", "NI_xpos", "NI_xneg", "NI_ypos", "NI_yneg", "NI_zpos", "NI_zneg",
         "far_field", "Rd_r", "Tt_r", "Rd_a", "Tt_a")
 #: outputs that do not depend on the wavelength (taken from the last run)
-_AXES = ("far_field_theta", "far_field_phi", "radial_r", "exit_angle")
+AXES = ("far_field_theta", "far_field_phi", "radial_r", "exit_angle")
 
 
 def is_broadband(wavelength) -> bool:
@@ -211,7 +211,7 @@ class _Stack:
         last = self.last
         for name in MAPS:
             setattr(MC, name, self.maps.get(name))
-        for name in _AXES:
+        for name in AXES:
             setattr(MC, name, getattr(last, name))
         if MC.use_light_collector:
             LC, LC_last = MC.light_collector, last.light_collector

@@ -97,16 +97,18 @@ def cmd_mc(args) -> int:
     return 0
 
 
-_OUTPUT_NAMES = ("NI_xpos", "NI_xneg", "NI_ypos", "NI_yneg", "NI_zpos", "NI_zneg", "far_field",
-                 "far_field_theta", "far_field_phi", "Rd_r", "Tt_r", "Rd_a", "Tt_a", "radial_r",
-                 "exit_angle", "example_paths")
+def _output_names() -> tuple[str, ...]:
+    """``MC``'s optional outputs (the maps beyond NA and NFR, their axes, the paths)."""
+    from mcmatlab_py.broadband import AXES, MAPS
+
+    return (*(m for m in MAPS if m not in ("NA", "NFR")), *AXES, "example_paths")
 
 
 def _mc_outputs(MC) -> dict:
     """The optional outputs of a run as arrays for ``outputs.npz`` (those computed only)."""
     import numpy as np
 
-    out = {k: np.asarray(getattr(MC, k)) for k in _OUTPUT_NAMES if getattr(MC, k) is not None}
+    out = {k: np.asarray(getattr(MC, k)) for k in _output_names() if getattr(MC, k) is not None}
     if MC.use_light_collector:
         LC = MC.light_collector
         out.update({f"light_collector_{k}": np.asarray(getattr(LC, k))
