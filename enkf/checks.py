@@ -10,7 +10,7 @@ import numbers
 
 import numpy as np
 
-__all__ = ["as_generator", "cov_sqrt", "covariance", "float_array", "variances"]
+__all__ = ["as_generator", "cov_sqrt", "covariance", "float_array", "rows_times", "variances"]
 
 
 def as_generator(rng: np.random.Generator | int, name: str = "rng") -> np.random.Generator:
@@ -88,3 +88,26 @@ def cov_sqrt(C: np.ndarray) -> np.ndarray:
         return np.sqrt(C)
     lam, V = np.linalg.eigh(C)
     return (V * np.sqrt(np.clip(lam, 0.0, None))) @ V.T
+
+
+def rows_times(H, X: np.ndarray) -> np.ndarray:
+    """``X @ H.T`` (N, p) for an operator ``H`` (p, n), dense or scipy-sparse, and the
+    members ``X`` (N, n), which may be a strided view.
+
+    A sparse ``H`` with few entries (sensor probes: a handful of weights per row) is
+    applied by gathering the columns it touches, ``O(N nnz)``; scipy's ``H @ X.T`` would
+    first copy ``X.T`` into C order, a pass over the whole ensemble (0.5-0.8 ms per call
+    at N = 50, n = 4851).
+    """
+    if not hasattr(H, "tocsr"):
+        return np.asarray(X @ np.asarray(H).T, dtype=float)
+    H = H.tocsr()
+    if H.nnz == 0:
+        return np.zeros((X.shape[0], H.shape[0]))
+    if H.nnz > X.shape[1]:
+        return np.asarray(H @ np.ascontiguousarray(X.T), dtype=float).T
+    G = X[:, H.indices] * H.data  # (N, nnz)
+    starts = H.indptr[:-1]
+    Y = np.add.reduceat(G, np.minimum(starts, H.nnz - 1), axis=1)
+    Y[:, starts == H.indptr[1:]] = 0.0  # reduceat gives an entry, not 0, for empty rows
+    return Y

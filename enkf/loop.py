@@ -45,9 +45,10 @@ import numpy as np
 
 from .adaptive import InflationEstimator, innovation_loglik
 from .analysis import analysis, enkf_localized, inflate, random_rotation
-from .checks import as_generator, cov_sqrt, covariance, float_array, variances
+from .checks import as_generator, cov_sqrt, covariance, float_array, rows_times, variances
 from .health import HealthCheck
 from .problem import FilterConfig, FilterDivergence, FilterProblem, FilterResult, StepReport
+from .random import standard_normal
 from .transforms import as_transforms, to_filter_space, to_physical
 
 __all__ = ["run_filter"]
@@ -154,7 +155,7 @@ class _Filter:
         N, rng = self.N, self.rng
         v = None
         if self.noise_fn is None and self.noisy.size:
-            v = rng.standard_normal((N, self.noisy.size))
+            v = standard_normal(rng, (N, self.noisy.size))
             v *= self.sd_noisy  # in place: the same numbers, one (N, n) temporary fewer
         if not self.rw_on:
             return v, None
@@ -203,7 +204,7 @@ class _Filter:
     def observe(self, Xf, Uf, k: int, tic: float) -> np.ndarray:
         """The forecast in observation space; a non-finite forecast stops the run."""
         obs = self.P.observation
-        Y = np.asarray(obs(Xf) if callable(obs) else (obs @ Xf.T).T, dtype=float)
+        Y = np.asarray(obs(Xf) if callable(obs) else rows_times(obs, Xf), dtype=float)
         if Y.shape != (self.N, self.p):
             raise ValueError(f"observation must map the ensemble to shape ({self.N}, {self.p}), "
                              f"got {Y.shape}")

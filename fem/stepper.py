@@ -48,6 +48,7 @@ from .bc import FACES, HeatBoundary, face_nodes
 from .fastdiag import MASS_KINDS, KroneckerSolver, NotApplicable, one_d_mass, one_d_operators
 from .linsolve import BatchedPCG, DirectSolver
 from .mesh import element_volumes, structured_grid
+from .threads import run_blocks
 
 __all__ = ["KRON_PRECONDITIONER_MAX_RATIO", "HeatStepper"]
 
@@ -364,9 +365,17 @@ class HeatStepper:
             c, shape, d, o = self._m_tridiag
             f2 = np.zeros((1, self.npoints)) if f is None else f.reshape(-1, self.npoints)
             rhs = np.empty((N, self.npoints))
-            _kernels.tridiag3_rhs(np.ascontiguousarray(T2).reshape(N, *shape),
-                                  np.ascontiguousarray(a), d[0], o[0], d[1], o[1], d[2], o[2],
-                                  c, self.g, np.ascontiguousarray(f2), rhs)
+            # rows may be a strided view (the state part of an augmented ensemble): the
+            # kernel reads it in place; member blocks on the threads of fem.threads
+            T4 = T2.reshape(N, *shape)
+            a_c = np.ascontiguousarray(a)
+
+            def block(i0, i1):
+                fb = f2 if f2.shape[0] == 1 else f2[i0:i1]
+                _kernels.tridiag3_rhs(T4[i0:i1], a_c[i0:i1], d[0], o[0], d[1], o[1], d[2], o[2],
+                                      c, self.g, fb, rhs[i0:i1])
+
+            run_blocks(N, block, 2 if N >= 8 else 1)
         else:
             rhs = self._apply(self.M, T2) * a[:, None] + self.g
             if f is not None:

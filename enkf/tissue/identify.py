@@ -11,10 +11,11 @@ import numpy as np
 import scipy.sparse as sp
 
 import fem
-from fem.threads import blas_threads
+from fem.threads import blas_threads, keep_freed_memory
 
 from ..adaptive import AdaptiveInflation
 from ..analysis import gaspari_cohn
+from ..checks import rows_times
 from ..health import HealthCheck
 from ..loop import run_filter
 from ..problem import FilterConfig, FilterDivergence, FilterProblem, FilterResult, StepReport, uniform_prior
@@ -228,7 +229,7 @@ def identify(setup: TissueFilterSetup, times: np.ndarray, data: np.ndarray, *,
     frac = np.full(M + 1, np.nan) if coag else None
 
     def record(rep: StepReport):
-        Y = (P_track @ rep.state_ensemble.T).T
+        Y = rows_times(P_track, rep.state_ensemble)
         tr_mean[rep.step] = Y.mean(axis=0)
         tr_std[rep.step] = Y.std(axis=0, ddof=1)
         with np.errstate(invalid="ignore"):
@@ -246,6 +247,7 @@ def identify(setup: TissueFilterSetup, times: np.ndarray, data: np.ndarray, *,
     try:
         # the filter's dense products are small (50 x 5000): threaded BLAS only spins, and
         # on a busy machine it is 20-30 times slower (measured); numba kernels keep the cores
+        keep_freed_memory()  # ensemble-sized temporaries: reuse, not fresh page faults
         with blas_threads(1):
             res = run_filter(problem, pieces.config, health=pieces.health, callback=record)
     except FilterDivergence as err:

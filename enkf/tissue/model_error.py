@@ -44,6 +44,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..random import standard_normal
+
 __all__ = ["StructuredModelError", "squared_exponential_root"]
 
 
@@ -104,7 +106,7 @@ class StructuredModelError:
     def field(self, rng: np.random.Generator, N: int) -> np.ndarray:
         """(N, n_nodes) unit-variance correlated Gaussian fields."""
         Lx, Ly, Lz = self.roots
-        xi = rng.standard_normal((N, *self.shape))
+        xi = standard_normal(rng, (N, *self.shape))
         return np.einsum("ai,bj,ck,nijk->nabc", Lx, Ly, Lz, xi, optimize=True).reshape(N, -1)
 
     def __call__(self, rng: np.random.Generator, X0: np.ndarray, X1: np.ndarray, theta,
@@ -124,5 +126,5 @@ class StructuredModelError:
         else:
             v = np.zeros_like(X1)
         if self.floor_std > 0:
-            v += self.floor_std * rng.standard_normal(X1.shape)
+            v += self.floor_std * standard_normal(rng, X1.shape)
         return v

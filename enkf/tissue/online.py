@@ -7,7 +7,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from fem.threads import blas_threads
+from fem.threads import blas_threads, keep_freed_memory
 
 from ..adaptive import InflationEstimator
 from ..loop import run_filter
@@ -74,6 +74,7 @@ class OnlineIdentifier:
                    .generate_state(1)[0])
         config = replace(self._pieces.config, seed=seed)
         tic = time.perf_counter()
+        keep_freed_memory()  # ensemble-sized temporaries: reuse, not fresh page faults
         with blas_threads(1):
             res = run_filter(problem, config, health=self._pieces.health,
                              inflation_state=self._inflation)
