@@ -3,7 +3,11 @@
     python benchmarks/bench_filter.py [--scenario constant|time-varying|all-params]
 
 Reports the wall time and the per-step latency (median, max); the truth and the emulator
-come from the cache (built on first use).
+come from the cache (built on first use). The machine's speed drifts by up to 2x from one
+minute to the next on a shared VM, so each filter run is bracketed by a yardstick (a fixed
+numpy workload: 150 draws of 50 x 4851 normals and a pass over them) and the ratio is
+printed with the times. ``--members 50 100 200 400`` times the constant scenario's steps
+for several ensemble sizes (per-step cost against N).
 """
 
 from __future__ import annotations
@@ -39,11 +43,41 @@ def heat_step_ms(operator: str, new_scales: bool, N: int = 50, repeat: int = 60,
     return 1e3 * float(np.median(times[5:]))
 
 
+def yardstick() -> float:
+    """s for a fixed numpy workload of the filter's size (normals, one pass over them)."""
+    import time
+
+    rng = np.random.default_rng(0)
+    t0 = time.perf_counter()
+    for _ in range(150):
+        x = rng.standard_normal((50, 4851))
+        x += 1.0
+    return time.perf_counter() - t0
+
+
+def members_scaling(emu, sizes) -> None:
+    truth = generate_truth(TruthConfig(scenario="constant"), progress=False)
+    data = noisy_sensor(truth, 0)[:, None]
+    for N in sizes:
+        setup = filter_setup("constant", emu, n_members=N)
+        identify(setup, truth.times[1:4], data[:3])
+        est = identify(setup, truth.times[1:], data)
+        lat = est.step_latency_s
+        print(f"N = {N}: 150 steps {est.filter_wall_s:.2f} s, median step "
+              f"{1e3 * np.median(lat):.1f} ms ({1e3 * np.median(lat) / N:.3f} ms per member), "
+              f"max step {1e3 * lat.max():.1f} ms")
+
+
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--scenario", choices=SCENARIOS, default=None)
     ap.add_argument("--repeat", type=int, default=3)
+    ap.add_argument("--members", type=int, nargs="+", default=None,
+                    help="time the constant scenario for these ensemble sizes and stop")
     args = ap.parse_args(argv)
+    if args.members:
+        members_scaling(emulator_for(progress=False), args.members)
+        return
     avg = dict(mass="averaged")
     print(f"heat step, 50 members, kronecker operator with the filter's averaged mass: "
           f"{heat_step_ms('kronecker', False, **avg):.2f} ms (fixed VHC, TC), "
@@ -56,16 +90,20 @@ def main(argv=None):
         data = noisy_sensor(truth, 0)[:, None]
         setup = filter_setup(sc, emu)
         identify(setup, truth.times[1:4], data[:3])  # warm up the JIT and the solvers
-        walls, med, mx = [], [], []
+        walls, med, mx, ratios = [], [], [], []
         for _ in range(args.repeat):
+            y0 = yardstick()
             est = identify(setup, truth.times[1:], data)
+            y1 = yardstick()
             walls.append(est.filter_wall_s)
+            ratios.append(est.filter_wall_s / (0.5 * (y0 + y1)))
             med.append(np.median(est.step_latency_s))
             mx.append(est.step_latency_s.max())
         warnings.simplefilter("ignore", RuntimeWarning)  # emulator clamps, reported elsewhere
         print(f"{sc}: filter {min(walls):.2f} s for {len(truth.times) - 1} steps (best of "
-              f"{args.repeat}), median step {1e3 * min(med):.1f} ms, max step "
-              f"{1e3 * min(mx):.1f} ms")
+              f"{args.repeat}; median {np.median(walls):.2f} s), median step "
+              f"{1e3 * min(med):.1f} ms, max step {1e3 * min(mx):.1f} ms; filter / yardstick "
+              f"{min(ratios):.2f}-{max(ratios):.2f}")
 
 
 if __name__ == "__main__":

@@ -59,8 +59,13 @@ class _Setup:
         self.mesh = self.mesh_grid.mesh()
         self.L = fem.voxel_load_matrix(self.mesh, self.grid)  # (npoints, nvox) cm^3
         # media per element: the voxel that holds the element's centroid
-        self.elem_voxel = fem.element_voxel_index(self.mesh, self.grid)
-        self.elem_medium = M.ravel()[self.elem_voxel]
+        # six elements per voxel: the narrowest integers that hold the indices (48 of the
+        # ~900 bytes per node of a large heat run, measured with bench_heat_memory.py)
+        ev = fem.element_voxel_index(self.mesh, self.grid)
+        self.elem_voxel = ev.astype(np.int32) if self.grid.nvoxels < 2**31 else ev
+        del ev
+        medium_type = np.int16 if int(M.max(initial=0)) < 2**15 else np.int64
+        self.elem_medium = M.ravel().astype(medium_type)[self.elem_voxel]
         self._to_voxels = None
         self.medium_nodes = [np.unique(self.mesh.t[:, self.elem_medium == i])
                              for i in range(len(G.media))]
@@ -125,6 +130,8 @@ def run_heat(model) -> None:  # noqa: C901  (one loop with its callbacks)
                             Omega_vox.reshape(M.shape) if coupling.thermal_dependent else None)
 
     def element_props(t):
+        if HS.VHC_t is None and HS.TC_t is None:  # no copies of the element arrays
+            return coupling.vhc_e, coupling.tc_e
         vhc, tc = coupling.vhc_e.copy(), coupling.tc_e.copy()
         in_vm = S.elem_medium == vm
         if HS.VHC_t is not None:
