@@ -119,10 +119,11 @@ def voxel_load_matrix(mesh, grid: BoxGrid, n_sub=None) -> sp.csr_matrix:
     O = np.stack(np.meshgrid(*offs, indexing="ij"), axis=0).reshape(3, -1)
     nsub = O.shape[1]
     weight = grid.dx * grid.dy * grid.dz / nsub
-    # voxels in chunks of about 10^6 sample points; each chunk's columns are summed into a
-    # CSC block of its own and the blocks are stacked: the temporaries stay ~100 MB
-    # (4 x 10^6 points and a running sparse sum peaked at 1.2 GB in a cold identify)
-    chunk = max(1, 1_000_000 // nsub)
+    # voxels in chunks of about 2.5 x 10^5 sample points; each chunk's columns are summed
+    # into a CSC block of its own and the blocks are stacked: 164 MB over the start for
+    # 100 x 100 x 50 voxels onto 20 x 20 x 10 (4 x 10^6 points with a running sparse sum
+    # had peaked at 1.2 GB in a cold identify)
+    chunk = max(1, 250_000 // nsub)
     lower = np.array(grid.lower)
     idx = np.int32 if max(n, grid.nvoxels) < 2**31 else np.int64
     blocks = []

@@ -424,6 +424,9 @@ class AbsorptionEmulator:
                 log_na[a, b], absorbed[a, b] = row, frac
         seconds = time.perf_counter() - t0
         _store(path, key, log_na, absorbed, seconds)
+        from fem.threads import release_free_memory
+
+        release_free_memory()  # the load operator's and the runs' temporaries
         return cls(spec=spec, log_na=log_na, absorbed=absorbed, out_of_range=out_of_range,
                    build_seconds=seconds)
 
@@ -439,6 +442,7 @@ _OPERATORS: dict = {}
 def _load_operator(spec: EmulatorSpec):
     """The voxel -> P1 node operator of a nodal-load spec (built once per process)."""
     import fem
+    from fem.threads import release_free_memory
 
     key = (spec.nx, spec.ny, spec.nz, spec.Lx, spec.Ly, spec.Lz, tuple(spec.mesh_divisions))
     if key not in _OPERATORS:
@@ -446,6 +450,8 @@ def _load_operator(spec: EmulatorSpec):
         mesh = fem.BoxGrid(*spec.mesh_divisions, spec.Lx, spec.Ly, spec.Lz).mesh()
         _OPERATORS.clear()  # one at a time: the matrices of fine grids are large
         _OPERATORS[key] = fem.voxel_load_matrix(mesh, grid)
+        del mesh
+        release_free_memory()  # its temporaries: ~270 MB kept otherwise
     return _OPERATORS[key]
 
 

@@ -133,3 +133,24 @@ def test_run_blocks_covers_every_index_once():
 def test_keep_freed_memory_is_idempotent():
     first = keep_freed_memory()
     assert keep_freed_memory() == first
+
+
+def test_box_load_matrix_equals_element_sum():
+    """The column-built load matrix of a box mesh against the sum over its elements."""
+    from fem.mesh import element_volumes
+
+    grid = fem.BoxGrid(5, 4, 3, 0.5, 0.4, 0.3)
+    mesh = grid.mesh()
+    L = fem.voxel_load_matrix(mesh, grid)
+    vox = np.repeat(np.arange(grid.nvoxels), 6)  # six Kuhn elements per voxel, in order
+    w = element_volumes(mesh) / 4.0
+    ref = sp.csr_matrix((np.tile(w, 4), (mesh.t.ravel(), np.tile(vox, 4))),
+                        shape=(mesh.p.shape[1], grid.nvoxels))
+    assert abs(L - ref).max() < 1e-14 * abs(ref).max()  # rounding of six summed terms
+    np.testing.assert_allclose(np.asarray(L.sum(axis=0)).ravel(), grid.dx * grid.dy * grid.dz)
+
+
+def test_release_free_memory_runs():
+    from fem.threads import release_free_memory
+
+    assert release_free_memory() in (True, False)
