@@ -102,26 +102,34 @@ class AdaptiveInflation:
             raise ValueError(f"target must be 'state' or 'all', got {self.target!r}")
 
 
-def innovation_statistics(Y: np.ndarray, y: np.ndarray, R: np.ndarray) -> tuple[float, float, int]:
-    """``(d̃ᵀd̃, tr(H̃PH̃ᵀ), p)`` of a forecast ``Y`` (N, p) against data ``y`` (p,), NaN
-    components dropped; ``R`` (p,) variances or (p, p) covariance."""
+def _whitened_innovations(Y: np.ndarray, y: np.ndarray, R: np.ndarray):
+    """``(d̃, S̃, log det R, p)``: the innovation of the forecast mean and the forecast
+    anomalies (N, p) whitened by ``R``, NaN components of ``y`` dropped; ``None`` when
+    none is left."""
     ok = ~np.isnan(y)
     p = int(ok.sum())
     if p == 0:
-        return 0.0, 0.0, 0
+        return None
     Y, y = Y[:, ok], y[ok]
-    N = Y.shape[0]
     d = y - Y.mean(axis=0)
     B = Y - Y.mean(axis=0)
     R = np.asarray(R, float)
     if R.ndim == 1:
         sd = np.sqrt(R[ok])
-        dt, S = d / sd, B / sd
-    else:
-        L = np.linalg.cholesky(R[np.ix_(ok, ok)])
-        dt = np.linalg.solve(L, d)
-        S = np.linalg.solve(L, B.T).T
-    return float(dt @ dt), float(np.sum(S * S) / (N - 1)), p
+        return d / sd, B / sd, 2.0 * float(np.sum(np.log(sd))), p
+    L = np.linalg.cholesky(R[np.ix_(ok, ok)])
+    return (np.linalg.solve(L, d), np.linalg.solve(L, B.T).T,
+            2.0 * float(np.sum(np.log(np.diag(L)))), p)
+
+
+def innovation_statistics(Y: np.ndarray, y: np.ndarray, R: np.ndarray) -> tuple[float, float, int]:
+    """``(d̃ᵀd̃, tr(H̃PH̃ᵀ), p)`` of a forecast ``Y`` (N, p) against data ``y`` (p,), NaN
+    components dropped; ``R`` (p,) variances or (p, p) covariance."""
+    w = _whitened_innovations(Y, y, R)
+    if w is None:
+        return 0.0, 0.0, 0
+    dt, S, _, p = w
+    return float(dt @ dt), float(np.sum(S * S) / (Y.shape[0] - 1)), p
 
 
 def innovation_loglik(Y: np.ndarray, y: np.ndarray, R: np.ndarray, rho: float = 1.0) -> float:
@@ -136,24 +144,11 @@ def innovation_loglik(Y: np.ndarray, y: np.ndarray, R: np.ndarray, rho: float = 
     with the whitened anomalies :math:`\tilde S = B L^{-\mathsf T}\sqrt{\rho/(N-1)}`
     and the determinant lemma, so only a ``min(N, p)`` square system is solved.
     """
-    ok = ~np.isnan(y)
-    p = int(ok.sum())
-    if p == 0:
+    w = _whitened_innovations(Y, y, R)
+    if w is None:
         return 0.0
-    Y, y = Y[:, ok], y[ok]
+    dt, S, logdet_R, p = w
     N = Y.shape[0]
-    d = y - Y.mean(axis=0)
-    B = Y - Y.mean(axis=0)
-    R = np.asarray(R, float)
-    if R.ndim == 1:
-        sd = np.sqrt(R[ok])
-        dt, S = d / sd, B / sd
-        logdet_R = 2.0 * float(np.sum(np.log(sd)))
-    else:
-        L = np.linalg.cholesky(R[np.ix_(ok, ok)])
-        dt = np.linalg.solve(L, d)
-        S = np.linalg.solve(L, B.T).T
-        logdet_R = 2.0 * float(np.sum(np.log(np.diag(L))))
     S = S * np.sqrt(rho / max(N - 1, 1))
     # C = L (I_p + S'S) L': factor the smaller of I_p + S'S and I_N + SS' (equal
     # determinants; Woodbury for the solve), so a large ensemble or many pixels stay cheap

@@ -27,9 +27,12 @@ _TABLES = _kernels.ziggurat_tables()
 _POOL: ThreadPoolExecutor | None = None
 
 
+_CORES = os.cpu_count() or 1
+
+
 def _pool() -> ThreadPoolExecutor | None:
     global _POOL
-    if (os.cpu_count() or 1) < 2:
+    if _CORES < 2:
         return None
     if _POOL is None:
         _POOL = ThreadPoolExecutor(max_workers=1, thread_name_prefix="enkf-normal")

@@ -28,9 +28,8 @@ __all__ = ["load_vector", "voxel_load_matrix"]
 
 
 def _aligned_voxels(mesh, grid: BoxGrid) -> np.ndarray | None:
-    """Voxel of each element if every element lies inside one voxel, else None."""
-    if structured_grid(mesh) == grid:
-        return np.repeat(np.arange(grid.nvoxels), 6)
+    """Voxel of each element if every element lies inside one voxel, else None (the
+    box mesh of ``grid`` itself goes to :func:`_box_load_matrix` before this)."""
     p, t = mesh.p, mesh.t
     c = p[:, t].mean(axis=1)
     ijk = grid.voxel_of_points(c)
