@@ -58,23 +58,23 @@ from ._mc_steps import (
     _spin,
     _turn_smooth,
 )
+from ._mc_tally import (  # noqa: F401 (re-exported: the Python layer reads them here)
+    N_TALLY,
+    T_ABSORBED_EXCLUDED,
+    T_BOTTOM,
+    T_KILLED,
+    T_LAUNCHED,
+    T_MISSED,
+    T_OUTSIDE_ABSORBED,
+    T_ROULETTE,
+    T_SIDES,
+    T_SPECULAR,
+    T_TOP,
+    W_ONE,
+)
+from ._mc_uniform import transport_uniform_batch, uniform_path_applies
 from ._rng import next_double, seed_stream
 from ._sources import SI_SURFACE, launch, sample_pwl
-
-W_ONE = 2**36  # fixed-point weight of a launched packet (about 1.5e-11 resolution)
-
-# tally slots (per thread slot, int64 fixed-point weights)
-T_LAUNCHED = 0
-T_SPECULAR = 1
-T_TOP = 2
-T_BOTTOM = 3
-T_SIDES = 4
-T_OUTSIDE_ABSORBED = 5
-T_KILLED = 6
-T_MISSED = 7
-T_ROULETTE = 8  # weight created by roulette survivors minus weight of packets killed
-T_ABSORBED_EXCLUDED = 9  # absorbed inside by packets that failed the deposition criteria
-N_TALLY = 10
 
 KILLRANGE = 5.0  # as MCmatlab: photons farther than 2.5 cuboid sizes from the centre die
 
@@ -495,11 +495,21 @@ def run_batches(
     """
     n_workers = acc.shape[0]
     counter = np.zeros(1, dtype=np.int64)
+    uniform = False  # the one-medium kernel (mcmatlab_py._mc_uniform) runs a plain run
+    if oi is None:  # the optional outputs need the general kernel (pruned at compile time)
+        uniform = uniform_path_applies(uniform_medium, boundary_type, nref, mua, mus, phase_idx)
     for k in numba.prange(n_workers):
         while True:
             b = batch_start + fetch_add(counter, 0, 1)
             if b >= batch_stop:
                 break
+            if uniform:
+                transport_uniform_batch(
+                    b, uniform_medium, mua, mus, g, nref, nx, ny, nz, dx, dy, dz, n_out,
+                    matched, roulette, weight_threshold, chance, si, sf, stab, svox, seed,
+                    batch_size, n_total, acc[k], tally[k],
+                )  # fmt: skip
+                continue
             transport_batch(
                 b, M, mua, mus, g, nref, uniform_medium, nx, ny, nz, dx, dy, dz,
                 boundary_type, n_out, matched, roulette, weight_threshold, chance,

@@ -56,12 +56,19 @@ def _hg_cos(g, xi):
 @numba.njit(cache=True, inline="always", fastmath=_FASTMATH)
 def _spin(ux, uy, uz, cost, psi):
     """Rotate direction (ux, uy, uz) by polar cos ``cost`` and azimuth ``psi`` (MCML)."""
-    sint = math.sqrt(max(0.0, 1.0 - cost * cost))
     cosp = math.cos(psi)
     # sin from cos (one transcendental fewer): psi in [0, 2 pi)
     sinp = math.sqrt(max(0.0, 1.0 - cosp * cosp))
     if psi > math.pi:
         sinp = -sinp
+    return _spin_cs(ux, uy, uz, cost, cosp, sinp)
+
+
+@numba.njit(cache=True, inline="always", fastmath=_FASTMATH)
+def _spin_cs(ux, uy, uz, cost, cosp, sinp):
+    """Rotate direction (ux, uy, uz) by polar cos ``cost`` and the azimuth of cos ``cosp``
+    and sin ``sinp`` (MCML's spin)."""
+    sint = math.sqrt(max(0.0, 1.0 - cost * cost))
     if abs(uz) > 0.99999:
         return sint * cosp, sint * sinp, cost * (1.0 if uz > 0.0 else -1.0)
     temp = math.sqrt(1.0 - uz * uz)
