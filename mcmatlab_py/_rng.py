@@ -49,15 +49,8 @@ def seed_stream(seed, stream):
 @numba.njit(cache=True, inline="always")
 def next_double(s0, s1, s2, s3):
     """xoshiro256**: returns the new state and a double uniform in [0, 1)."""
-    result = _rotl(s1 * _U64(5), 7) * _U64(9)
-    t = s1 << _U64(17)
-    s2 ^= s0
-    s3 ^= s1
-    s1 ^= s2
-    s0 ^= s3
-    s2 ^= t
-    s3 = _rotl(s3, 45)
-    return s0, s1, s2, s3, (result >> _U64(11)) * _TWO_M53
+    s0, s1, s2, s3, u = next_u64(s0, s1, s2, s3)
+    return s0, s1, s2, s3, (u >> _U64(11)) * _TWO_M53
 
 
 @numba.njit(cache=True, inline="always")
