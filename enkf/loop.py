@@ -48,7 +48,7 @@ from .analysis import analysis, enkf_localized, inflate, random_rotation
 from .checks import as_generator, cov_sqrt, covariance, float_array, rows_times, variances
 from .health import HealthCheck
 from .problem import FilterConfig, FilterDivergence, FilterProblem, FilterResult, StepReport
-from .random import standard_normal
+from .random import PendingNormals, standard_normal, standard_normal_later
 from .transforms import as_transforms, to_filter_space, to_physical
 
 __all__ = ["run_filter"]
@@ -125,6 +125,12 @@ class _Filter:
         self.rw_root = cov_sqrt(rw)
         self.rw_on = bool(self.n_par) and bool(np.any(rw != 0))
         self._check_sizes()
+        # the next step's model noise can be drawn during this step's analysis when
+        # nothing between the two draws takes numbers from the generator
+        self._draw_ahead = (self.noise_fn is None and bool(self.noisy.size)
+                            and config.method == "etkf" and config.mda == 1 and not config.rotate
+                            and problem.localization is None)
+        self._ahead: dict = {}
         self.rec = _Record(np.concatenate([[problem.t0], problem.obs_times]), self.n_par,
                            problem.tracked.size)
 
@@ -149,14 +155,19 @@ class _Filter:
 
     # ------------------------------------------------------------------ pieces of a step
 
-    def noises(self, t_a: float, t_b: float) -> tuple[np.ndarray | None, np.ndarray | None]:
+    def noises(self, t_a: float, t_b: float, later: bool = False):
         """This step's model noise ``v`` (N, n_noisy) and parameter walk ``dU`` (N, n_par),
-        drawn once: they belong to the step, not to an iteration of it."""
+        drawn once: they belong to the step, not to an iteration of it. With ``later``,
+        ``v`` is drawn on the worker thread (a :class:`~enkf.random.PendingNormals` that
+        ``advance`` waits for); the numbers are the same."""
         N, rng = self.N, self.rng
         v = None
         if self.noise_fn is None and self.noisy.size:
-            v = standard_normal(rng, (N, self.noisy.size))
-            v *= self.sd_noisy  # in place: the same numbers, one (N, n) temporary fewer
+            if later:
+                v = standard_normal_later(rng, (N, self.noisy.size), self.sd_noisy)
+            else:
+                v = standard_normal(rng, (N, self.noisy.size))
+                v *= self.sd_noisy  # in place: the same numbers, one (N, n) temporary fewer
         if not self.rw_on:
             return v, None
         xi = rng.standard_normal((N, self.n_par))
@@ -181,6 +192,8 @@ class _Filter:
         X1 = np.asarray(P.forecast(X0, theta0, t_a, t_b), dtype=float)
         if X1.shape != (N, n_state):
             raise ValueError(f"forecast must return shape ({N}, {n_state}), got {X1.shape}")
+        if isinstance(v, PendingNormals):
+            v = v.result()
         if v is None and self.noise_fn is not None:
             v = np.asarray(self.noise_fn(self.rng, X0, X1, theta0, t_a, t_b), dtype=float)
             if v.shape != (N, n_state):
@@ -290,7 +303,7 @@ class _Filter:
         tic = time.perf_counter()
         times = self.rec.times
         t_a, t_b = float(times[k - 1]), float(times[k])
-        v, dU = self.noises(t_a, t_b)
+        v, dU = self._ahead.pop(k) if k in self._ahead else self.noises(t_a, t_b)
         y = self.P.obs_data[k - 1]
         observed = not np.all(np.isnan(y))
         if observed and self.config.mda > 1:
@@ -298,6 +311,10 @@ class _Filter:
             self.X, self.U = self.step_mda(k, t_a, t_b, v, dU, y, tic)
         else:
             self.X, self.U, _ = self.advance(self.X, self.U, self.theta, t_a, t_b, v, dU)
+            if self._draw_ahead and k < times.size - 1:
+                # the next step's noises, drawn on the worker during this analysis: the
+                # generator moves as it would at the next step (the analysis draws nothing)
+                self._ahead[k + 1] = self.noises(t_b, float(times[k + 1]), later=True)
             if observed:
                 tic_a = time.perf_counter()
                 Y = self.observe(self.X, self.U, k, tic)

@@ -7,6 +7,11 @@ takes a seed for each of at most two fixed blocks of rows from the caller's gene
 and fills the blocks concurrently with a numba ziggurat (:mod:`enkf._kernels`, 1.0 ms
 for the whole draw on one core). The split depends on the size of the draw only, not
 on the machine: the same generator state gives the same numbers on one core or many.
+
+:func:`standard_normal_later` draws the same numbers on the worker thread while the
+caller goes on (the filter draws the next step's model noise during this step's
+analysis); its seeds are taken from the generator at the call, so the stream is the
+same as with :func:`standard_normal` at that point.
 """
 
 from __future__ import annotations
@@ -18,7 +23,7 @@ import numpy as np
 
 from . import _kernels
 
-__all__ = ["standard_normal"]
+__all__ = ["PendingNormals", "standard_normal", "standard_normal_later"]
 
 #: draws smaller than this are one block (a thread hand-off costs ~50 us)
 SPLIT_MIN = 20_000
@@ -39,6 +44,55 @@ def _pool() -> ThreadPoolExecutor | None:
     return _POOL
 
 
+def _seeds(rng: np.random.Generator, shape: tuple[int, ...]):
+    """(empty output, its blocks, one seed per block): the split depends on the size only."""
+    out = np.empty(shape)
+    if out.size == 0:
+        return out, [], np.zeros(0, np.uint64)
+    blocks = _BLOCKS if out.size >= SPLIT_MIN and shape[0] >= _BLOCKS else 1
+    seeds = rng.integers(0, 2**63, size=blocks, dtype=np.uint64)
+    if blocks == 1:
+        return out, [out], seeds
+    cut = np.linspace(0, shape[0], blocks + 1).astype(int)
+    return out, [out[a:b] for a, b in zip(cut[:-1], cut[1:], strict=True)], seeds
+
+
+class PendingNormals:
+    """Normals being drawn on the worker thread; :meth:`result` waits and returns them."""
+
+    def __init__(self, future=None, value: np.ndarray | None = None):
+        self._future, self._value = future, value
+
+    def result(self) -> np.ndarray:
+        if self._future is not None:
+            self._value = self._future.result()
+            self._future = None
+        return self._value
+
+
+def standard_normal_later(rng: np.random.Generator, shape: tuple[int, ...],
+                          scale: float | np.ndarray = 1.0) -> PendingNormals:
+    """``scale * standard_normal(rng, shape)``, drawn on the worker thread.
+
+    The seeds are drawn from ``rng`` now (so the generator moves exactly as with
+    :func:`standard_normal`) and the numbers are the same; on one core the draw is done
+    before returning.
+    """
+    out, parts, seeds = _seeds(rng, tuple(int(s) for s in shape))
+    scale = np.asarray(scale, float)
+
+    def fill():
+        for seed, part in zip(seeds, parts, strict=True):
+            _kernels.fill_normal(seed, part, *_TABLES)
+        np.multiply(out, scale, out=out)
+        return out
+
+    pool = _pool()
+    if pool is None or out.size == 0:
+        return PendingNormals(value=fill())
+    return PendingNormals(pool.submit(fill))
+
+
 def standard_normal(rng: np.random.Generator, shape: tuple[int, ...]) -> np.ndarray:
     """A new float64 array of ``shape`` with independent N(0, 1) entries.
 
@@ -49,17 +103,11 @@ def standard_normal(rng: np.random.Generator, shape: tuple[int, ...]) -> np.ndar
     shape : tuple of int
         Output shape; a large draw is split into two blocks along the first axis.
     """
-    shape = tuple(int(s) for s in shape)
-    out = np.empty(shape)
-    if out.size == 0:
+    out, parts, seeds = _seeds(rng, tuple(int(s) for s in shape))
+    if len(parts) < 2:
+        for seed, part in zip(seeds, parts, strict=True):
+            _kernels.fill_normal(seed, part, *_TABLES)
         return out
-    blocks = _BLOCKS if out.size >= SPLIT_MIN and shape[0] >= _BLOCKS else 1
-    seeds = rng.integers(0, 2**63, size=blocks, dtype=np.uint64)
-    if blocks == 1:
-        _kernels.fill_normal(seeds[0], out, *_TABLES)
-        return out
-    cut = np.linspace(0, shape[0], blocks + 1).astype(int)
-    parts = [out[a:b] for a, b in zip(cut[:-1], cut[1:], strict=True)]
     pool = _pool()
     if pool is None:
         for seed, part in zip(seeds, parts, strict=True):

@@ -26,15 +26,19 @@ def _stencil(t, grid_log):
     return i0
 
 
-@numba.njit(cache=True, parallel=True)
+@numba.njit(cache=True, nogil=True)
 def interpolate_log_na(table, lmua_grid, lmus_grid, lmua, lmus, offset, out):
     """``out[n] = exp(sum_ab w_a(lmua[n]) w_b(lmus[n]) table[a, b]) - offset`` (4 x 4 Lagrange).
 
     table : (n_mua, n_mus, nvox) float64 log NA; lmua, lmus : (N,) logs; out : (N, nvox).
+
+    One thread on purpose: the filter calls it every step for 50 members (0.3 ms), and
+    after a numba parallel region the OpenMP workers spin on the other core for
+    milliseconds, which made the heat step that follows 1.3 ms (50%) slower.
     """
     N = lmua.size
     nvox = table.shape[2]
-    for n in numba.prange(N):
+    for n in range(N):
         ia = _stencil(lmua[n], lmua_grid)
         ib = _stencil(lmus[n], lmus_grid)
         wa = _lagrange4(lmua[n], ia, lmua_grid)

@@ -16,7 +16,7 @@ from scipy import stats
 import enkf.analysis as an
 import fem
 from enkf.checks import rows_times
-from enkf.random import SPLIT_MIN, standard_normal
+from enkf.random import SPLIT_MIN, standard_normal, standard_normal_later
 from fem.threads import keep_freed_memory, run_blocks
 
 
@@ -56,6 +56,56 @@ def test_standard_normal_does_not_depend_on_the_threads(monkeypatch):
     monkeypatch.setattr(er, "_pool", lambda: None)  # one core: the blocks in turn
     b = standard_normal(np.random.default_rng(9), (40, 1000))
     np.testing.assert_array_equal(a, b)
+
+
+@pytest.mark.parametrize("shape", [(50, 4851), (3, 7), (0, 4)])
+def test_normals_drawn_later_are_the_same_numbers(monkeypatch, shape):
+    import enkf.random as er
+
+    scale = np.linspace(0.5, 2.0, shape[1])
+    rng_a, rng_b = np.random.default_rng(4), np.random.default_rng(4)
+    want = standard_normal(rng_a, shape) * scale
+    pending = standard_normal_later(rng_b, shape, scale)
+    # the generator has moved as with the immediate draw, before the numbers are done
+    assert rng_a.integers(0, 2**63) == rng_b.integers(0, 2**63)
+    np.testing.assert_array_equal(pending.result(), want)
+    np.testing.assert_array_equal(pending.result(), want)  # a second call: the same array
+    monkeypatch.setattr(er, "_pool", lambda: None)  # one core: drawn before returning
+    one = standard_normal_later(np.random.default_rng(4), shape, scale)
+    np.testing.assert_array_equal(one.result(), want)
+
+
+def test_filter_draws_the_next_noise_ahead_without_changing_its_numbers(monkeypatch):
+    """The ETKF run draws step k+1's model noise during step k's analysis; the results
+    equal those of a run that draws every noise at its own step."""
+    import enkf.loop as loop
+    from enkf.problem import FilterConfig, FilterProblem
+
+    n, M = 500, 30  # 50 x 500 noise draws: the two-block path
+    rng = np.random.default_rng(8)
+    times = 0.1 * np.arange(1, M + 1)
+    data = rng.standard_normal((M, 2))
+    data[4] = np.nan  # a step without data: no analysis, the draw ahead goes on
+    problem = FilterProblem(
+        forecast=lambda X, th, t0, t1: 0.9 * X + th[:, :1],
+        observation=sp.csr_matrix(([1.0, 1.0], ([0, 1], [3, 250])), shape=(2, n)),
+        obs_times=times, obs_data=data, obs_cov=np.ones(2), model_noise=0.01,
+        param_noise=0.05, prior=lambda r, N: (r.standard_normal((N, n)),
+                                              r.standard_normal((N, 1))),
+        tracked=np.array([3, 250, 400]))
+    config = FilterConfig(method="etkf", seed=3)
+    ahead = loop.run_filter(problem, config)
+    init = loop._Filter.__init__
+
+    def no_ahead(self, *a, **k):
+        init(self, *a, **k)
+        self._draw_ahead = False
+
+    monkeypatch.setattr(loop._Filter, "__init__", no_ahead)
+    plain = loop.run_filter(problem, config)
+    np.testing.assert_array_equal(ahead.param_mean, plain.param_mean)
+    np.testing.assert_array_equal(ahead.tracked_mean, plain.tracked_mean)
+    np.testing.assert_array_equal(ahead.tracked_std, plain.tracked_std)
 
 
 @pytest.mark.parametrize("N,p", [(50, 1), (20, 7), (60, 80)])

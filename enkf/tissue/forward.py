@@ -122,8 +122,9 @@ class TissueForwardModel:
         for w in caught:
             if w not in clamps:
                 warnings.warn(str(w.message), w.category, stacklevel=3)
-        if self._nodal:
-            return power * vals[:, self.absorption.inverse]
+        if self._nodal:  # np.take keeps C order (vals[:, idx] comes out in Fortran
+            # order), which the heat step's kernels read row by row
+            return power * np.take(vals, self.absorption.inverse, axis=1)
         return (self.L @ (power * vals).T).T
 
     def step(self, E_state: np.ndarray, theta: np.ndarray, t0: float, t1: float,
