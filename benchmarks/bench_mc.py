@@ -4,6 +4,7 @@
 radius 1 mm, matched interfaces, boundary type 1. Run::
 
     python benchmarks/bench_mc.py [--photons N] [--pairs K] [--ratio-photons N] [--ratio-only]
+                                  [--control]
 
 The JIT compile is done (or loaded from the cache) before timing; only the kernel is
 timed. One-thread and two-thread runs alternate (``--pairs`` times), so that a slow
@@ -11,6 +12,11 @@ spell of the machine hits both; the speed-up is reported over all pairs (median,
 worst and best). For each run the kernel's CPU time over its wall time
 (``MC.cores_used``) is printed too: the threads claim batches dynamically, so it stays
 near 2 even when one core of a shared virtual machine runs slower for a while.
+
+``--control`` adds, to each pair, two one-thread runs in two processes at the same time:
+their summed rate is what the machine gives two independent copies of the kernel, the
+ceiling for two threads sharing its caches and memory (on a shared virtual machine that
+is often well below twice one thread).
 
 Then the yardstick: our kernel's photons per CPU-second over those of a plain numba
 kernel (``benchmarks/plain_kernel.py``: absorbs at the interaction points, recomputes
@@ -44,6 +50,19 @@ def standard_model(n_photons: int, threads: int):
 def run(n_photons: int, threads: int):
     MC = standard_model(n_photons, threads).run_monte_carlo().MC
     return MC.photons_per_second, MC.cores_used
+
+
+def _one_thread_rate(n_photons: int) -> float:
+    return run(n_photons, 1)[0]
+
+
+def two_processes(n_photons: int) -> float:
+    """Summed photons/s of two one-thread runs in two processes side by side."""
+    import multiprocessing as mp
+
+    with mp.get_context("spawn").Pool(2) as pool:
+        pool.map(_one_thread_rate, [2000, 2000])  # compile / load cache in each
+        return float(sum(pool.map(_one_thread_rate, [n_photons, n_photons])))
 
 
 def our_cpu_rate(grid, n_photons: int) -> float:
@@ -98,19 +117,27 @@ def main(argv=None):
                         help="photons per run of the yardstick comparison")
     parser.add_argument("--ratio-only", action="store_true",
                         help="only the comparison with the plain kernel")
+    parser.add_argument("--control", action="store_true",
+                        help="also two one-thread processes side by side, in each pair")
     args = parser.parse_args(argv)
     if args.ratio_only:
         yardstick(args.ratio_photons, args.pairs)
         return
     standard_model(2000, 1).run_monte_carlo()  # compile / load cache
     two = min(2, numba.config.NUMBA_NUM_THREADS)
-    pairs = []
+    pairs, controls = [], []
     for k in range(args.pairs):
         r1, c1 = run(args.photons, 1)
         r2, c2 = run(args.photons, two)
         pairs.append((r1, r2, c2))
+        extra = ""
+        if args.control:
+            r_pp = two_processes(args.photons)
+            controls.append(r_pp)
+            extra = (f"; two one-thread processes together {r_pp:.3e} photons/s, "
+                     f"{r_pp / r1:.2f}x ({r2 / r_pp:.2f} of it with threads)")
         print(f"pair {k + 1}: 1 thread {r1:.3e} photons/s, {two} threads {r2:.3e} photons/s "
-              f"on {c2:.2f} cores, speed-up {r2 / r1:.2f}x", flush=True)
+              f"on {c2:.2f} cores, speed-up {r2 / r1:.2f}x{extra}", flush=True)
     rate1 = max(p[0] for p in pairs)
     rate2 = max(p[1] for p in pairs)
     print(f"best rates ({args.photons} photons per run): 1 thread {rate1:.3e}, "
@@ -119,6 +146,11 @@ def main(argv=None):
         ups = [p[1] / p[0] for p in pairs]
         print(f"speed-up 2 threads / 1 thread: median {statistics.median(ups):.2f}x, "
               f"worst {min(ups):.2f}x, best {max(ups):.2f}x, over {len(ups)} pairs")
+    if controls:
+        th = [p[1] / c for p, c in zip(pairs, controls, strict=True)]
+        print(f"two threads / two processes: median {statistics.median(th):.2f} (the "
+              f"processes' own speed-up over one thread: median "
+              f"{statistics.median(c / p[0] for p, c in zip(pairs, controls, strict=True)):.2f}x)")
     peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
     print(f"peak resident memory: {peak:.0f} MiB")
     yardstick(args.ratio_photons, args.pairs)
