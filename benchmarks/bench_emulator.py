@@ -5,6 +5,10 @@
     python benchmarks/bench_emulator.py --builds [--photons 250000]
         # the direct ("table") and perturbation ("white") builds from scratch, side by side
         # in this process, and their ratio
+    python benchmarks/bench_emulator.py --cold [--repeat 2]
+        # `tissue-enkf identify examples/own_data.toml` from an empty cache, against a plain
+        # one-thread Monte Carlo kernel pushing 5 million photons through the same block
+        # (benchmarks/plain_kernel.py), run before and after each identify
 
 The filter's emulator: Monte Carlo on the paper's 100 x 100 x 50 voxels, nodal loads on the
 20 x 20 x 10 mesh; and the plain voxel emulator on 20 x 20 x 10.
@@ -69,6 +73,56 @@ def time_builds(n_photons: int) -> None:
               f"{seconds['table'] / seconds['white']:.2f}x", flush=True)
 
 
+def plain_seconds(n_photons: int = 5_000_000, seed: int = 1) -> float:
+    """Seconds of the plain one-thread kernel for ``n_photons`` on examples/own_data.toml's
+    block (the paper's tissue, 100 x 100 x 50, top hat of radius 1 mm)."""
+    import sys
+    from pathlib import Path
+
+    sys.path.insert(0, str(Path(__file__).parent))
+    from plain_kernel import plain_run
+
+    model = paper_model((100, 100, 50), n_photons=1, progress=False)
+    G, med = model.G, model.G.media[0]
+    M = np.zeros((100, 100, 50), dtype=np.int32)
+    args = (M, np.array([med.mua]), np.array([med.mus]), np.array([med.g]), 100, 100, 50,
+            G.dx, model.MC.light_source.radius)
+    plain_run(*args, 100, seed)  # compile / load the cache
+    t0 = time.perf_counter()
+    plain_run(*args, n_photons, seed)
+    return time.perf_counter() - t0
+
+
+def time_cold(repeat: int) -> None:
+    """The cold identify against the plain kernel, alternating, in fresh processes."""
+    import os
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    root = Path(__file__).parents[1]
+    exe = Path(sys.executable).with_name("tissue-enkf")
+    cmd = [str(exe), "identify", str(root / "examples" / "own_data.toml"), "--data",
+           str(root / "examples" / "own_data.csv"), "--force"]
+    plain = [plain_seconds()]
+    ratios = []
+    for k in range(repeat):
+        with tempfile.TemporaryDirectory() as tmp:
+            env = dict(os.environ, TISSUE_ENKF_CACHE=str(Path(tmp) / "cache"))
+            t0 = time.perf_counter()
+            subprocess.run(cmd + ["--out", str(Path(tmp) / "out")], env=env, check=True,
+                           stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+            cold = time.perf_counter() - t0
+        plain.append(plain_seconds(seed=k + 2))
+        ratio = cold / (0.5 * (plain[-2] + plain[-1]))
+        ratios.append(ratio)
+        print(f"run {k + 1}: cold identify {cold:.1f} s (empty TISSUE_ENKF_CACHE, numba's cache "
+              f"as it is), plain kernel 5e6 photons {plain[-2]:.1f} s before, {plain[-1]:.1f} s "
+              f"after: {ratio:.2f}x", flush=True)
+    print(f"cold identify / plain kernel: median {np.median(ratios):.2f}x over {repeat} runs "
+          f"(target <= 2)")
+
+
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--rebuild", action="store_true")
@@ -76,7 +130,13 @@ def main(argv=None):
                     help="time the table and white builds side by side (minutes)")
     ap.add_argument("--photons", type=int, default=250_000,
                     help="photons per table point at mus = 100 for --builds")
+    ap.add_argument("--cold", action="store_true",
+                    help="time a cold identify against the plain kernel (minutes)")
+    ap.add_argument("--repeat", type=int, default=2, help="cold identifies for --cold")
     args = ap.parse_args(argv)
+    if args.cold:
+        time_cold(args.repeat)
+        return
     if args.builds:
         time_builds(args.photons)
         return
