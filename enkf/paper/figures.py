@@ -50,7 +50,19 @@ def plot_results(path, scenario: str, est, truth: Truth, data: np.ndarray) -> No
         ax.plot(t, lo, "r--", lw=0.8)  # 2.3 % and 97.7 % quantiles of the ensemble
         ax.plot(t, hi, "r--", lw=0.8)
         ax.set(title=labels[name], xlabel="time [s]", ylabel=f"{labels[name]} [{PARAMETER_LABELS[name]}]")
-    for i in range(n_par, axes.shape[1]):
+    spare = list(range(n_par, axes.shape[1]))
+    ens = getattr(getattr(est, "result", None), "param_ensemble", None)
+    if spare and ens is not None and n_par >= 2 and len(ens):
+        # the members at the end in the (mua, mus) plane: the joint spread that the two
+        # parameter panels show one at a time (and how the two trade off)
+        ax = axes[1, spare.pop(0)]
+        ia, ib = est.names.index("mua"), est.names.index("mus")
+        ax.scatter(ens[:, ia], ens[:, ib], s=10, c="r", alpha=0.6, lw=0, label="members")
+        ax.plot(tp["mua"][-1], tp["mus"][-1], "k+", ms=12, mew=2, label="truth")
+        ax.set(title=f"the members at t = {t[-1]:g} s", xlabel=f"{labels['mua']} [{PARAMETER_LABELS['mua']}]",
+               ylabel=f"{labels['mus']} [{PARAMETER_LABELS['mus']}]")
+        ax.legend(fontsize=8)
+    for i in spare:
         axes[1, i].axis("off")
     fig.suptitle(f"{_method(est)}, scenario '{scenario}'; parameter bands: 2.3-97.7 % "
                  "quantiles of the ensemble")
