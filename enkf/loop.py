@@ -221,6 +221,12 @@ class _Filter:
         if Y.shape != (self.N, self.p):
             raise ValueError(f"observation must map the ensemble to shape ({self.N}, {self.p}), "
                              f"got {Y.shape}")
+        if self.P.observation_offset is not None:
+            off = np.asarray(self.P.observation_offset(self.physical(Uf)), dtype=float)
+            if off.shape != (self.N, self.p):
+                raise ValueError(f"observation_offset must return shape ({self.N}, {self.p}), "
+                                 f"got {off.shape}")
+            Y = Y + off
         if not (np.all(np.isfinite(Xf)) and np.all(np.isfinite(Uf)) and np.all(np.isfinite(Y))):
             self.X, self.theta = Xf, to_physical(self.transforms, Uf)
             self.rec.latency[k - 1] = time.perf_counter() - tic

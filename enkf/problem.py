@@ -164,6 +164,11 @@ class FilterProblem:
         Schur-product tapers for :func:`enkf.analysis.enkf_localized`, rows of
         ``rho_xy`` over the augmented state (the state, then the parameters). Only
         with ``method="enkf"``.
+    observation_offset : callable, optional
+        ``offset(theta) -> (N, p)``: a term of the observation that depends on the
+        parameters (physical units), added to ``observation``'s: ``Y = G(E_state) +
+        offset(theta)``, e.g. an unknown calibration offset of each sensor carried as a
+        parameter of the ensemble. Default: none.
     """
 
     forecast: Forecast
@@ -185,9 +190,14 @@ class FilterProblem:
     #: optional covariance localization ``(rho_xy (n_state + n_par, p), rho_yy (p, p))``
     #: for method "enkf" (see :func:`enkf.analysis.enkf_localized`)
     localization: tuple | None = None
+    #: optional ``offset(theta) -> (N, p)`` added to the observation (sensor offsets)
+    observation_offset: Callable[[np.ndarray], np.ndarray] | None = None
 
     def __post_init__(self):
         set_ = object.__setattr__  # frozen: store the validated arrays
+        if self.observation_offset is not None and not callable(self.observation_offset):
+            raise ValueError(f"observation_offset must be callable or None, got "
+                             f"{type(self.observation_offset).__name__}")
         if not callable(self.forecast):
             raise ValueError(f"forecast must be callable, got {self.forecast!r}")
         if not callable(self.prior):

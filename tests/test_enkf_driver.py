@@ -298,3 +298,35 @@ def test_mda_on_a_linear_model_has_the_moments_of_one_analysis():
     np.testing.assert_allclose(three.tracked_std, one.tracked_std, rtol=1e-9, atol=1e-9)
     with pytest.raises(ValueError, match="^mda"):
         FilterConfig(mda=0)
+
+
+def test_observation_offset_is_learned_as_a_parameter():
+    """y = x + b + noise with x known and b ~ N(0, 1) a parameter: the ETKF's posterior of
+    b after M readings is the conjugate Gaussian one (mean and variance, within the
+    ensemble's sampling error)."""
+    from enkf.loop import run_filter
+    from enkf.problem import FilterConfig, FilterProblem
+
+    rng = np.random.default_rng(2)
+    M, sigma, b_true, N = 30, 0.3, 0.8, 400
+    y = 2.0 + b_true + sigma * rng.standard_normal((M, 1))
+    problem = FilterProblem(
+        forecast=lambda X, th, t0, t1: X, observation=np.array([[1.0]]),
+        obs_times=np.arange(1, M + 1.0), obs_data=y, obs_cov=np.array([sigma**2]),
+        prior=lambda r, n: (np.full((n, 1), 2.0), r.standard_normal((n, 1))),
+        observation_offset=lambda th: th[:, :1])
+    res = run_filter(problem, FilterConfig(n_members=N, method="etkf", seed=4))
+    prec = 1.0 + M / sigma**2
+    mean = np.sum(y - 2.0) / sigma**2 / prec
+    assert res.param_mean[-1, 0] == pytest.approx(mean, abs=4 / np.sqrt(prec * N))
+    assert res.param_std[-1, 0] ** 2 == pytest.approx(1 / prec, rel=4 * np.sqrt(2 / N))
+    with pytest.raises(ValueError, match="observation_offset must return shape"):
+        run_filter(FilterProblem(
+            forecast=lambda X, th, t0, t1: X, observation=np.array([[1.0]]),
+            obs_times=np.arange(1, 3.0), obs_data=y[:2], obs_cov=np.array([sigma**2]),
+            prior=lambda r, n: (np.full((n, 1), 2.0), r.standard_normal((n, 1))),
+            observation_offset=lambda th: th[:, 0]), FilterConfig(n_members=10, method="etkf"))
+    with pytest.raises(ValueError, match="observation_offset must be callable"):
+        FilterProblem(forecast=lambda X, th, t0, t1: X, observation=np.array([[1.0]]),
+                      obs_times=[1.0], obs_data=[[1.0]], obs_cov=[1.0],
+                      prior=lambda r, n: (np.zeros((n, 1)), None), observation_offset=3.0)

@@ -64,3 +64,35 @@ def test_divergence_is_reported_with_the_estimates_so_far(tissue):
 def test_bad_setup(kw, pattern, tissue):
     with pytest.raises(ValueError, match=pattern):
         tissue.setup(**kw)
+
+
+def test_sensor_offset_is_estimated_with_the_optics(tissue):
+    """A sensor reading 0.5 deg C high: with sensor_offset_std the members carry the offset
+    and find it (within 3 sd of the truth, the band narrower than the prior); the optics
+    stay near the twin's truth. Without it the optics absorb the offset."""
+    s = tissue.setup(sensor_offset_std=1.0, n_members=100)
+    times, data = tissue.twin_data(s, 1.4, 100.0)
+    est = identify(s, times, data + 0.5)
+    assert est.param_mean.shape == (21, 2)  # the offset is reported apart
+    m, sd = est.sensor_offset_mean[-1, 0], est.sensor_offset_std[-1, 0]
+    assert abs(m - 0.5) < 3 * sd + 0.02 and sd < 0.5 * est.sensor_offset_std[0, 0]
+    plain = identify(tissue.setup(n_members=100), times, data + 0.5)
+    assert plain.sensor_offset_mean is None
+    err_with = abs(est.param_mean[-1, 0] - 1.4)
+    err_without = abs(plain.param_mean[-1, 0] - 1.4)
+    assert err_with < err_without
+
+
+@pytest.mark.parametrize("kw, pattern", [
+    (dict(sensor_offset_std=-0.1), "sensor_offset_std must be >= 0"),
+    (dict(sensor_offset_std=float("nan")), "sensor_offset_std must be >= 0"),
+    (dict(sensor_offset_std=0.5, sensor_positions=np.zeros((0, 3)), image="camera"),
+     "needs point sensors"),
+])
+def test_bad_sensor_offset(kw, pattern, tissue):
+    from enkf.tissue.image import ThermalImage
+
+    if kw.get("image") == "camera":  # a camera alone: no point sensor to offset
+        kw = dict(kw, image=ThermalImage((-0.1, 0.1), (-0.1, 0.1), (2, 2)))
+    with pytest.raises(ValueError, match=pattern):
+        tissue.setup(**kw)

@@ -111,6 +111,8 @@ def cmd_identify(args) -> int:
             continue
         par = ", ".join(f"{k} {v['estimate_final']:.4g} +- {v['std_final']:.2g}"
                         for k, v in r["parameters"].items())
+        for j, o in enumerate(r.get("sensor_offsets") or []):
+            par += f", sensor {j + 1} offset {o['estimate_final']:+.3f} +- {o['std_final']:.2g} deg C"
         stop = f" (stopped: {r['stopped']})" if r["stopped"] else ""
         print(f"{r['data']}: {par}{stop}")
     print(f"-> {args.out}")

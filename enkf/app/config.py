@@ -77,7 +77,7 @@ _FILTER_KEYS = {
     "n_members", "method", "estimate", "grid", "prior_range", "model_noise_std",
     "random_walk_std", "random_walk_when_off", "inflation", "mda", "seed", "parameter_model",
     "localization_radius", "heat_mass", "transforms", "emulator", "bounds", "prior",
-    "model_error", "adaptive_inflation", "coagulation", "medium",
+    "model_error", "adaptive_inflation", "coagulation", "medium", "sensor_offset_std",
 }
 _MODEL_ERROR_KEYS = {"kind", "rel_std", "time_scale", "length_xy", "length_z"}
 _ADAPTIVE_KEYS = {"enabled", "bounds", "time_scale"}
@@ -175,6 +175,7 @@ class IdentifyConfig:
 _LIMITS = {"sensors.noise_var": 1e4, "sensors.camera.noise_var": 1e4, "sensors.rate": 1e6,
            "sensors.camera.shape": 4096, "sensors.camera.subsamples": 64,
            "filter.n_members": 100_000, "filter.grid": 1000, "filter.model_noise_std": 100.0,
+           "filter.sensor_offset_std": 100.0,
            "filter.random_walk_std": 10.0, "filter.random_walk_when_off": 10.0,
            "filter.inflation": 100.0, "filter.localization_radius": 1e3, "filter.mda": 100,
            "filter.seed": 2**63 - 1, "filter.emulator.n_photons": 10**11,
@@ -306,6 +307,7 @@ def identify_config_from_dict(cfg: dict) -> IdentifyConfig:
     if prior:
         setup_kw["prior"] = prior
     for k, kw in (("model_noise_std", dict(lo=0)), ("random_walk_when_off", dict(lo=0)),
+                  ("sensor_offset_std", dict(lo=0)),
                   ("inflation", dict(positive=True)), ("localization_radius", dict(positive=True))):
         if k in flt:
             setup_kw[k] = _num(f"filter.{k}", flt[k], **kw)

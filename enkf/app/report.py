@@ -170,6 +170,12 @@ def write_identify_outputs(out: Path, setup, est, times, data, *, absorption=Non
                 "std_final": float(est.effective_std[k, i])} for i, n in enumerate(("mua", "mus"))}
         summary["effective_optics"]["coagulated_fraction_final"] = float(
             est.coagulated_fraction[k])
+    if getattr(est, "sensor_offset_mean", None) is not None:
+        summary["sensor_offsets"] = [
+            {"position_cm": setup.sensor_positions[j].tolist(), "unit": "deg C",
+             "estimate_final": float(est.sensor_offset_mean[k, j]),
+             "std_final": float(est.sensor_offset_std[k, j])}
+            for j in range(est.sensor_offset_mean.shape[1])]
     if est.diverged:
         summary["rejected"] = {n: {"mean": float(est.param_mean[-1, i]),
                                    "std": float(est.param_std[-1, i])}

@@ -68,6 +68,10 @@ class TissueEstimates:
     effective_std: np.ndarray | None = None
     coagulated_fraction: np.ndarray | None = None
     innovation_loglik: np.ndarray | None = None
+    #: (M+1, n_sensors) deg C: mean and sd of the point sensors' estimated offsets
+    #: (``setup.sensor_offset_std > 0``), else None
+    sensor_offset_mean: np.ndarray | None = None
+    sensor_offset_std: np.ndarray | None = None
 
     def log_evidence(self) -> float:
         """Sum of :attr:`innovation_loglik` over the analysed readings (NaN if not recorded)."""
@@ -105,6 +109,8 @@ class FilterPieces:
     config: FilterConfig
     health: HealthCheck
     n: int
+    #: the sensors' estimated offsets in the readings (setup.sensor_offset_std > 0)
+    observation_offset: Callable | None = None
 
     def model_noise(self):
         """The model error of a new run: a :class:`StructuredModelError` on the mesh nodes,
@@ -126,7 +132,8 @@ class FilterPieces:
             model_noise=self.model_noise() if model_noise is None else model_noise,
             param_noise=self.rw,
             transforms=self.transforms, t0=t0, param_dynamics=self.dynamics,
-            localization=self.localization, param_noise_scale=self.walk_scale)
+            localization=self.localization, param_noise_scale=self.walk_scale,
+            observation_offset=self.observation_offset)
 
 
 def assemble(setup: TissueFilterSetup, param_bounds=None, warm_dt: float | None = None
@@ -168,6 +175,25 @@ def assemble(setup: TissueFilterSetup, param_bounds=None, warm_dt: float | None 
             return U
 
         bounds_extra = np.tile([-1e3, 1e3], (n, 1))  # rates: no physical bound
+    observation_offset = None
+    n_off = setup.n_sensor_offsets
+    if n_off:
+        # an unknown calibration offset of each point sensor (deg C), a parameter of the
+        # members: N(0, sensor_offset_std^2) at the start, no walk, added to the readings
+        inner_prior, so = prior, float(setup.sensor_offset_std)
+
+        def prior(rng, N):  # noqa: F811 - the parameters' prior plus the offsets
+            X0, th = inner_prior(rng, N)
+            return X0, np.hstack([th, so * rng.standard_normal((N, n_off))])
+
+        rw = np.concatenate([rw, np.zeros(n_off)])
+        transforms = (transforms if isinstance(transforms, list) else [transforms] * n) \
+            + [IdentityTransform()] * n_off
+        bounds_extra = np.vstack([bounds_extra, np.tile([-1e3, 1e3], (n_off, 1))])
+        p_img = 0 if setup.image is None else setup.image.n_pixels
+
+        def observation_offset(theta):
+            return np.hstack([theta[:, -n_off:], np.zeros((theta.shape[0], p_img))])
     localization = None
     if setup.localization_radius is not None:
         # Houtekamer & Mitchell (2001): taper the temperature-observation and the
@@ -175,7 +201,7 @@ def assemble(setup: TissueFilterSetup, param_bounds=None, warm_dt: float | None 
         c = 0.5 * float(setup.localization_radius)  # the taper reaches zero at 2c
         d_xy = np.linalg.norm(model.mesh.p.T[:, None, :] - obs_xyz[None, :, :], axis=2)
         d_yy = np.linalg.norm(obs_xyz[:, None, :] - obs_xyz[None, :, :], axis=2)
-        n_theta = len(names) * (2 if setup.parameter_model == "trend" else 1)
+        n_theta = len(names) * (2 if setup.parameter_model == "trend" else 1) + n_off
         rho_xy = np.vstack([gaspari_cohn(d_xy / c), np.ones((n_theta, obs_xyz.shape[0]))])
         localization = (rho_xy, gaspari_cohn(d_yy / c))
     adaptive = None
@@ -194,7 +220,7 @@ def assemble(setup: TissueFilterSetup, param_bounds=None, warm_dt: float | None 
                          min_param_std=min_std)
     return FilterPieces(model, P_obs, noise_var, P_track, prior, rw, transforms, dynamics,
                    localization, None if setup.random_walk_when_off == 1.0 else walk_scale,
-                   config, health, n)
+                   config, health, n, observation_offset)
 
 
 def identify(setup: TissueFilterSetup, times: np.ndarray, data: np.ndarray, *,
@@ -218,6 +244,7 @@ def identify(setup: TissueFilterSetup, times: np.ndarray, data: np.ndarray, *,
     pieces = assemble(setup, param_bounds, float(times[0]) if len(times) else None)
     problem = pieces.problem(times, data)
     P_track, n = pieces.P_track, pieces.n
+    n_off = setup.n_sensor_offsets
     M = len(times)
     tr_mean = np.full((M + 1, P_track.shape[0]), np.nan)
     tr_std = np.full_like(tr_mean, np.nan)
@@ -270,4 +297,6 @@ def identify(setup: TissueFilterSetup, times: np.ndarray, data: np.ndarray, *,
         effective_mean=None if eff_mean is None else eff_mean[:k],
         effective_std=None if eff_std is None else eff_std[:k],
         coagulated_fraction=None if frac is None else frac[:k],
-        innovation_loglik=res.innovation_loglik)
+        innovation_loglik=res.innovation_loglik,
+        sensor_offset_mean=res.param_mean[:, -n_off:] if n_off else None,
+        sensor_offset_std=res.param_std[:, -n_off:] if n_off else None)

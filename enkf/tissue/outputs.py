@@ -11,8 +11,8 @@ __all__ = ["jsonable", "write_estimates_csv", "write_json"]
 
 def write_estimates_csv(path, est, truth=None, data=None) -> None:
     """``estimates.csv``: time; mean and std of each parameter (then, with damage-driven
-    optics, of the effective mua and mus and the mean coagulated fraction) and of each
-    tracked temperature."""
+    optics, of the effective mua and mus and the mean coagulated fraction; with estimated
+    sensor offsets, of each offset in deg C) and of each tracked temperature."""
     cols = ["time_s"]
     arrays = [est.times]
     for i, name in enumerate(est.names):
@@ -24,6 +24,10 @@ def write_estimates_csv(path, est, truth=None, data=None) -> None:
             arrays += [est.effective_mean[:, i], est.effective_std[:, i]]
         cols.append("coagulated_fraction_mean")
         arrays.append(est.coagulated_fraction)
+    if getattr(est, "sensor_offset_mean", None) is not None:  # estimated sensor offsets
+        for j in range(est.sensor_offset_mean.shape[1]):
+            cols += [f"sensor{j + 1}_offset_mean", f"sensor{j + 1}_offset_std"]
+            arrays += [est.sensor_offset_mean[:, j], est.sensor_offset_std[:, j]]
     for j, pos in enumerate(est.tracked_positions):
         tag = f"T_z{pos[2]:.2f}"
         cols += [f"{tag}_mean", f"{tag}_std"]

@@ -115,6 +115,11 @@ class TissueFilterSetup:
     coagulation: object = None  #: enkf.tissue.coagulation.Coagulation (its defaults: None)
     trend_prior_std: float = 0.2  #: 1/s, prior spread of each rate v (mean 0)
     trend_noise_std: float | Sequence[float] = 0.02  #: 1/s per step, std of eta
+    #: deg C: the prior sd of an unknown calibration offset of each point sensor, estimated
+    #: with the parameters (one per sensor, N(0, sd^2) at the start, constant; added to the
+    #: model's readings). 0 (default): the sensors are calibrated. A real sensor that reads
+    #: 0.3 deg C high otherwise pulls the optics until the model fits the offset
+    sensor_offset_std: float = 0.0
     n_members: int = 50
     method: str = DEFAULT_METHOD  #: "etkf" or "enkf" (see enkf.problem.FilterConfig)
     inflation: float = 1.0
@@ -184,13 +189,22 @@ class TissueFilterSetup:
         self.tracked_positions = np.atleast_2d(np.asarray(self.tracked_positions, float))
         if self.max_dt is not None and not (np.isfinite(self.max_dt) and self.max_dt > 0):
             raise ValueError(f"max_dt must be > 0 (s) or None, got {self.max_dt!r}")
+        if self.sensor_offset_std and self.sensor_positions.shape[0] == 0:
+            raise ValueError(f"sensor_offset_std = {self.sensor_offset_std!r} needs point sensors "
+                             "(sensor_positions is empty)")
         if self.model_error not in ("structured", "white"):
             raise ValueError(f"model_error must be 'structured' or 'white', got "
                              f"{self.model_error!r}")
-        for name in ("model_noise_std", "trend_prior_std", "model_error_rel_std",
+        for name in ("model_noise_std", "trend_prior_std", "model_error_rel_std", "sensor_offset_std",
                      "model_error_time_scale", "model_error_length_xy", "model_error_length_z"):
             if not (np.isfinite(getattr(self, name)) and getattr(self, name) >= 0):
                 raise ValueError(f"{name} must be >= 0, got {getattr(self, name)!r}")
+
+    @property
+    def n_sensor_offsets(self) -> int:
+        """Offsets estimated beside the parameters: one per point sensor when
+        ``sensor_offset_std > 0``, else 0."""
+        return self.sensor_positions.shape[0] if self.sensor_offset_std > 0 else 0
 
     @property
     def parameter_names(self) -> tuple:
