@@ -35,6 +35,7 @@ SUITE: dict[str, tuple[list | None, list | None]] = {
     "paper_runs": (None, ["--twin"]),
     # builds the emulator of examples/own_data.toml (long on 2 cores): full suite only
     "model_error_coverage": (None, ["--seeds", "20"]),
+    "sensor_offset": (None, []),  # the same emulator and the independent truths
     "walk_bound": (None, []),  # the same emulator and the independent truths
     "image_vs_point": (None, []),
     "sensitivity": ([], []),
