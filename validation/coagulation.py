@@ -166,10 +166,17 @@ def plot_mus(path, case, truth, ests) -> None:
     for ax, i, name in ((axes[0], 0, "mua"), (axes[1], 1, "mus")):
         ax.plot(truth.times, truth.optics[:, i], "k-", lw=2, label="truth (effective)")
         for model, est in ests.items():
-            m = est.effective_mean if est.effective_mean is not None else est.param_mean[:, :2]
-            s = est.effective_std if est.effective_std is not None else est.param_std[:, :2]
-            ax.plot(est.times, m[:, i], label=model)
-            ax.fill_between(est.times, m[:, i] - 2 * s[:, i], m[:, i] + 2 * s[:, i], alpha=0.2)
+            if est.effective_mean is not None:  # a log-normal band of the effective optics
+                m, s = est.effective_mean[:, i], est.effective_std[:, i]
+                with np.errstate(invalid="ignore", divide="ignore"):
+                    s2 = np.log1p((s / m) ** 2)
+                    mu = np.log(m) - 0.5 * s2
+                    lo, hi = np.exp(mu - 2 * np.sqrt(s2)), np.exp(mu + 2 * np.sqrt(s2))
+            else:  # the members' 2.3 and 97.7 % quantiles (positive, like the members)
+                m = est.param_mean[:, i]
+                lo, hi = est.param_band(i)
+            ax.plot(est.times, m, label=model)
+            ax.fill_between(est.times, lo, hi, alpha=0.2)
         ax.set(xlabel="time [s]", ylabel=f"{name} [cm$^{{-1}}$]", title=f"{case}, seed 0")
         ax.legend(fontsize=8)
     fig.savefig(path, dpi=110)
