@@ -46,6 +46,8 @@ class TissueEstimates:
     ``innovation_loglik``: (M,) log-density of each reading under the forecast (NaN where
     none was analysed; :func:`enkf.adaptive.innovation_loglik`): the sums of two models on
     the same data compare them.
+    ``sensor_offset_mean``/``sensor_offset_std``: (M+1, n_sensors) deg C, the point
+    sensors' estimated offsets with ``sensor_offset_std > 0``; else None.
     """
 
     times: np.ndarray
