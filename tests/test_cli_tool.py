@@ -265,3 +265,26 @@ def test_mc_config_asks_for_the_optional_outputs_and_gets_them_with_figures(tmp_
     assert run("mc", tmp_path / "bad.toml", "--out", tmp_path / "b") == 2
     assert "unknown key MC.light_collector.diameter" in capsys.readouterr().err
     assert not (tmp_path / "b").exists()
+
+
+def test_identify_reports_the_sensor_offsets(tmp_path, cache):
+    """[filter] sensor_offset_std: the offset in summary.json, estimates.csv and the printed
+    line, for a run on a file and for --follow."""
+    cfg = tmp_path / "offset.toml"
+    cfg.write_text(TINY.replace("[filter]\n", "[filter]\nsensor_offset_std = 0.5\n", 1))
+    out = tmp_path / "id"
+    assert run("identify", cfg, "--data", EX / "tiny_data.csv", "--out", out, "--quiet",
+               "--cache-dir", cache) == 0
+    s = json.loads((out / "summary.json").read_text())
+    (off,) = s["sensor_offsets"]
+    assert off["position_cm"] == [0.0, 0.0, 0.0] and 0 < off["std_final"] < 0.5
+    header = (out / "estimates.csv").read_text().splitlines()[0].split(",")
+    assert header[5:7] == ["sensor1_offset_mean", "sensor1_offset_std"]
+    live = tmp_path / "live.csv"
+    live.write_text("\n".join((EX / "tiny_data.csv").read_text().splitlines()[:6]) + "\n# end\n")
+    out2 = tmp_path / "follow"
+    assert run("identify", cfg, "--follow", live, "--out", out2, "--quiet", "--cache-dir", cache,
+               "--idle-timeout", "5") == 0
+    rows = (out2 / "estimates.csv").read_text().splitlines()
+    assert rows[0].split(",")[5:7] == ["sensor1_offset_mean", "sensor1_offset_std"]
+    assert len(rows) == 6 and len(rows[1].split(",")) == len(rows[0].split(","))

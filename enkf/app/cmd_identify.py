@@ -210,7 +210,9 @@ def _follow(args, cfg, absorption, seed, t_emu) -> int:
     ident = OnlineIdentifier(setup, param_bounds=cfg.param_bounds,
                              dt_hint=1.0 / cfg.rate if cfg.rate else 0.1)
     names = list(setup.parameter_names)
+    n_off = setup.n_sensor_offsets
     cols = ["time_s"] + [f"{n}_{s}" for n in names for s in ("mean", "std")] + [
+        f"sensor{j + 1}_offset_{s}" for j in range(n_off) for s in ("mean", "std")] + [
         f"T{j}_{s}" for j in range(len(setup.tracked_positions)) for s in ("mean", "std")]
     fh = open(out / "estimates.csv", "w", encoding="utf-8")
     fh.write(",".join(cols) + "\n")
@@ -220,6 +222,8 @@ def _follow(args, cfg, absorption, seed, t_emu) -> int:
     def on_update(est, line):
         vals = [est.time] + [v for i in range(len(names))
                              for v in (est.param_mean[i], est.param_std[i])]
+        vals += [v for j in range(n_off)
+                 for v in (est.sensor_offset_mean[j], est.sensor_offset_std[j])]
         vals += [v for j in range(len(est.tracked_mean))
                  for v in (est.tracked_mean[j], est.tracked_std[j])]
         fh.write(",".join(f"{v:.8g}" for v in vals) + "\n")

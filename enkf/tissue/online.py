@@ -28,6 +28,9 @@ class OnlineEstimate:
     tracked_std: np.ndarray  #: (n_tracked,) deg C
     analysed: bool
     latency_s: float  #: wall time of this update
+    #: (n_sensors,) deg C: the point sensors' estimated offsets (``sensor_offset_std > 0``)
+    sensor_offset_mean: np.ndarray | None = None
+    sensor_offset_std: np.ndarray | None = None
 
 
 class OnlineIdentifier:
@@ -81,9 +84,12 @@ class OnlineIdentifier:
         self._X, self._theta = res.state_ensemble, res.param_ensemble
         Y = (self._pieces.P_track @ self._X.T).T
         n = self._pieces.n
+        n_off = self.setup.n_sensor_offsets
         est = OnlineEstimate(t, res.param_mean[-1, :n], res.param_std[-1, :n], Y.mean(axis=0),
                              Y.std(axis=0, ddof=1), bool(res.analysed[-1]),
-                             time.perf_counter() - tic)
+                             time.perf_counter() - tic,
+                             res.param_mean[-1, -n_off:] if n_off else None,
+                             res.param_std[-1, -n_off:] if n_off else None)
         self.time = t
         self.history.append(est)
         return est
