@@ -75,22 +75,16 @@ def time_builds(n_photons: int) -> None:
 
 def plain_seconds(n_photons: int = 5_000_000, seed: int = 1) -> float:
     """Seconds of the plain one-thread kernel for ``n_photons`` on examples/own_data.toml's
-    block (the paper's tissue, 100 x 100 x 50, top hat of radius 1 mm)."""
+    block (the paper's tissue, 100 x 100 x 50, top hat of radius 1 mm): its CPU time, as
+    ``benchmarks/bench_mc.py`` measures it."""
     import sys
     from pathlib import Path
 
     sys.path.insert(0, str(Path(__file__).parent))
-    from plain_kernel import plain_run
+    from bench_mc import plain_cpu_rate
 
-    model = paper_model((100, 100, 50), n_photons=1, progress=False)
-    G, med = model.G, model.G.media[0]
-    M = np.zeros((100, 100, 50), dtype=np.int32)
-    args = (M, np.array([med.mua]), np.array([med.mus]), np.array([med.g]), 100, 100, 50,
-            G.dx, model.MC.light_source.radius)
-    plain_run(*args, 100, seed)  # compile / load the cache
-    t0 = time.perf_counter()
-    plain_run(*args, n_photons, seed)
-    return time.perf_counter() - t0
+    plain_cpu_rate((100, 100, 50), 100)  # compile / load the cache
+    return n_photons / plain_cpu_rate((100, 100, 50), n_photons, seed)
 
 
 def time_cold(repeat: int) -> None:

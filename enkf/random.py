@@ -104,12 +104,8 @@ def standard_normal(rng: np.random.Generator, shape: tuple[int, ...]) -> np.ndar
         Output shape; a large draw is split into two blocks along the first axis.
     """
     out, parts, seeds = _seeds(rng, tuple(int(s) for s in shape))
-    if len(parts) < 2:
-        for seed, part in zip(seeds, parts, strict=True):
-            _kernels.fill_normal(seed, part, *_TABLES)
-        return out
-    pool = _pool()
-    if pool is None:
+    pool = _pool() if len(parts) == 2 else None
+    if pool is None:  # one block, or one core: the blocks in turn
         for seed, part in zip(seeds, parts, strict=True):
             _kernels.fill_normal(seed, part, *_TABLES)
         return out

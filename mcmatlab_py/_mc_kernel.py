@@ -74,7 +74,7 @@ from ._mc_tally import (  # noqa: F401 (re-exported: the Python layer reads them
 )
 from ._mc_uniform import transport_uniform_batch, uniform_path_applies
 from ._rng import next_double, seed_stream
-from ._sources import SI_SURFACE, launch, sample_pwl
+from ._sources import SI_SURFACE, launch_from, sample_pwl
 
 KILLRANGE = 5.0  # as MCmatlab: photons farther than 2.5 cuboid sizes from the centre die
 
@@ -129,15 +129,8 @@ def transport_batch(
         dc_end = oi[O.OI_DC] == 1 and oi[O.OI_DC_END] == 1
     for ip in range(first, last):
         # ---------------------------------------------------------------- launch
-        st[0] = s0
-        st[1] = s1
-        st[2] = s2
-        st[3] = s3
-        px, py, pz, ux, uy, uz, ok = launch(si, sf, stab, svox, nx, ny, nz, dx, dy, dz, st)
-        s0 = st[0]
-        s1 = st[1]
-        s2 = st[2]
-        s3 = st[3]
+        s0, s1, s2, s3, px, py, pz, ux, uy, uz, ok = launch_from(
+            si, sf, stab, svox, nx, ny, nz, dx, dy, dz, st, s0, s1, s2, s3)
         w = np.int64(W_ONE)
         tally[T_LAUNCHED] += w
         if boundary_type == 3:  # cyclic sides: fold the entry point into the face

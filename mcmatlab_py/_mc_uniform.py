@@ -25,7 +25,7 @@ import numpy as np
 from ._mc_steps import _fresnel, _hg_cos, _mirror, _spin_cs
 from ._mc_tally import T_BOTTOM, T_LAUNCHED, T_MISSED, T_ROULETTE, T_SIDES, T_SPECULAR, T_TOP, W_ONE
 from ._rng import next_azimuth, next_double, next_exponential, seed_stream
-from ._sources import SI_SURFACE, launch
+from ._sources import SI_SURFACE, launch_from
 
 _INF = np.inf
 _FASTMATH = {"nsz", "arcp", "contract", "afn", "reassoc"}
@@ -75,15 +75,8 @@ def transport_uniform_batch(
     last = min(first + batch_size, n_total)
     for _ in range(first, last):
         # ---------------------------------------------------------------- launch
-        st[0] = s0
-        st[1] = s1
-        st[2] = s2
-        st[3] = s3
-        px, py, pz, ux, uy, uz, ok = launch(si, sf, stab, svox, nx, ny, nz, dx, dy, dz, st)
-        s0 = st[0]
-        s1 = st[1]
-        s2 = st[2]
-        s3 = st[3]
+        s0, s1, s2, s3, px, py, pz, ux, uy, uz, ok = launch_from(
+            si, sf, stab, svox, nx, ny, nz, dx, dy, dz, st, s0, s1, s2, s3)
         w = np.int64(W_ONE)
         tally[T_LAUNCHED] += w
         if not (ok and 0.0 <= px <= Lx and 0.0 <= py <= Ly and 0.0 <= pz <= Lz):

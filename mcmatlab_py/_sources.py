@@ -292,6 +292,19 @@ def launch(si, sf, tab, vox, nx, ny, nz, dx, dy, dz, st):
     return tx_ - s * dx_, ty_ - s * dy_, 0.0, dx_, dy_, dz_, True
 
 
+@numba.njit(cache=True, inline="always")
+def launch_from(si, sf, tab, vox, nx, ny, nz, dx, dy, dz, st, s0, s1, s2, s3):
+    """:func:`launch` for a kernel that keeps its random state in four scalars: the state
+    goes through the scratch array ``st`` (4,) uint64. Returns the new state, then
+    ``(px, py, pz, ux, uy, uz, ok)``."""
+    st[0] = s0
+    st[1] = s1
+    st[2] = s2
+    st[3] = s3
+    px, py, pz, ux, uy, uz, ok = launch(si, sf, tab, vox, nx, ny, nz, dx, dy, dz, st)
+    return st[0], st[1], st[2], st[3], px, py, pz, ux, uy, uz, ok
+
+
 @numba.njit(cache=True)
 def launch_many(si, sf, tab, vox, nx, ny, nz, dx, dy, dz, seed, n):
     """(n, 7) float64: ``launch`` n times from stream 0 of ``seed`` (x, y, z, ux, uy, uz, ok)."""

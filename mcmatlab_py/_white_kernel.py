@@ -67,7 +67,7 @@ from ._mc_kernel import (
 )
 from ._mc_steps import _clamp, _fresnel, _hg_cos, _mirror, _plane_distance, _spin
 from ._rng import next_double, seed_stream
-from ._sources import SI_SURFACE, launch
+from ._sources import SI_SURFACE, launch_from
 
 __all__ = ["N_TALLY", "W_ONE", "run_white_batches", "white_batch"]
 
@@ -155,15 +155,8 @@ def white_batch(
     first = b * batch_size
     last = min(first + batch_size, n_total)
     for _ip in range(first, last):
-        st[0] = s0
-        st[1] = s1
-        st[2] = s2
-        st[3] = s3
-        px, py, pz, ux, uy, uz, ok = launch(si, sf, stab, svox, nx, ny, nz, dx, dy, dz, st)
-        s0 = st[0]
-        s1 = st[1]
-        s2 = st[2]
-        s3 = st[3]
+        s0, s1, s2, s3, px, py, pz, ux, uy, uz, ok = launch_from(
+            si, sf, stab, svox, nx, ny, nz, dx, dy, dz, st, s0, s1, s2, s3)
         for k in range(K):
             tally[T_LAUNCHED, k] += W_ONE
         if boundary_type == 3:
