@@ -61,7 +61,11 @@ class TissueForwardModel:
         N = s.n_members
         theta = np.tile([s.nominal[n] for n in s.estimate], (N, 1))
         npts = self.mesh.p.shape[1]
-        self.step(np.zeros((N, npts)), theta, 0.0, dt, 0.0 if self.absorption.exact else 1.0)
+        # the members as the filter holds them: a plain array from the prior, then the state
+        # part of the augmented ensemble, a strided view (the heat step's kernels are
+        # compiled for each layout)
+        for E in (np.zeros((N, npts)), np.zeros((N, npts + theta.shape[1]))[:, :npts]):
+            self.step(E, theta, 0.0, dt, 0.0 if self.absorption.exact else 1.0)
 
     def table_ranges(self) -> dict:
         """``{"mua": (lo, hi), "mus": (lo, hi)}`` cm^-1 of the emulator's table ({} when the

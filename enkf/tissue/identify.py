@@ -19,6 +19,7 @@ from ..checks import rows_times
 from ..health import HealthCheck
 from ..loop import run_filter
 from ..problem import FilterConfig, FilterDivergence, FilterProblem, FilterResult, StepReport, uniform_prior
+from ..random import standard_normal
 from ..transforms import IdentityTransform, LogTransform
 from .coagulation import CoagulationForwardModel
 from .forward import TissueForwardModel, observation_operator
@@ -147,6 +148,7 @@ def assemble(setup: TissueFilterSetup, param_bounds=None, warm_dt: float | None 
     npts = model.mesh.p.shape[1]
     if warm_dt is not None:
         model.warm_up(warm_dt)
+        standard_normal(np.random.default_rng(0), (2, 2))  # the model noise's kernel too
     P_obs, noise_var, obs_xyz = observation_operator(setup, model.mesh)
     P_track = fem.probe_matrix(model.mesh, setup.tracked_positions.T)
     nominal = setup.nominal_values()
