@@ -68,6 +68,7 @@ from ._mc_kernel import (
 from ._mc_steps import _clamp, _fresnel, _hg_cos, _mirror, _plane_distance, _spin
 from ._rng import next_double, seed_stream
 from ._sources import SI_SURFACE, launch_from
+from ._white_uniform import white_uniform_batch
 
 __all__ = ["N_TALLY", "W_ONE", "run_white_batches", "white_batch"]
 
@@ -371,8 +372,12 @@ def run_white_batches(
     mua_tab, rate, Mf, mus, g, nref, nx, ny, nz, dx, dy, dz,
     boundary_type, n_out, matched, roulette, weight_threshold, chance,
     si, sf, stab, svox, fold, seed, batch_size, n_total, batch_start, batch_stop, acc, tally,
+    uniform=-1,
 ):  # fmt: skip
     """Run batches ``[batch_start, batch_stop)`` on ``acc.shape[0]`` workers.
+
+    ``uniform``: the medium that fills the grid when every face is escaping (then
+    :func:`mcmatlab_py._white_uniform.white_uniform_batch` runs), else -1.
 
     ``acc`` is (n_workers, n_rows, K) and ``tally`` (n_workers, N_TALLY, K), one slice per
     worker; batches are claimed from an atomic counter as in
@@ -386,8 +391,15 @@ def run_white_batches(
             b = batch_start + fetch_add(counter, 0, 1)
             if b >= batch_stop:
                 break
-            white_batch(
-                b, mua_tab, rate, Mf, mus, g, nref, nx, ny, nz, dx, dy, dz,
-                boundary_type, n_out, matched, roulette, weight_threshold, chance,
-                si, sf, stab, svox, fold, seed, batch_size, n_total, acc[kw], tally[kw],
-            )  # fmt: skip
+            if uniform >= 0:
+                white_uniform_batch(
+                    b, mua_tab[uniform], mus[uniform], g[uniform], nref, nx, ny, nz,
+                    dx, dy, dz, n_out, matched, roulette, weight_threshold, chance,
+                    si, sf, stab, svox, fold, seed, batch_size, n_total, acc[kw], tally[kw],
+                )  # fmt: skip
+            else:
+                white_batch(
+                    b, mua_tab, rate, Mf, mus, g, nref, nx, ny, nz, dx, dy, dz,
+                    boundary_type, n_out, matched, roulette, weight_threshold, chance,
+                    si, sf, stab, svox, fold, seed, batch_size, n_total, acc[kw], tally[kw],
+                )  # fmt: skip

@@ -98,6 +98,9 @@ def white_absorbed(spec, mua, mus: float, *, n_photons: int, seed: int,
     args = _kernel_args(m.G, m.MC, M, mua_m, mus_m, g_m, n_m, seed, int(n_photons))
     (Mf, _, _, _, _, _, nx, ny, nz, dx, dy, dz, boundary_type, n_out, matched, roulette,
      w_thr, chance, si, sf, stab, svox, *_rest) = args
+    # one medium in the grid, every face escaping: the kernel that walks no voxel faces
+    uniform = int(present[0]) if (present.size == 1 and boundary_type == 1
+                                  and np.isfinite(n_m[present[0]])) else -1
     bs = m.MC.batch_size
     n_threads = min(n_threads or numba.get_num_threads(), numba.config.NUMBA_NUM_THREADS)
     K = mua.size
@@ -116,7 +119,7 @@ def white_absorbed(spec, mua, mus: float, *, n_photons: int, seed: int,
     old = numba.get_num_threads()
     numba.set_num_threads(n_threads)
     try:
-        WK.run_white_batches(*kargs, 0, -(-int(n_photons) // bs), acc, tally)
+        WK.run_white_batches(*kargs, 0, -(-int(n_photons) // bs), acc, tally, uniform)
     finally:
         numba.set_num_threads(old)
     rows = acc.sum(axis=0).T / WK.W_ONE  # (K, n_rows)

@@ -163,3 +163,30 @@ def test_white_two_layers_energy_balance_and_refraction():
                                                              (None, None, 0.9, 1.3)))
     with pytest.raises(NotBuiltError, match="one refractive index"):
         white_absorbed(other_n, [1.0], 100.0, n_photons=100, seed=3)
+
+
+@pytest.mark.parametrize("x", [1e-5, 2e-3, 9.9e-3, 1.01e-2, 0.3, 5.0, 40.0])
+def test_loss_point_inverts_where_the_weight_is_lost(x):
+    """The point of a move where the one-medium white kernel puts a weight's loss: the
+    inverse of the share lost before t, (1 - exp(-x t)) / (1 - exp(-x))."""
+    from mcmatlab_py._white_uniform import loss_point
+
+    t = np.linspace(0.0, 1.0, 41)
+    lost = -math.expm1(-x)
+    u = -np.expm1(-x * t) / lost
+    got = np.array([loss_point(ui, x, lost) for ui in u])
+    assert np.all((got >= 0.0) & (got <= 1.0))
+    # the share lost before the point is u (the inverse is ill-conditioned near t = 1 for
+    # large x, so the check is on the share; the series' error is below 1e-6 of the move)
+    np.testing.assert_allclose(-np.expm1(-x * got) / lost, u, rtol=0, atol=1e-6)
+    if x < 1.0:
+        np.testing.assert_allclose(got, t, rtol=0, atol=1e-6)
+
+
+@pytest.mark.parametrize("mus", [10.0, 300.0])
+def test_one_medium_kernel_equals_direct_where_moves_cross_many_voxels(mus):
+    """40 x 40 x 20 voxels of 0.0125 cm: at mus = 10 a free path crosses about 8 voxels,
+    so almost every loss is put at its sampled point; at 300 most moves stay in one voxel
+    and the losses are settled by path length."""
+    spec = spec_(nx=40, ny=40, nz=20, matched_interfaces=False)
+    compare(spec, np.array([0.1, 3.0, 20.0]), mus, 8000, 8000)
