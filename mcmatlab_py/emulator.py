@@ -318,7 +318,14 @@ class AbsorptionEmulator:
     absorbed: np.ndarray = None  #: (n_mua, n_mus) absorbed fraction of each table point
     out_of_range: str = "error"  #: "error" or "clamp"
     build_seconds: float = 0.0
+    #: (n_mua, n_mus) bool: the table points built so far (None: all). An emulator built
+    #: ``on_demand`` runs the Monte Carlo of the points an interpolation needs the first time
+    #: a member needs them (:meth:`fill`); the others hold NaN and are never read
+    have: np.ndarray = None
+    method: str = "table"  #: how missing points are built (:data:`METHODS`)
     exact = False  #: an interpolation, not Monte Carlo (enkf.tissue.absorption.Absorption)
+    #: where missing points go (the cache file), the Dask client, whether to show progress
+    _fill_with: tuple = field(default=(None, None, False), repr=False)
     _lmua: np.ndarray = field(init=False, repr=False)
     _lmus: np.ndarray = field(init=False, repr=False)
     inverse: np.ndarray = field(init=False, repr=False)  #: (nvox,) orbit of each voxel
@@ -330,6 +337,19 @@ class AbsorptionEmulator:
         if self.out_of_range not in ("error", "clamp"):
             raise ValueError(f"out_of_range must be 'error' or 'clamp', got {self.out_of_range!r}")
         self.log_na = np.ascontiguousarray(self.log_na, dtype=np.float64)
+        if self.have is None:
+            self.have = np.ones((self.spec.n_mua, self.spec.n_mus), dtype=bool)
+
+    def __getstate__(self):  # a Dask client does not travel (workers fill with their own cores)
+        state = dict(self.__dict__)
+        path, _client, progress = state["_fill_with"]
+        state["_fill_with"] = (path, None, progress)
+        return state
+
+    @property
+    def complete(self) -> bool:
+        """Whether every table point is built."""
+        return bool(self.have.all())
 
     @property
     def shape(self) -> tuple[int, int, int]:
@@ -363,6 +383,8 @@ class AbsorptionEmulator:
         mua = self._check("mua", mua, *self.spec.mua_range)
         mus = self._check("mus", mus, *self.spec.mus_range)
         mua, mus = np.broadcast_arrays(mua, mus)
+        if not self.have.all():
+            self.fill(self.needed(mua, mus))
         out = np.empty((mua.size, self.log_na.shape[2]))
         interpolate_log_na(self.log_na, self._lmua, self._lmus, np.log(mua).ravel(),
                            np.log(mus).ravel(), self.spec.offset, out)
@@ -377,7 +399,7 @@ class AbsorptionEmulator:
     @classmethod
     def build(cls, spec: EmulatorSpec, *, cache_dir: str | Path | None = None,
               progress: bool = True, out_of_range: str = "error",
-              client=None, method: str = "table") -> AbsorptionEmulator:
+              client=None, method: str = "table", on_demand: bool = False) -> AbsorptionEmulator:
         """Load the table for ``spec`` from the cache, or run the Monte Carlo and store it.
 
         ``method="table"``: one direct Monte Carlo run per table point (``n_mua * n_mus``
@@ -388,6 +410,12 @@ class AbsorptionEmulator:
         (:func:`mcmatlab_py.distributed.connect`), one task per run on the cluster's
         workers; both give the same table. The cache file is keyed by the spec and the
         method; a corrupted one is detected by its checksum and rebuilt.
+
+        ``on_demand=True`` runs nothing now: each table point is built the first time an
+        interpolation needs it (:meth:`fill`, from :meth:`unique`) and added to the cache,
+        so a filter whose members stay in a corner of the table never pays for the rest
+        (the paper's prior needs 7 of the 12 columns, not the costly high ``mus`` ones).
+        The points are the same numbers either way.
         """
         import time
 
@@ -399,36 +427,76 @@ class AbsorptionEmulator:
         cache = Path(cache_dir) if cache_dir is not None else default_cache_dir()
         path = cache / f"emulator-{key}.npz"
         loaded = _load(path, spec, key)
-        if loaded is not None:
-            return cls(spec=spec, log_na=loaded["log_na"], absorbed=loaded["absorbed"],
-                       out_of_range=out_of_range, build_seconds=float(loaded["build_seconds"]))
-        cache = usable_cache_dir(cache)  # before minutes of Monte Carlo, not after
-        path = cache / path.name
-        log_na = np.empty((spec.n_mua, spec.n_mus, spec.orbits()[0].size))
-        absorbed = np.empty((spec.n_mua, spec.n_mus))
-        t0 = time.perf_counter()
-        # cost grows with mus: do the expensive column first so the ETA is honest
-        if method == "white":
-            from .white import white_column
+        if loaded is None:
+            shape = (spec.n_mua, spec.n_mus)
+            loaded = dict(log_na=np.full((*shape, spec.orbits()[0].size), np.nan),
+                          absorbed=np.full(shape, np.nan), have=np.zeros(shape, dtype=bool),
+                          build_seconds=0.0)
+        emu = cls(spec=spec, log_na=loaded["log_na"], absorbed=loaded["absorbed"],
+                  out_of_range=out_of_range, build_seconds=float(loaded["build_seconds"]),
+                  have=loaded["have"], method=method)
+        emu._fill_with = (path, client, progress)
+        if not on_demand:
+            emu.fill(np.ones_like(emu.have))
+        return emu
 
-            columns = list(range(spec.n_mus))[::-1]
+    def needed(self, mua, mus) -> np.ndarray:
+        """(n_mua, n_mus) bool: the table points the interpolation at ``mua``, ``mus``
+        (N,) cm^-1 (inside the table's ranges) reads: the 4 x 4 stencil of each member."""
+        need = np.zeros((self.spec.n_mua, self.spec.n_mus), dtype=bool)
+        ia = _stencils(np.log(np.ravel(mua)), self._lmua)
+        ib = _stencils(np.log(np.ravel(mus)), self._lmus)
+        for a, b in set(zip(ia.tolist(), ib.tolist(), strict=True)):
+            need[a:a + 4, b:b + 4] = True
+        return need
+
+    def fill(self, points: np.ndarray) -> None:
+        """Run the Monte Carlo of the table points in ``points`` ((n_mua, n_mus) bool) not
+        built yet, and add them to the cache file. ``method="white"`` builds whole ``mus``
+        columns (one run gives every ``mua``). Each point's numbers depend only on the spec
+        and its place in the table, so an emulator filled piece by piece equals one built
+        at once, bit for bit."""
+        import time
+
+        from .distributed import run_tasks
+        from .white import white_column
+
+        missing = np.asarray(points, dtype=bool) & ~self.have
+        if not missing.any():
+            return
+        spec = self.spec
+        path, client, progress = self._fill_with
+        if path is not None:  # before minutes of Monte Carlo, not after
+            path = usable_cache_dir(path.parent) / path.name
+            self._fill_with = (path, client, progress)
+        t0 = time.perf_counter()
+        # cost grows with mus: the expensive columns first, so the ETA is honest
+        columns = [b for b in range(spec.n_mus)[::-1] if missing[:, b].any()]
+        if self.method == "white":
             results = run_tasks(functools.partial(white_column, spec), columns, client=client,
                                 progress=progress, label="emulator table (white)")
             for b, (rows, fracs) in zip(columns, results, strict=True):
-                log_na[:, b], absorbed[:, b] = rows, fracs
+                self.log_na[:, b], self.absorbed[:, b] = rows, fracs
+                self.have[:, b] = True
         else:
-            points = [(a, b) for b in range(spec.n_mus)[::-1] for a in range(spec.n_mua)]
-            results = run_tasks(functools.partial(table_point, spec), points, client=client,
+            todo = [(a, b) for b in columns for a in range(spec.n_mua) if missing[a, b]]
+            results = run_tasks(functools.partial(table_point, spec), todo, client=client,
                                 progress=progress, label="emulator table")
-            for (a, b), (row, frac) in zip(points, results, strict=True):
-                log_na[a, b], absorbed[a, b] = row, frac
-        seconds = time.perf_counter() - t0
-        _store(path, key, log_na, absorbed, seconds)
+            for (a, b), (row, frac) in zip(todo, results, strict=True):
+                self.log_na[a, b], self.absorbed[a, b] = row, frac
+                self.have[a, b] = True
+        self.build_seconds += time.perf_counter() - t0
+        if path is not None:
+            _store(path, cache_key(spec, self.method), self)
         from fem.threads import release_free_memory
 
         release_free_memory()  # the load operator's and the runs' temporaries
-        return cls(spec=spec, log_na=log_na, absorbed=absorbed, out_of_range=out_of_range,
-                   build_seconds=seconds)
+
+
+def _stencils(t: np.ndarray, grid_log: np.ndarray) -> np.ndarray:
+    """The first node of the 4-point stencil of each ``t`` (as ``_interp._stencil``)."""
+    i = np.searchsorted(grid_log, t) - 1
+    return np.clip(i - 1, 0, grid_log.size - 4)
 
 
 def _voxel_map(X, Y, Z, M):
@@ -551,26 +619,44 @@ def usable_cache_dir(cache: Path) -> Path:
         return tmp
 
 
-def _store(path: Path, key: str, log_na, absorbed, seconds) -> None:
+def _store(path: Path, key: str, emu: AbsorptionEmulator) -> None:
+    """Write the table (and which points it holds) atomically; points another process
+    added to the file meanwhile are kept."""
+    on_disk = _load(path, emu.spec, key, quiet=True)
+    if on_disk is not None:
+        extra = on_disk["have"] & ~emu.have
+        emu.log_na[extra] = on_disk["log_na"][extra]
+        emu.absorbed[extra] = on_disk["absorbed"][extra]
+        emu.have |= extra
     path.parent.mkdir(parents=True, exist_ok=True)
     tmp = path.with_suffix(f".tmp{os.getpid()}.npz")
-    np.savez(tmp, log_na=log_na, absorbed=absorbed, build_seconds=seconds, key=key,
-             checksum=_checksum(log_na, absorbed))
+    np.savez(tmp, log_na=emu.log_na, absorbed=emu.absorbed, have=emu.have,
+             build_seconds=emu.build_seconds, key=key,
+             checksum=_checksum(emu.log_na, emu.absorbed, emu.have))
     os.replace(tmp, path)  # atomic: a reader never sees half a table
 
 
-def _load(path: Path, spec: EmulatorSpec, key: str):
+def _load(path: Path, spec: EmulatorSpec, key: str, quiet: bool = False):
     if not path.exists():
         return None
     try:
         with np.load(path, allow_pickle=False) as f:
             data = {k: f[k] for k in ("log_na", "absorbed", "build_seconds", "key", "checksum")}
+            if "have" in f:
+                data["have"] = f["have"]
+                check = _checksum(data["log_na"], data["absorbed"], data["have"])
+            else:  # written before on-demand tables: complete
+                data["have"] = np.ones((spec.n_mua, spec.n_mus), dtype=bool)
+                check = _checksum(data["log_na"], data["absorbed"])
         ok = (str(data["key"]) == key
               and data["log_na"].shape == (spec.n_mua, spec.n_mus, spec.orbits()[0].size)
-              and str(data["checksum"]) == _checksum(data["log_na"], data["absorbed"]))
+              and data["have"].shape == (spec.n_mua, spec.n_mus) and data["have"].dtype == bool
+              and str(data["checksum"]) == check)
     except Exception:  # noqa: BLE001 - any unreadable file is treated as corrupted
         ok = False
     if not ok:
+        if quiet:
+            return None
         warnings.warn(f"emulator cache {path} is corrupted or stale: rebuilding", RuntimeWarning,
                       stacklevel=3)
         path.unlink(missing_ok=True)

@@ -46,6 +46,8 @@ def test_identify_on_the_example_data(tmp_path, cache):
     s = json.loads((out / "summary.json").read_text())
     assert set(s["parameters"]) == {"mua", "mus"} and s["stopped"] is None
     assert s["analysed"] == 19  # 20 readings, one gap
+    points = json.loads((out / "run.json").read_text())["emulator_points"]
+    assert 0 < points["built"] <= points["table"]  # on demand: the points the filter read
     import meshio
 
     mesh = meshio.read(out / "fields" / "final.vtu")

@@ -83,6 +83,8 @@ def with_(path: str, value, base=None):
     ("filter.grid", [5, 5, 0], "filter.grid[2] must be >= 1, got 0"),
     ("filter.transforms", "logit", "filter.transforms must be \"log\""),
     ("filter.emulator.n_mua", 2, "filter.emulator.n_mua must be >= 4, got 2"),
+    ("filter.emulator.on_demand", "yes", "filter.emulator.on_demand must be true or false, got 'yes'"),
+    ("filter.emulator.exact", 1, "filter.emulator.exact must be true or false, got 1"),
     ("filter.emulator.mua_range", [0.0, 20.0], "filter.emulator.mua_range[0] must be > 0"),
     ("filter.bounds.mua", [0.8, 2.0], "filter.bounds.mua = [0.8, 2.0] must contain the prior"),
     ("filter.bounds.VHC", [1.0, 10.0], "filter.bounds.VHC: VHC is not estimated"),

@@ -117,3 +117,45 @@ def test_nodal_load_emulator_conserves_power(tmp_path):
     assert load.sum() == pytest.approx(emu.absorbed[a, b], rel=1e-9)
     exact = DirectMonteCarloAbsorption(spec)
     assert exact.kind == "load" and exact(mua, mus).shape == (1, 5, 5, 3)
+
+
+@pytest.mark.parametrize("method", ["table", "white"])
+def test_on_demand_points_equal_the_table_built_at_once(tmp_path, method):
+    """An on-demand emulator builds only the 4 x 4 stencils its members need, keeps them in
+    the cache (a second process starts from them), and once complete equals the table built
+    at once bit for bit."""
+    spec = small_spec(n_mua=6, n_mus=6)
+    full = AbsorptionEmulator.build(spec, cache_dir=tmp_path / "full", progress=False,
+                                    method=method)
+    lazy = AbsorptionEmulator.build(spec, cache_dir=tmp_path / "lazy", progress=False,
+                                    method=method, on_demand=True)
+    assert not lazy.have.any() and not list((tmp_path / "lazy").glob("*.npz"))
+    mua, mus = np.array([0.5, 0.7]), np.array([60.0, 90.0])
+    np.testing.assert_array_equal(lazy.unique(mua, mus), full.unique(mua, mus))
+    need = lazy.needed(mua, mus)
+    expect = need if method == "table" else need.any(axis=0)[None, :].repeat(spec.n_mua, 0)
+    np.testing.assert_array_equal(lazy.have, expect)
+    assert 0 < lazy.have.sum() < lazy.have.size
+    np.testing.assert_array_equal(lazy.log_na[lazy.have], full.log_na[lazy.have])
+    assert np.isnan(lazy.log_na[~lazy.have]).all()
+    again = AbsorptionEmulator.build(spec, cache_dir=tmp_path / "lazy", progress=False,
+                                     method=method, on_demand=True)
+    np.testing.assert_array_equal(again.have, lazy.have)
+    # a member at the table's top corner needs new points; the rest come with on_demand=False
+    np.testing.assert_array_equal(again.unique(4.0, 400.0), full.unique(4.0, 400.0))
+    done = AbsorptionEmulator.build(spec, cache_dir=tmp_path / "lazy", progress=False,
+                                    method=method)
+    assert done.complete
+    np.testing.assert_array_equal(done.log_na, full.log_na)
+    np.testing.assert_array_equal(done.absorbed, full.absorbed)
+
+
+def test_on_demand_cache_merges_points_of_another_process(tmp_path):
+    spec = small_spec(n_mua=6, n_mus=6)
+    one = AbsorptionEmulator.build(spec, cache_dir=tmp_path, progress=False, on_demand=True)
+    two = AbsorptionEmulator.build(spec, cache_dir=tmp_path, progress=False, on_demand=True)
+    one.unique(0.5, 50.0)
+    two.unique(4.0, 400.0)  # writes the file after `one` did: one's points are kept
+    both = AbsorptionEmulator.build(spec, cache_dir=tmp_path, progress=False, on_demand=True)
+    np.testing.assert_array_equal(both.have, one.have | two.have)
+    assert not one.have[-1, -1] and one.have[0, 0] and two.have[-1, -1]

@@ -87,9 +87,13 @@ def cmd_identify(args) -> int:
                 rows = [summary]
             else:
                 rows = _identify_batch(cfg, absorption, seed, files, tmp, client, args.quiet)
+            extra = {"data": [str(f) for f in files]}
+            have = getattr(absorption, "have", None)
+            if have is not None:  # the emulator's table points built so far (on demand)
+                extra["emulator_points"] = {"built": int(have.sum()), "table": int(have.size)}
             manifest(tmp / "run.json", command="identify", config=cfg.raw, seed=seed,
                      timings={"emulator": t_emu, "total": time.perf_counter() - t0},
-                     extra={"data": [str(f) for f in files]})
+                     extra=extra)
             if len(files) > 1:
                 write_json(tmp / "summary.json", {"runs": rows})
     finally:

@@ -84,7 +84,7 @@ _ADAPTIVE_KEYS = {"enabled", "bounds", "time_scale"}
 _LASER_KEYS = ("P", "duration_on", "T_initial")
 _DATA_KEYS = {"file", "columns", "time_offset"}
 _EMULATOR_KEYS = {"n_photons", "n_mua", "n_mus", "mua_range", "mus_range", "seed", "exact",
-                  "method"}
+                  "method", "on_demand"}
 
 
 @dataclass
@@ -103,6 +103,9 @@ class IdentifyConfig:
     medium: int = 0  #: index in G.media of the medium whose parameters are estimated
     #: how the emulator's table is built: "table" (direct Monte Carlo per point) or "white"
     emulator_method: str = "table"
+    #: build each table point the first time a member needs it (the same numbers; a cold
+    #: start pays only for the part of the table the ensemble visits), else all at once
+    emulator_on_demand: bool = True
 
     @property
     def n_obs(self) -> int:
@@ -145,7 +148,8 @@ class IdentifyConfig:
             return DirectMonteCarloAbsorption(spec, client=client)
         return AbsorptionEmulator.build(spec, cache_dir=cache_dir, progress=progress,
                                         out_of_range="clamp", client=client,
-                                        method=self.emulator_method)
+                                        method=self.emulator_method,
+                                        on_demand=self.emulator_on_demand)
 
     def setup(self, absorption, seed: int | None = None):
         """The :class:`~enkf.tissue.TissueFilterSetup` with ``absorption``."""
@@ -355,8 +359,10 @@ def identify_config_from_dict(cfg: dict) -> IdentifyConfig:
         raise ConfigError(f"filter.emulator.method must be \"table\" or \"white\", got "
                           f"{shorten(repr(method))}")
     exact = emu.get("exact", False)
-    if not isinstance(exact, bool):
-        raise ConfigError(f"filter.emulator.exact must be true or false, got {shorten(repr(exact))}")
+    on_demand = emu.get("on_demand", True)
+    for k, v in (("exact", exact), ("on_demand", on_demand)):
+        if not isinstance(v, bool):
+            raise ConfigError(f"filter.emulator.{k} must be true or false, got {shorten(repr(v))}")
     if "dt" in cfg.get("HS", {}) and model.HS.dt is not None:
         setup_kw["max_dt"] = float(model.HS.dt)  # the filter's longest heat step
         try:
@@ -371,7 +377,7 @@ def identify_config_from_dict(cfg: dict) -> IdentifyConfig:
         setup_kw["image"].n_pixels if "image" in setup_kw else 0))
     try:
         out = IdentifyConfig(model, setup_kw, grid, emulator_kw, exact, cfg, bounds, data, rate,
-                             medium, method)
+                             medium, method, on_demand)
         out.setup(absorption=lambda mua, mus: None)  # validates the filter settings
         n_nodes = int(np.prod([n + 1 for n in grid]))
         table = 0 if exact else emulator_kw.get("n_mua", 12) * emulator_kw.get("n_mus", 12)
