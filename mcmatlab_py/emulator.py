@@ -417,9 +417,7 @@ class AbsorptionEmulator:
         (the paper's prior needs 7 of the 12 columns, not the costly high ``mus`` ones).
         The points are the same numbers either way.
         """
-        import time
 
-        from .distributed import run_tasks
 
         if method not in METHODS:
             raise ValueError(f"method must be one of {METHODS}, got {method!r}")
