@@ -417,8 +417,6 @@ class AbsorptionEmulator:
         (the paper's prior needs 7 of the 12 columns, not the costly high ``mus`` ones).
         The points are the same numbers either way.
         """
-
-
         if method not in METHODS:
             raise ValueError(f"method must be one of {METHODS}, got {method!r}")
         key = cache_key(spec, method)
