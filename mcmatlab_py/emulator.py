@@ -446,6 +446,16 @@ class AbsorptionEmulator:
             need[a:a + 4, b:b + 4] = True
         return need
 
+    def needed_box(self, mua_range, mus_range) -> np.ndarray:
+        """(n_mua, n_mus) bool: the table points that interpolations anywhere in the box
+        ``mua_range`` x ``mus_range`` (cm^-1, inside the table) read (e.g. a prior's)."""
+        axes = []
+        for (lo, hi), grid in ((mua_range, self.spec.mua_grid()),
+                               (mus_range, self.spec.mus_grid())):
+            axes.append(np.r_[lo, hi, grid[(grid > lo) & (grid < hi)]])
+        A, B = np.meshgrid(*axes, indexing="ij")
+        return self.needed(A.ravel(), B.ravel())
+
     def fill(self, points: np.ndarray) -> None:
         """Run the Monte Carlo of the table points in ``points`` ((n_mua, n_mus) bool) not
         built yet, and add them to the cache file. ``method="white"`` builds whole ``mus``

@@ -159,3 +159,13 @@ def test_on_demand_cache_merges_points_of_another_process(tmp_path):
     both = AbsorptionEmulator.build(spec, cache_dir=tmp_path, progress=False, on_demand=True)
     np.testing.assert_array_equal(both.have, one.have | two.have)
     assert not one.have[-1, -1] and one.have[0, 0] and two.have[-1, -1]
+
+
+def test_the_points_of_a_box_cover_every_member_in_it(tmp_path):
+    spec = small_spec(n_mua=8, n_mus=8)
+    emu = AbsorptionEmulator.build(spec, cache_dir=tmp_path, progress=False, on_demand=True)
+    box = emu.needed_box((0.7, 2.0), (60.0, 150.0))
+    rng = np.random.default_rng(1)
+    members = emu.needed(rng.uniform(0.7, 2.0, 500), rng.uniform(60.0, 150.0, 500))
+    assert np.array_equal(box | members, box) and box.sum() < box.size
+    assert emu.needed_box((0.7, 0.7), (60.0, 60.0)).sum() == 16  # one point: its stencil

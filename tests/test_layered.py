@@ -156,7 +156,7 @@ def test_identify_two_layers_end_to_end(tmp_path):
 
     cfg = identify_config_from_dict(tiny_two_layer())
     emu = cfg.emulator(cache_dir=tmp_path, progress=False)
-    assert (tmp_path / f"emulator-{cfg_key(cfg)}.npz").exists()
+    assert not emu.have.any()  # on demand: the points come with the members' first loads
     setup = cfg.setup(emu)
     model = TissueForwardModel(setup)
     P, _, _ = observation_operator(setup, model.mesh)
@@ -169,6 +169,7 @@ def test_identify_two_layers_end_to_end(tmp_path):
     data = np.array(clean) + 0.1 * np.random.default_rng(0).standard_normal((20, 1))
     est = identify(setup, times, data)
     assert est.diverged is None
+    assert (tmp_path / f"emulator-{cfg_key(cfg)}.npz").exists() and emu.have.any()
     lo, hi = setup.prior_bounds()
     assert np.all((lo <= est.param_mean[-1]) & (est.param_mean[-1] <= hi))
     assert est.param_std[-1, 0] < est.param_std[0, 0]  # the data told something about mua

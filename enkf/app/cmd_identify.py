@@ -138,6 +138,10 @@ def _identify_batch(cfg, absorption, seed, files, tmp, client, quiet) -> list:
         names.append(base)
     for n in names:
         (tmp / n).mkdir()
+    if not getattr(absorption, "complete", True):
+        # an on-demand emulator: the points of the prior's optics here (with the cluster),
+        # before it travels, not once per worker
+        absorption.fill(absorption.needed_box(*cfg.optics_box))
     # the emulator travels once per task (tens of MB at most); results are small dicts
     task = functools.partial(_batch_task, cfg, absorption, seed)
     results = run_tasks(task, [(str(f), str(tmp / n)) for f, n in zip(files, names, strict=True)],
