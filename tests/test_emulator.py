@@ -169,3 +169,21 @@ def test_the_points_of_a_box_cover_every_member_in_it(tmp_path):
     members = emu.needed(rng.uniform(0.7, 2.0, 500), rng.uniform(60.0, 150.0, 500))
     assert np.array_equal(box | members, box) and box.sum() < box.size
     assert emu.needed_box((0.7, 0.7), (60.0, 60.0)).sum() == 16  # one point: its stencil
+
+
+def test_the_prior_points_are_filled_before_the_filter(tmp_path, tissue):
+    """fill_prior_points: an on-demand emulator gets the points every member of the prior
+    reads (here the prior 0.5-2 x (1, 100) inside a wider table), and nothing else."""
+    from enkf.tissue.absorption import fill_prior_points
+
+    spec = small_spec(mua_range=(0.1, 20.0), mus_range=(10.0, 2000.0), n_mua=8, n_mus=8)
+    emu = AbsorptionEmulator.build(spec, cache_dir=tmp_path, progress=False, on_demand=True)
+    setup = tissue.setup(absorption=emu)
+    fill_prior_points(setup)
+    lo, hi = setup.prior_bounds()
+    rng = np.random.default_rng(0)
+    members = emu.needed(rng.uniform(lo[0], hi[0], 300), rng.uniform(lo[1], hi[1], 300))
+    assert np.array_equal(emu.have | members, emu.have)
+    np.testing.assert_array_equal(emu.have, emu.needed_box((lo[0], hi[0]), (lo[1], hi[1])))
+    assert not emu.complete
+    fill_prior_points(tissue.setup())  # a plain function as absorption: nothing to do

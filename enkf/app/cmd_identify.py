@@ -20,10 +20,12 @@ def _identify_one(cfg, absorption, seed, data_path, out_dir, quiet=True) -> dict
     from mcmatlab_py.progress import Progress
 
     from ..tissue import identify
+    from ..tissue.absorption import fill_prior_points
     from .report import write_identify_outputs
 
     setup = cfg.setup(absorption, seed=seed)
     times, data = cfg.read_data(data_path)
+    fill_prior_points(setup)  # an on-demand emulator: the prior's points before the filter
     medium = cfg.model.G.media[cfg.medium]  # the estimated medium's damage law
     risk = None
     if medium.E and medium.A:  # MCmatlab's damage model: the risk of injury per node
@@ -129,6 +131,8 @@ def _identify_batch(cfg, absorption, seed, files, tmp, client, quiet) -> list:
 
     from mcmatlab_py.distributed import TaskError, run_tasks
 
+    from ..tissue.absorption import fill_prior_points
+
     names = []
     for f in files:  # one sub-directory per file, unique names
         base, k = f.stem, 1
@@ -138,10 +142,9 @@ def _identify_batch(cfg, absorption, seed, files, tmp, client, quiet) -> list:
         names.append(base)
     for n in names:
         (tmp / n).mkdir()
-    if not getattr(absorption, "complete", True):
-        # an on-demand emulator: the points of the prior's optics here (with the cluster),
-        # before it travels, not once per worker
-        absorption.fill(absorption.needed_box(*cfg.optics_box))
+    # an on-demand emulator: the points of the prior's optics here (with the cluster),
+    # before it travels, not once per worker
+    fill_prior_points(cfg.setup(absorption))
     # the emulator travels once per task (tens of MB at most); results are small dicts
     task = functools.partial(_batch_task, cfg, absorption, seed)
     results = run_tasks(task, [(str(f), str(tmp / n)) for f, n in zip(files, names, strict=True)],
@@ -207,6 +210,7 @@ def _follow(args, cfg, absorption, seed, t_emu) -> int:
     carries ``outcome``, the line that ``main`` prints.
     """
     from ..tissue import OnlineIdentifier
+    from ..tissue.absorption import fill_prior_points
     from .readers import follow_csv
     from .report import manifest
 
@@ -215,6 +219,7 @@ def _follow(args, cfg, absorption, seed, t_emu) -> int:
         _clear_outputs(out)
     out.mkdir(parents=True, exist_ok=True)
     setup = cfg.setup(absorption, seed=seed)
+    fill_prior_points(setup)  # before the first reading, not while the stream waits
     ident = OnlineIdentifier(setup, param_bounds=cfg.param_bounds,
                              dt_hint=1.0 / cfg.rate if cfg.rate else 0.1)
     names = list(setup.parameter_names)

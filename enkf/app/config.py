@@ -106,8 +106,6 @@ class IdentifyConfig:
     #: build each table point the first time a member needs it (the same numbers; a cold
     #: start pays only for the part of the table the ensemble visits), else all at once
     emulator_on_demand: bool = True
-    #: ((mua lo, hi), (mus lo, hi)) cm^-1: the optics the prior spans (inside the table)
-    optics_box: tuple = None
 
     @property
     def n_obs(self) -> int:
@@ -347,10 +345,8 @@ def identify_config_from_dict(cfg: dict) -> IdentifyConfig:
     for k in ("mua_range", "mus_range"):
         if k in emu:
             emulator_kw[k] = _pair(f"filter.emulator.{k}", emu[k], positive=True)
-    optics_box = []  # the range of mua and of mus over the prior (the emulator's first reads)
     for name, default in (("mua", (0.1, 20.0)), ("mus", (10.0, 2000.0))):  # EmulatorSpec's
         t_lo, t_hi = emulator_kw.get(f"{name}_range", default)
-        box = [getattr(m, name)] * 2 if not callable(getattr(m, name)) else [t_lo, t_hi]
         # with damage-driven optics the effective values lie between native and coagulated
         for par in [p for p in (name, f"{name}_coag") if p in filtered_names(setup_kw)]:
             (p_lo, p_hi), source = prior_of(par, setup_kw, m, where)
@@ -358,8 +354,6 @@ def identify_config_from_dict(cfg: dict) -> IdentifyConfig:
                 raise ConfigError(
                     f"filter.emulator.{name}_range = {[t_lo, t_hi]} must cover the prior of "
                     f"{par}, [{p_lo:g}, {p_hi:g}] cm^-1 ({source})")
-            box = [min(box[0], p_lo), max(box[1], p_hi)]
-        optics_box.append((float(np.clip(box[0], t_lo, t_hi)), float(np.clip(box[1], t_lo, t_hi))))
     method = emu.get("method", "table")
     if method not in ("table", "white"):
         raise ConfigError(f"filter.emulator.method must be \"table\" or \"white\", got "
@@ -383,7 +377,7 @@ def identify_config_from_dict(cfg: dict) -> IdentifyConfig:
         setup_kw["image"].n_pixels if "image" in setup_kw else 0))
     try:
         out = IdentifyConfig(model, setup_kw, grid, emulator_kw, exact, cfg, bounds, data, rate,
-                             medium, method, on_demand, tuple(optics_box))
+                             medium, method, on_demand)
         out.setup(absorption=lambda mua, mus: None)  # validates the filter settings
         n_nodes = int(np.prod([n + 1 for n in grid]))
         table = 0 if exact else emulator_kw.get("n_mua", 12) * emulator_kw.get("n_mus", 12)

@@ -11,6 +11,7 @@ import numpy as np
 from mcmatlab_py.progress import Progress
 
 from ..problem import DEFAULT_METHOD
+from ..tissue.absorption import fill_prior_points
 from ..tissue.identify import identify
 from ..tissue.outputs import write_estimates_csv, write_json
 from ..tissue.parameters import PARAMETER_NAMES, TRACKED_DEPTHS
@@ -64,6 +65,7 @@ def run_experiment(scenario: str, seed: int = 0, *, n_members: int = 50, method:
         absorption = DirectMonteCarloAbsorption(emu.spec, client=client)
     setup = filter_setup(scenario, absorption, seed=seed, n_members=n_members, method=method,
                          **overrides)
+    fill_prior_points(setup)  # an on-demand emulator: the prior's points, outside the filter
     bar = Progress(len(truth.times) - 1, "filter", enabled=progress)
     est = identify(setup, truth.times[1:], data[:, None], callback=lambda r: bar.update(r.step))
     bar.close()

@@ -15,7 +15,7 @@ from typing import Protocol, runtime_checkable
 
 import numpy as np
 
-__all__ = ["Absorption", "FunctionAbsorption", "as_absorption"]
+__all__ = ["Absorption", "FunctionAbsorption", "as_absorption", "fill_prior_points"]
 
 
 @runtime_checkable
@@ -76,3 +76,25 @@ def as_absorption(absorption, voxel_shape: tuple) -> Absorption:
         raise ValueError(f"absorption must be an Absorption or a function NA(mua, mus), "
                          f"got {type(absorption).__name__}")
     return FunctionAbsorption(absorption, voxel_shape)
+
+
+def fill_prior_points(setup) -> None:
+    """Before the filter starts: with an emulator built on demand
+    (:meth:`mcmatlab_py.emulator.AbsorptionEmulator.fill`), run the table points that the
+    prior's optics read (the first step would wait for them otherwise), so the filter's
+    own time and progress are its own. ``setup``: a :class:`~enkf.tissue.TissueFilterSetup`.
+    Anything else as absorption: nothing to do."""
+    emu = setup.absorption
+    if getattr(emu, "complete", True) or not hasattr(emu, "needed_box"):
+        return
+    lo, hi = setup.prior_bounds()
+    names = setup.parameter_names
+    box = []
+    for name, (t_lo, t_hi) in (("mua", emu.spec.mua_range), ("mus", emu.spec.mus_range)):
+        idx = [i for i, n in enumerate(names) if n in (name, f"{name}_coag")]
+        if idx:  # damage-driven optics lie between the native and coagulated values
+            b_lo, b_hi = min(lo[i] for i in idx), max(hi[i] for i in idx)
+        else:
+            b_lo = b_hi = float(setup.nominal[name])
+        box.append((float(np.clip(b_lo, t_lo, t_hi)), float(np.clip(b_hi, t_lo, t_hi))))
+    emu.fill(emu.needed_box(*box))
