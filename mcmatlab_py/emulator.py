@@ -636,10 +636,13 @@ def _store(path: Path, key: str, emu: AbsorptionEmulator) -> None:
         emu.have |= extra
     path.parent.mkdir(parents=True, exist_ok=True)
     tmp = path.with_suffix(f".tmp{os.getpid()}.npz")
-    np.savez(tmp, log_na=emu.log_na, absorbed=emu.absorbed, have=emu.have,
-             build_seconds=emu.build_seconds, key=key,
-             checksum=_checksum(emu.log_na, emu.absorbed, emu.have))
-    os.replace(tmp, path)  # atomic: a reader never sees half a table
+    try:
+        np.savez(tmp, log_na=emu.log_na, absorbed=emu.absorbed, have=emu.have,
+                 build_seconds=emu.build_seconds, key=key,
+                 checksum=_checksum(emu.log_na, emu.absorbed, emu.have))
+        os.replace(tmp, path)  # atomic: a reader never sees half a table
+    finally:  # interrupted (Ctrl-C, SIGTERM, a full disk): no half-written file stays
+        tmp.unlink(missing_ok=True)
 
 
 def _load(path: Path, spec: EmulatorSpec, key: str, quiet: bool = False):

@@ -187,3 +187,18 @@ def test_the_prior_points_are_filled_before_the_filter(tmp_path, tissue):
     np.testing.assert_array_equal(emu.have, emu.needed_box((lo[0], hi[0]), (lo[1], hi[1])))
     assert not emu.complete
     fill_prior_points(tissue.setup())  # a plain function as absorption: nothing to do
+
+
+def test_an_interrupted_cache_write_leaves_no_file(tmp_path, monkeypatch):
+    spec = small_spec()
+    emu = AbsorptionEmulator.build(spec, cache_dir=tmp_path, progress=False, on_demand=True)
+
+    def interrupted(file, **arrays):
+        with open(file, "wb") as fh:
+            fh.write(b"PK\x03\x04 half a table")
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(np, "savez", interrupted)
+    with pytest.raises(KeyboardInterrupt):
+        emu.unique(1.0, 100.0)
+    assert list(tmp_path.iterdir()) == []
