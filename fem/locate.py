@@ -14,7 +14,7 @@ from __future__ import annotations
 import numpy as np
 
 from . import _kernels
-from .mesh import KUHN_PATHS, structured_grid
+from .mesh import _KUHN, KUHN_PATHS, structured_grid
 
 __all__ = ["locate"]
 
@@ -77,25 +77,27 @@ def locate(mesh, points, tol: float = 1e-10) -> tuple[np.ndarray, np.ndarray]:
 # KUHN_PATHS[s] is the axis order of simplex s: the code 3 * first + second -> s
 _PATH_OF_ORDER = np.full(9, -1, dtype=np.int64)
 _PATH_OF_ORDER[3 * KUHN_PATHS[:, 0] + KUHN_PATHS[:, 1]] = np.arange(len(KUHN_PATHS))
+#: the simplices whose last two vertices box_mesh swapped (orientation): (6,) bool
+_SWAPPED = np.array([tuple(_KUHN[s, 2]) != tuple(np.eye(3, dtype=np.int64)[p[:2]].sum(axis=0))
+                     for s, p in enumerate(KUHN_PATHS)])
 
 
 def _locate_structured(mesh, grid, x: np.ndarray, tol: float, chunk: int = 1 << 16):
     """:func:`locate` on ``box_mesh(grid)``: voxel and Kuhn simplex from the coordinates.
 
     Points go in chunks of ``chunk``: the temporaries (local coordinates, axis orders,
-    the 3 x 3 systems) then cost a few MB whatever the number of points, instead of
+    barycentrics) then cost a few MB whatever the number of points, instead of
     ~500 bytes per point (the voxel centres of a 200 x 200 x 100 heat run: 2 GB)."""
     n = x.shape[1]
     elem = np.empty(n, dtype=np.int64)
     bary = np.zeros((4, n))
     for a in range(0, n, chunk):
         b = min(n, a + chunk)
-        elem[a:b], bary[:, a:b] = _locate_structured_chunk(mesh, grid, x[:, a:b], tol)
+        elem[a:b], bary[:, a:b] = _locate_structured_chunk(grid, x[:, a:b], tol)
     return elem, bary
 
 
-def _locate_structured_chunk(mesh, grid, x: np.ndarray, tol: float):
-    n = x.shape[1]
+def _locate_structured_chunk(grid, x: np.ndarray, tol: float):
     u = (x - grid.lower[:, None]) / np.asarray(grid.spacing)[:, None]  # voxel units
     shape = np.asarray(grid.shape)[:, None]
     inside = np.all((u >= -tol) & (u <= shape + tol), axis=0)
@@ -105,15 +107,12 @@ def _locate_structured_chunk(mesh, grid, x: np.ndarray, tol: float):
     simplex = _PATH_OF_ORDER[3 * order[0] + order[1]]
     v = (ijk[0] * grid.ny + ijk[1]) * grid.nz + ijk[2]
     elem = np.where(inside, 6 * v + simplex, -1)
-    bary = np.zeros((4, n))
-    ok = np.flatnonzero(inside)
-    if ok.size:
-        t = mesh.t[:, elem[ok]]
-        p0 = mesh.p[:, t[0]]
-        A = np.stack([mesh.p[:, t[k]] - p0 for k in (1, 2, 3)], axis=-1)  # (3, m, 3)
-        lam = np.linalg.solve(np.moveaxis(A, 0, 1), (x[:, ok] - p0).T[..., None])[..., 0].T
-        lam = np.clip(lam, 0.0, 1.0)
-        bary[1:, ok] = lam
-        bary[0, ok] = np.clip(1.0 - lam.sum(axis=0), 0.0, 1.0)
-        bary[:, ok] /= bary[:, ok].sum(axis=0)
+    # barycentrics in closed form: along the path 0 -> e_s0 -> e_s0 + e_s1 -> (1, 1, 1) they
+    # are 1 - f_s0, f_s0 - f_s1, f_s1 - f_s2, f_s2 (the last two swapped in the simplices
+    # whose vertices box_mesh swapped to keep them positively oriented)
+    fs = np.take_along_axis(f, order, axis=0)  # f by decreasing value
+    lam = np.stack([1.0 - fs[0], fs[0] - fs[1], fs[1] - fs[2], fs[2]])
+    swap = _SWAPPED[simplex]
+    lam[2:, swap] = lam[2:, swap][::-1]
+    bary = np.where(inside, lam, 0.0)
     return elem, bary
