@@ -201,3 +201,37 @@ def _turn_smooth(ux, uy, uz, gx, gy, gz, cin, cat, mu, reflected, axis, sgn):
     if reflected == (ua * sgn > 0.0):
         return _mirror(ux, uy, uz, axis)
     return ux, uy, uz
+
+
+@numba.njit(cache=True, inline="always", fastmath=_FASTMATH)
+def _cut_at_face(px, py, pz, ux, uy, uz, Lx, Ly, Lz):
+    """Where a move from ``(px, py, pz)`` (inside the cuboid ``[0, L]^3``) along ``u``
+    leaves it: ``(axis, d, ua, qx, qy, qz)``, the axis of the face crossed, the distance
+    to it (>= 0), the direction's component along that axis and the exit point, landed
+    exactly on the face (the one-medium kernels cut only such moves)."""
+    d0 = (Lx - px) / ux if ux > 0.0 else (-px / ux if ux < 0.0 else _INF)
+    d1 = (Ly - py) / uy if uy > 0.0 else (-py / uy if uy < 0.0 else _INF)
+    d2 = (Lz - pz) / uz if uz > 0.0 else (-pz / uz if uz < 0.0 else _INF)
+    if d0 <= d1 and d0 <= d2:
+        axis = 0
+        d = d0
+        ua = ux
+    elif d1 <= d2:
+        axis = 1
+        d = d1
+        ua = uy
+    else:
+        axis = 2
+        d = d2
+        ua = uz
+    d = max(d, 0.0)
+    qx = px + d * ux
+    qy = py + d * uy
+    qz = pz + d * uz
+    if axis == 0:
+        qx = Lx if ux > 0.0 else 0.0
+    elif axis == 1:
+        qy = Ly if uy > 0.0 else 0.0
+    else:
+        qz = Lz if uz > 0.0 else 0.0
+    return axis, d, ua, qx, qy, qz

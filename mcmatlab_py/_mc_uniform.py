@@ -22,7 +22,7 @@ so it is the same for any number of threads.
 import numba
 import numpy as np
 
-from ._mc_steps import _fresnel, _hg_cos, _mirror, _spin_cs
+from ._mc_steps import _cut_at_face, _fresnel, _hg_cos, _mirror, _spin_cs
 from ._mc_tally import T_BOTTOM, T_LAUNCHED, T_MISSED, T_ROULETTE, T_SIDES, T_SPECULAR, T_TOP, W_ONE
 from ._rng import next_azimuth, next_double, next_exponential, seed_stream
 from ._sources import SI_SURFACE, launch_from
@@ -109,31 +109,7 @@ def transport_uniform_batch(
                     py = qy
                     pz = qz
                     break
-                d0 = (Lx - px) / ux if ux > 0.0 else (-px / ux if ux < 0.0 else _INF)
-                d1 = (Ly - py) / uy if uy > 0.0 else (-py / uy if uy < 0.0 else _INF)
-                d2 = (Lz - pz) / uz if uz > 0.0 else (-pz / uz if uz < 0.0 else _INF)
-                if d0 <= d1 and d0 <= d2:
-                    axis = 0
-                    dmin = d0
-                    ua = ux
-                elif d1 <= d2:
-                    axis = 1
-                    dmin = d1
-                    ua = uy
-                else:
-                    axis = 2
-                    dmin = d2
-                    ua = uz
-                dmin = max(dmin, 0.0)
-                px += dmin * ux
-                py += dmin * uy
-                pz += dmin * uz
-                if axis == 0:  # land exactly on the face crossed
-                    px = Lx if ux > 0.0 else 0.0
-                elif axis == 1:
-                    py = Ly if uy > 0.0 else 0.0
-                else:
-                    pz = Lz if uz > 0.0 else 0.0
+                axis, dmin, ua, px, py, pz = _cut_at_face(px, py, pz, ux, uy, uz, Lx, Ly, Lz)
                 if not matched:
                     rf, cat = _fresnel(nm, n_out, abs(ua))
                     s0, s1, s2, s3, r1 = next_double(s0, s1, s2, s3)

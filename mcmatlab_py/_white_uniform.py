@@ -31,7 +31,7 @@ import math
 import numba
 import numpy as np
 
-from ._mc_steps import _fresnel, _hg_cos, _mirror, _spin_cs
+from ._mc_steps import _cut_at_face, _fresnel, _hg_cos, _mirror, _spin_cs
 from ._mc_tally import (
     T_BOTTOM,
     T_LAUNCHED,
@@ -44,18 +44,10 @@ from ._mc_tally import (
 )
 from ._rng import next_azimuth, next_double, next_exponential, seed_stream
 from ._sources import SI_SURFACE, launch_from
+from ._white_steps import exp_neg, flush
 
 _INF = np.inf
 _FASTMATH = {"nsz", "arcp", "contract", "afn", "reassoc"}
-
-
-@numba.njit(cache=True, inline="always", fastmath=_FASTMATH)
-def _exp_neg(x):
-    """exp(-x) for x >= 0: a short Taylor sum for the tiny decays of one move (error below
-    1e-13 under 2e-3), else ``math.exp``."""
-    if x < 2e-3:
-        return 1.0 - x * (1.0 - x * (0.5 - x * (1.0 / 6.0 - x * (1.0 / 24.0))))
-    return math.exp(-x)
 
 
 @numba.njit(cache=True, inline="always", fastmath=_FASTMATH)
@@ -79,23 +71,6 @@ def _voxel(px, py, pz, inv_dx, inv_dy, inv_dz, nx, ny, nz):
 
 
 @numba.njit(cache=True, inline="always", fastmath=_FASTMATH)
-def _settle(q, w, e, mua, ds, dst):
-    """The losses of a path ``ds`` that stayed in one voxel, into its row ``dst`` (K,):
-    ``e_k *= exp(-mua_k ds)``, ``q_k = W_ONE w_k e_k``. Returns the live weights."""
-    alive = 0
-    for k in range(q.size):
-        if q[k] == 0:
-            continue
-        e[k] *= _exp_neg(mua[k] * ds)
-        qn = np.int64(W_ONE * w[k] * e[k])
-        dst[k] += q[k] - qn
-        q[k] = qn
-        if qn > 0:
-            alive += 1
-    return alive
-
-
-@numba.njit(cache=True, inline="always", fastmath=_FASTMATH)
 def _spread(q, w, e, mua, s, u, px, py, pz, ux, uy, uz,
             inv_dx, inv_dy, inv_dz, nx, ny, nz, fold, acc):  # fmt: skip
     """The losses of a move of length ``s`` from ``(px, py, pz)`` along ``u`` that crosses
@@ -106,7 +81,7 @@ def _spread(q, w, e, mua, s, u, px, py, pz, ux, uy, uz,
         if q[k] == 0:
             continue
         x = mua[k] * s
-        f = _exp_neg(x)
+        f = exp_neg(x)
         e[k] *= f
         qn = np.int64(W_ONE * w[k] * e[k])
         d = q[k] - qn
@@ -190,37 +165,13 @@ def white_uniform_batch(
                 qz = pz + s * uz
                 leaving = not (0.0 <= qx <= Lx and 0.0 <= qy <= Ly and 0.0 <= qz <= Lz)
                 if leaving:
-                    d0 = (Lx - px) / ux if ux > 0.0 else (-px / ux if ux < 0.0 else _INF)
-                    d1 = (Ly - py) / uy if uy > 0.0 else (-py / uy if uy < 0.0 else _INF)
-                    d2 = (Lz - pz) / uz if uz > 0.0 else (-pz / uz if uz < 0.0 else _INF)
-                    if d0 <= d1 and d0 <= d2:
-                        axis = 0
-                        s = d0
-                        ua = ux
-                    elif d1 <= d2:
-                        axis = 1
-                        s = d1
-                        ua = uy
-                    else:
-                        axis = 2
-                        s = d2
-                        ua = uz
-                    s = max(s, 0.0)
-                    qx = px + s * ux
-                    qy = py + s * uy
-                    qz = pz + s * uz
-                    if axis == 0:  # land exactly on the face crossed
-                        qx = Lx if ux > 0.0 else 0.0
-                    elif axis == 1:
-                        qy = Ly if uy > 0.0 else 0.0
-                    else:
-                        qz = Lz if uz > 0.0 else 0.0
+                    axis, s, ua, qx, qy, qz = _cut_at_face(px, py, pz, ux, uy, uz, Lx, Ly, Lz)
                 nvox = _voxel(qx, qy, qz, inv_dx, inv_dy, inv_dz, nx, ny, nz)
                 if nvox == vox:  # the move stayed in the voxel: add the path up
                     pend += s
                 else:
                     if pend > 0.0:
-                        _settle(q, w, e, mua, pend, acc[fold[vox]])
+                        flush(q, w, e, mua, pend, acc[fold[vox]])
                         pend = 0.0
                     s0, s1, s2, s3, r1 = next_double(s0, s1, s2, s3)
                     n_alive = _spread(q, w, e, mua, s, r1, px, py, pz, ux, uy, uz,
@@ -242,7 +193,7 @@ def white_uniform_batch(
                         tau = max(tau - mus * s, 0.0)
                         continue
                 if pend > 0.0:
-                    _settle(q, w, e, mua, pend, acc[fold[vox]])
+                    flush(q, w, e, mua, pend, acc[fold[vox]])
                     pend = 0.0
                 slot = (T_TOP if uz < 0.0 else T_BOTTOM) if axis == 2 else T_SIDES
                 for k in range(K):
@@ -260,7 +211,7 @@ def white_uniform_batch(
                 # some weights fell below the threshold: settle the path up to here, then
                 # roulette each of those weights on its own
                 dst = acc[fold[vox]]
-                _settle(q, w, e, mua, pend, dst)
+                flush(q, w, e, mua, pend, dst)
                 pend = 0.0
                 for k in range(K):
                     if q[k] == 0 or L <= lr[k]:
