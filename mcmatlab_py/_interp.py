@@ -26,6 +26,16 @@ def _stencil(t, grid_log):
     return i0
 
 
+@numba.njit(cache=True)
+def stencil_starts(t, grid_log):
+    """The first node of the 4-point stencil of each ``t`` (N,): the table points an
+    interpolation at ``t`` reads (the emulator's on-demand points)."""
+    out = np.empty(t.size, dtype=np.int64)
+    for n in range(t.size):
+        out[n] = _stencil(t[n], grid_log)
+    return out
+
+
 @numba.njit(cache=True, nogil=True)
 def interpolate_log_na(table, lmua_grid, lmus_grid, lmua, lmus, offset, out):
     """``out[n] = exp(sum_ab w_a(lmua[n]) w_b(lmus[n]) table[a, b]) - offset`` (4 x 4 Lagrange).

@@ -29,7 +29,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ._interp import interpolate_log_na
+from ._interp import interpolate_log_na, stencil_starts
 from ._strict import NotBuiltError
 from .media import Medium
 from .model import Geometry, MonteCarloSimulation
@@ -440,8 +440,8 @@ class AbsorptionEmulator:
         """(n_mua, n_mus) bool: the table points the interpolation at ``mua``, ``mus``
         (N,) cm^-1 (inside the table's ranges) reads: the 4 x 4 stencil of each member."""
         need = np.zeros((self.spec.n_mua, self.spec.n_mus), dtype=bool)
-        ia = _stencils(np.log(np.ravel(mua)), self._lmua)
-        ib = _stencils(np.log(np.ravel(mus)), self._lmus)
+        ia = stencil_starts(np.log(np.ravel(mua).astype(np.float64)), self._lmua)
+        ib = stencil_starts(np.log(np.ravel(mus).astype(np.float64)), self._lmus)
         for a, b in set(zip(ia.tolist(), ib.tolist(), strict=True)):
             need[a:a + 4, b:b + 4] = True
         return need
@@ -497,12 +497,6 @@ class AbsorptionEmulator:
         from fem.threads import release_free_memory
 
         release_free_memory()  # the load operator's and the runs' temporaries
-
-
-def _stencils(t: np.ndarray, grid_log: np.ndarray) -> np.ndarray:
-    """The first node of the 4-point stencil of each ``t`` (as ``_interp._stencil``)."""
-    i = np.searchsorted(grid_log, t) - 1
-    return np.clip(i - 1, 0, grid_log.size - 4)
 
 
 def _voxel_map(X, Y, Z, M):
