@@ -19,6 +19,7 @@ from enkf.tissue.coagulation import (
     coagulated_fraction,
     effective_optics,
 )
+from enkf.tissue.identify import assemble
 from mcmatlab_py.config import ConfigError
 from mcmatlab_py.heat import HeatSimulation
 
@@ -70,6 +71,9 @@ def test_effective_optics_interpolates_native_and_coagulated():
     (dict(A=float("inf")), "coagulation.A must be a finite number > 0"),
     (dict(nominal_factor=(1.5,)), "coagulation.nominal_factor must be two numbers > 0"),
     (dict(nominal_factor=(1.5, 0.0)), "coagulation.nominal_factor must be two numbers > 0"),
+    (dict(mean_field_rel_std=-0.1), "coagulation.mean_field_rel_std must be a finite number >= 0"),
+    (dict(mean_field_rel_std=float("nan")),
+     "coagulation.mean_field_rel_std must be a finite number >= 0"),
 ])
 def test_coagulation_settings_are_checked(kw, message):
     with pytest.raises(ValueError, match=message):
@@ -105,6 +109,42 @@ def test_damage_follows_the_members_and_is_never_added_twice(tissue):
         T1 = base(T1, theta[1:2, :2], t0, t1)
         T2 = m(T2, theta[1:2], t0, t1)  # a new run: its own damage starts at zero
     np.testing.assert_allclose(T2, T1, rtol=0, atol=1e-12)
+
+
+def test_mean_field_model_error_grows_with_each_members_coagulated_fraction(tissue):
+    """With the structured model error, a member's relative sd is the setup's plus
+    ``mean_field_rel_std * sqrt(F)`` (F its coagulated fraction): no addition before any
+    damage, the same correlated field scaled by it after; the random walk and
+    ``mean_field_rel_std = 0`` get no addition."""
+    s, _ = _model(tissue, model_error="structured")
+    pieces = assemble(s)
+    noise = pieces.model_noise()
+    assert noise.extra_rel_std is not None
+    theta = np.repeat(NATIVE_COAG, 2, axis=0)
+    np.testing.assert_array_equal(pieces.model.mean_field_rel_std(theta, 0.0), [0.0, 0.0])
+    T = np.full((2, pieces.model.mesh.p.shape[1]), 37.0)
+    for t0, t1 in zip(np.r_[0.0, TIMES[:24]], TIMES[:25], strict=True):
+        T = pieces.model(T, theta, t0, t1)
+    F = pieces.model.effective(theta, TIMES[24])[0]
+    assert np.all(F > 0.1)
+    np.testing.assert_allclose(pieces.model.mean_field_rel_std(theta, TIMES[24]),
+                               0.25 * np.sqrt(F), rtol=1e-12)
+    # the noise drawn: the same correlated field, scaled by each member's relative sd
+    X1 = pieces.model(T, theta, TIMES[24], TIMES[25])
+    kw = dict(T_initial=37.0, power=LASER, parameter_model="coagulation",
+              model_error="structured", model_noise_std=0.0)
+    plain = assemble(tissue.setup(coagulation=Coagulation(mean_field_rel_std=0.0), **kw))
+    assert plain.model_noise().extra_rel_std is None
+    with_mf = assemble(tissue.setup(**kw))
+    for p in (plain, with_mf):  # the same damage at TIMES[24]
+        p.model._t, p.model._omega = TIMES[24], pieces.model._latest(TIMES[24])
+    v0 = plain.model_noise()(np.random.default_rng(5), T, X1, theta, TIMES[24], TIMES[25])
+    v1 = with_mf.model_noise()(np.random.default_rng(5), T, X1, theta, TIMES[24], TIMES[25])
+    rel = s.model_error_rel_std
+    np.testing.assert_allclose(v1, v0 * ((rel + 0.25 * np.sqrt(F)) / rel)[:, None], rtol=1e-10,
+                               atol=1e-15)
+    rw = assemble(tissue.setup(T_initial=37.0, power=LASER, model_error="structured"))
+    assert rw.model_noise().extra_rel_std is None
 
 
 # ------------------------------------------------------------------ tiny identical twin
@@ -184,11 +224,13 @@ def _cfg(tiny, **flt):
 def test_config_builds_the_damage_driven_filter(tiny):
     c = identify_config_from_dict(_cfg(
         tiny, parameter_model="coagulation", random_walk_std=[0.005, 0.005, 0.002, 0.002],
-        coagulation={"E": 4.0e5, "A": 1e60, "nominal_factor": [2.0, 4.0]},
+        coagulation={"E": 4.0e5, "A": 1e60, "nominal_factor": [2.0, 4.0],
+                     "mean_field_rel_std": 0.1},
         prior={"mus_coag": [150.0, 800.0]}, bounds={"mua_coag": [0.1, 50.0]}))
     s = c.setup(absorption=lambda mua, mus: None)
     assert s.parameter_names == ("mua", "mus", "mua_coag", "mus_coag")
     assert (s.coagulation.E, s.coagulation.A) == (4.0e5, 1e60)
+    assert s.coagulation.mean_field_rel_std == 0.1
     lo, hi = s.prior_bounds()
     np.testing.assert_allclose(lo, [0.5, 50.0, 1.0, 150.0])  # mua_coag: 0.5 x 2 x 1
     np.testing.assert_allclose(hi, [2.0, 200.0, 4.0, 800.0])
@@ -204,6 +246,8 @@ def test_config_builds_the_damage_driven_filter(tiny):
     (dict(parameter_model="coagulation", coagulation={"A": 0}),
      "filter.coagulation.A must be > 0"),
     (dict(parameter_model="coagulation", coagulation={"Ea": 4e5}), "filter.coagulation"),
+    (dict(parameter_model="coagulation", coagulation={"mean_field_rel_std": -0.25}),
+     "filter.coagulation.mean_field_rel_std must be >= 0"),
     (dict(parameter_model="coagulation", coagulation={"nominal_factor": 3.0}),
      "filter.coagulation.nominal_factor must be [mua, mus]"),
     (dict(prior={"mus_coag": [100.0, 500.0]}),

@@ -28,6 +28,7 @@ Python API (``model.G``, ``model.MC``, ``model.HS`` as in MCmatlab, then
     A = 7.6e66                      # nominal coagulated (mua, mus) / native
     nominal_factor = [1.5, 3.0]
     weight_exponent = 2.0           # F weighs the nodes by (absorbed power)**this
+    mean_field_rel_std = 0.25       # model error added per unit of F (structured only)
     [filter.emulator]
     method = "table"                # or "white" (one run per mus: docs/white_mc.md)
     n_photons = 250000
@@ -186,7 +187,8 @@ _LIMITS = {"sensors.noise_var": 1e4, "sensors.camera.noise_var": 1e4, "sensors.r
            "filter.emulator.n_mua": 1000, "filter.emulator.n_mus": 1000,
            "filter.emulator.seed": 2**63 - 1, "data.time_offset": 1e9,
            "filter.coagulation.E": 1e7, "filter.coagulation.A": 1e300,
-           "filter.coagulation.nominal_factor": 1e3, "filter.coagulation.weight_exponent": 10.0}
+           "filter.coagulation.nominal_factor": 1e3, "filter.coagulation.weight_exponent": 10.0,
+           "filter.coagulation.mean_field_rel_std": 10.0}
 
 
 def _num(key, v, *, positive=False, integer=False, lo=None, hi=None):

@@ -15,7 +15,7 @@ from ..tissue.parameters import COAGULATION_NAMES, ESTIMATES, PARAMETER_NAMES, p
 from . import config as _cfg
 
 #: keys of [filter.coagulation] (enkf.tissue.coagulation.Coagulation)
-COAGULATION_KEYS = {"E", "A", "nominal_factor", "weight_exponent"}
+COAGULATION_KEYS = {"E", "A", "nominal_factor", "weight_exponent", "mean_field_rel_std"}
 
 __all__ = ["COAGULATION_KEYS", "bounds_settings", "coagulation_settings", "filtered_names", "nominal_of",
            "prior_of", "prior_settings"]
@@ -47,6 +47,9 @@ def coagulation_settings(flt: dict, setup_kw: dict) -> None:
 
     kw = {k: _cfg._num(f"filter.coagulation.{k}", table[k], positive=True)
           for k in ("E", "A", "weight_exponent") if k in table}
+    if "mean_field_rel_std" in table:
+        kw["mean_field_rel_std"] = _cfg._num("filter.coagulation.mean_field_rel_std",
+                                             table["mean_field_rel_std"], lo=0.0)
     if "nominal_factor" in table:
         f = table["nominal_factor"]
         if not (isinstance(f, list) and len(f) == 2):

@@ -122,10 +122,15 @@ class FilterPieces:
         if s.model_error == "white":
             return s.model_noise_std ** 2
         p = self.model.mesh.p
+        extra = None
+        if isinstance(self.model, CoagulationForwardModel) and \
+                self.model.coagulation.mean_field_rel_std > 0:
+            extra = self.model.mean_field_rel_std
         return StructuredModelError(
             *(np.unique(p[i]) for i in range(3)), rel_std=s.model_error_rel_std,
             time_scale=s.model_error_time_scale, length_xy=s.model_error_length_xy,
-            length_z=s.model_error_length_z, floor_std=s.model_noise_std)
+            length_z=s.model_error_length_z, floor_std=s.model_noise_std,
+            extra_rel_std=extra)
 
     def problem(self, times, data, prior=None, t0: float = 0.0, model_noise=None
                 ) -> FilterProblem:

@@ -40,6 +40,7 @@ innovations show.
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
@@ -76,6 +77,11 @@ class StructuredModelError:
         cm, correlation lengths of the relative error across and down (0: white).
     floor_std : float
         :math:`\\sigma_0`, deg C per step, white additive noise on every node.
+    extra_rel_std : callable, optional
+        ``extra_rel_std(theta, t0) -> (N,)``: a member's own addition to ``rel_std`` at the
+        start ``t0`` (s) of a step, from its parameters ``theta`` (N, n_par) in physical
+        units; e.g. the damage-driven optics' mean-field error, which grows with each
+        member's coagulated fraction (:class:`enkf.tissue.Coagulation`).
     """
 
     nodes_x: np.ndarray
@@ -86,6 +92,7 @@ class StructuredModelError:
     length_xy: float = 0.1
     length_z: float = 0.05
     floor_std: float = 0.002
+    extra_rel_std: Callable | None = None
 
     def __post_init__(self):
         for name in ("rel_std", "time_scale", "length_xy", "length_z", "floor_std"):
@@ -115,14 +122,21 @@ class StructuredModelError:
         ``t1`` (s) (the ``model_noise`` callable of :class:`enkf.FilterProblem`)."""
         N = X0.shape[0]
         fresh = self._r is None or self._r.shape[0] != N or self._t is None or t0 < self._t - 1e-9
-        if self.rel_std > 0:
+        rel = self.rel_std
+        if self.extra_rel_std is not None:
+            extra = np.asarray(self.extra_rel_std(theta, t0), float)
+            if extra.shape != (N,) or not np.all(np.isfinite(extra) & (extra >= 0)):
+                raise ValueError(f"extra_rel_std must return {N} finite numbers >= 0, got "
+                                 f"shape {extra.shape}")
+            rel = rel + extra[:, None]
+        if np.any(rel > 0):
             if fresh:
                 r = self.field(rng, N)
             else:
                 phi = np.exp(-(t1 - t0) / self.time_scale) if self.time_scale > 0 else 0.0
                 r = phi * self._r + np.sqrt(1 - phi * phi) * self.field(rng, N)
             self._r, self._t = r, t1
-            v = self.rel_std * r * (X1 - X0)
+            v = rel * r * (X1 - X0)
         else:
             v = np.zeros_like(X1)
         if self.floor_std > 0:
