@@ -68,7 +68,7 @@ from enkf.tissue import Coagulation, TissueFilterSetup, identify
 from enkf.tissue.risk import MCMATLAB_A, MCMATLAB_E, RiskTracker
 
 sys.path.insert(0, str(Path(__file__).parent))
-from risk_calibration import RECORD, THRESHOLD, truth_events  # noqa: E402
+from risk_calibration import RECORD, THRESHOLD, reliability, truth_events  # noqa: E402
 
 REPORTS = Path(__file__).parent / "reports"
 CASES = ("damage, single pulse", "damage, pulse train", "damage, identical twin",
@@ -160,7 +160,20 @@ def run_one(case, truth, model, seed, emu, n_members, events, model_error="struc
     out["brier"] = float(np.mean((p - o) ** 2))
     out["brier_events"] = int(o.sum())
     out["brier_n"] = int(o.size)
+    out["reliability"] = [[lab, n, pm, of] for lab, n, pm, of in reliability(p, o)]
     return out, est
+
+
+def pooled_reliability(rows: list[dict]) -> list[tuple]:
+    """(label, count, mean forecast, observed frequency) over the runs' bins."""
+    runs = [r["reliability"] for r in rows if "reliability" in r]
+    out = []
+    for k, (lab, *_rest) in enumerate(runs[0] if runs else []):
+        n = sum(run[k][1] for run in runs)
+        pm = sum(run[k][1] * run[k][2] for run in runs if run[k][1]) / n if n else np.nan
+        of = sum(run[k][1] * run[k][3] for run in runs if run[k][1]) / n if n else np.nan
+        out.append((lab, n, pm, of))
+    return out
 
 
 def summarize(rows: list[dict]) -> dict:
@@ -359,6 +372,18 @@ def write_report(out: Path, args, results: dict, truths: dict, wall: float) -> N
               + (f"; log Bayes factor where both ran to the end: mean {diff.mean():+.1f}, "
                  f"range {diff.min():+.1f} to {diff.max():+.1f} ({diff.size} seeds)."
                  if diff.size else ".")]
+        tables = {m: pooled_reliability(res[m]) for m in MODELS}
+        if all(tables.values()):
+            L += ["", "Reliability of P(Omega > 1), pooled over the seeds (node-times; mean "
+                  "forecast; observed frequency of the truth's damage):", "",
+                  "| forecast | coagulation: n | mean | observed | random_walk: n | mean | "
+                  "observed |", "|---|---|---|---|---|---|---|"]
+            for a, b in zip(tables["coagulation"], tables["random_walk"], strict=True):
+                if a[1] or b[1]:
+                    L.append(f"| {a[0]} | " + " | ".join(
+                        f"{r[1]} | {r[2]:.3f} | {r[3]:.3f}" if r[1] else "0 | - | -"
+                        for r in (a, b)) + " |")
+            L.append("")
         th = [r.get("theta_final") for r in res["coagulation"] if r.get("theta_final")]
         if th:
             L.append("Damage-driven estimates at the end (mean over seeds): " + ", ".join(
