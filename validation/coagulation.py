@@ -40,7 +40,9 @@ decides which model the data prefer.
     python validation/coagulation.py [--seeds 0 1 ... 19] [--cases ...] [--n-members 50]
         [--model-error structured|white] [--mean-field-rel-std 0.25]
 
-Writes validation/reports/coagulation.md (and coagulation_mus.png, coagulation.json).
+Writes validation/reports/coagulation.md (``--out``), its ``.json`` and, named after it, the
+figures of seed 0: ``*_damage_seed0.png``, ``*_ramp_seed0.png`` (the optics) and
+``*_pulse_temps_seed0.png``, ``*_train_temps_seed0.png`` (the temperatures beneath the sensor).
 """
 
 from __future__ import annotations
