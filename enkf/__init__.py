@@ -11,6 +11,8 @@ no knowledge of tissue, photons or meshes (it imports nothing from ``mcmatlab_py
   :class:`FilterProblem`, the prior, :class:`FilterResult`).
 - :mod:`enkf.health`: the health check that stops a run gone wrong.
 - :mod:`enkf.loop`: the augmented-state filter loop (:func:`run_filter`).
+- :mod:`enkf.smoother`: the ensemble smoother with multiple data assimilation
+  (:func:`es_mda`) for constant parameters over a whole window.
 - :mod:`enkf.toy_models`: toy models to verify the filter (linear-Gaussian with its
   exact Kalman filter, Lorenz-96).
 - :mod:`enkf.checks`: input checks shared by these modules.
@@ -49,6 +51,7 @@ from .problem import (
     StepReport,
     uniform_prior,
 )
+from .smoother import es_mda
 from .transforms import IdentityTransform, LogitTransform, LogTransform
 
 try:
@@ -58,6 +61,7 @@ except PackageNotFoundError:  # pragma: no cover - running from a source tree
 
 __all__ = [
     "AdaptiveInflation",
+    "es_mda",
     "DEFAULT_METHOD",
     "FilterConfig",
     "FilterDivergence",

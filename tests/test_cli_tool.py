@@ -290,3 +290,28 @@ def test_identify_reports_the_sensor_offsets(tmp_path, cache):
     rows = (out2 / "estimates.csv").read_text().splitlines()
     assert rows[0].split(",")[5:7] == ["sensor1_offset_mean", "sensor1_offset_std"]
     assert len(rows) == 6 and len(rows[1].split(",")) == len(rows[0].split(","))
+
+
+def test_identify_with_the_smoother_reports_it(tmp_path, cache):
+    """``[filter] smoother_iterations``: ES-MDA over the whole window after the filter, in
+    summary.json beside the filter's estimates; not with --follow; bad values exit 2."""
+    cfg = tmp_path / "tiny.toml"
+    cfg.write_text(TINY.replace("seed = 0\n", "seed = 0\nsmoother_iterations = 2\n", 1))
+    out = tmp_path / "id"
+    assert run("identify", cfg, "--data", EX / "tiny_data.csv", "--out", out, "--quiet",
+               "--cache-dir", cache) == 0
+    s = json.loads((out / "summary.json").read_text())
+    sm = s["smoother"]
+    assert sm["method"] == "ES-MDA" and sm["iterations"] == 2 and set(sm["parameters"]) == {
+        "mua", "mus"}
+    for p in sm["parameters"].values():
+        lo, hi = p["band_2sd"]
+        assert 0 < lo < p["estimate"] < hi and p["std"] > 0
+    assert run("identify", cfg, "--follow", EX / "tiny_data.csv", "--out", tmp_path / "f",
+               "--quiet", "--cache-dir", cache) == 2
+    for bad in ("smoother_iterations = -1\n", "smoother_iterations = 1.5\n",
+                "smoother_iterations = 2\nparameter_model = \"trend\"\n"):
+        cfg.write_text(TINY.replace("seed = 0\n", "seed = 0\n" + bad, 1))
+        assert run("identify", cfg, "--data", EX / "tiny_data.csv", "--out", tmp_path / "b",
+                   "--quiet", "--cache-dir", cache) == 2
+        assert not (tmp_path / "b").exists()

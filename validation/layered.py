@@ -18,7 +18,8 @@ mua and mus the filter estimates; one laser pulse of 0.5 W for 5 s, 150 readings
    log mua and log mus against the bound, and how often the +-2 sd band (the ensemble's
    2.3-97.7% quantiles) covers the truth. No model error by construction: the filter's
    model error is the white floor (``model_error = "white"``, as ``docs/enkf.md`` says for
-   identical twins).
+   identical twins). ``--smoother N``: also the ES-MDA smoother over the whole window
+   (:func:`enkf.tissue.smooth.smooth_constant`, N updates) from the same prior and data.
 4. **Filter on a fine truth** (``--fine``): the data from direct Monte Carlo (10^6
    photons) of the layered block and the heat simulation on the Monte Carlo's voxels, for
    the point sensor, with the config's model error (``structured``: data from another
@@ -178,6 +179,30 @@ def run_seeds(cfg, emulator, kind: str, truth: dict, clean: np.ndarray, seeds,
     return {k: np.array(v) for k, v in out.items()}
 
 
+def smooth_seeds(cfg, emulator, kind: str, truth: dict, clean: np.ndarray, seeds, n_iter: int,
+                 overrides=None) -> dict:
+    """As :func:`run_seeds`, the estimates of the ES-MDA smoother over the whole window
+    (:func:`enkf.tissue.smooth.smooth_constant`) from the same data."""
+    from enkf.tissue.smooth import smooth_constant
+
+    times = np.round(np.arange(1, N_STEPS + 1) * DT, 10)
+    out = {"err": [], "sd": [], "covered": [], "seconds": []}
+    for seed in seeds:
+        setup = sensor_setup(cfg, emulator, kind, seed=seed, **(overrides or {}))
+        rng = np.random.default_rng(10_000 + seed)
+        data = clean + np.sqrt(0.01) * rng.standard_normal(clean.shape)
+        est = smooth_constant(setup, times, data, n_iter=n_iter)
+        true = np.array([truth[n] for n in est.names])
+        bands = np.array([est.band(i) for i in range(len(true))])
+        out["err"].append(np.log(est.mean / true))
+        out["sd"].append(est.std / est.mean)
+        out["covered"].append((bands[:, 0] <= true) & (true <= bands[:, 1]))
+        out["seconds"].append(est.wall_s)
+        print(f"  {kind} ES-MDA seed {seed}: mean {np.round(est.mean, 4)} covered "
+              f"{out['covered'][-1]} {est.wall_s:.1f} s", flush=True)
+    return {k: np.array(v) for k, v in out.items()}
+
+
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--seeds", type=int, default=20)
@@ -192,6 +217,8 @@ def main(argv=None):
                     help="deg C per step (default: the config's)")
     ap.add_argument("--n-members", type=int, default=None)
     ap.add_argument("--mda", type=int, default=None)
+    ap.add_argument("--smoother", type=int, default=0, metavar="N_ITER",
+                    help="also the ES-MDA smoother with N_ITER updates on the twins (section 3)")
     ap.add_argument("--pseudo-true", action="store_true",
                     help="section 5 (the coarse model's best fit to the fine truth)")
     ap.add_argument("--out", default=str(HERE / "reports" / "layered.md"))
@@ -236,6 +263,12 @@ def main(argv=None):
                             {"model_error": "white", **overrides})
             filt_rows.append(_filter_row(kind, "twin", label, truth, res, crb))
             print(filt_rows[-1], flush=True)
+            if args.smoother:
+                res = smooth_seeds(cfg, emulator, kind, truth, twin_data(sensor, truth), seeds,
+                                   args.smoother, {"model_error": "white", **overrides})
+                filt_rows.append(_filter_row(kind, f"twin, ES-MDA ({args.smoother})", label,
+                                             truth, res, crb))
+                print(filt_rows[-1], flush=True)
             if args.fine and kind == "sensor" and label == next(iter(truths)):
                 fine = fine_data(cfg, truth)
                 for me in (cfg.setup_kw.get("model_error", "white"), "white")[:2]:

@@ -15,6 +15,21 @@ EXIT_BATCH_FAILED = 1  #: every file of a batch failed (batch.csv says why)
 #: what ``identify`` writes at the top of --out: what ``--follow --force`` clears first
 _OUTPUTS = ("estimates.csv", "summary.json", "run.json", "batch.csv", "fields", "figures")
 
+def _smoother_summary(setup, times, data, n_iter: int, quiet: bool) -> dict:
+    """summary.json's ``smoother``: ES-MDA over the whole window (constant optics)."""
+    from ..tissue import smooth_constant
+
+    est = smooth_constant(setup, times, data, n_iter=n_iter)
+    if not quiet:
+        print(f"smoother (ES-MDA, {n_iter} updates, {est.wall_s:.1f} s): " + ", ".join(
+            f"{n} {m:.4g} +- {s:.2g}" for n, m, s in zip(est.names, est.mean, est.std,
+                                                          strict=True)), file=sys.stderr)
+    return {"method": "ES-MDA", "iterations": n_iter, "wall_s": est.wall_s,
+            "parameters": {n: {"estimate": float(est.mean[i]), "std": float(est.std[i]),
+                               "band_2sd": list(est.band(i))}
+                           for i, n in enumerate(est.names)}}
+
+
 def _identify_one(cfg, absorption, seed, data_path, out_dir, quiet=True) -> dict:
     """Run the filter on one data file and write its outputs into ``out_dir`` (a task)."""
     from mcmatlab_py.progress import Progress
@@ -22,6 +37,7 @@ def _identify_one(cfg, absorption, seed, data_path, out_dir, quiet=True) -> dict
     from ..tissue import identify
     from ..tissue.absorption import fill_prior_points
     from .report import write_identify_outputs
+    from .rundir import write_json
 
     setup = cfg.setup(absorption, seed=seed)
     times, data = cfg.read_data(data_path)
@@ -46,6 +62,10 @@ def _identify_one(cfg, absorption, seed, data_path, out_dir, quiet=True) -> dict
         bar.close()
     summary = write_identify_outputs(Path(out_dir), setup, est, times, data,
                                      absorption=absorption, risk=risk)
+    if cfg.smoother_iterations:
+        summary["smoother"] = _smoother_summary(setup, times, data, cfg.smoother_iterations,
+                                                quiet)
+        write_json(Path(out_dir) / "summary.json", summary)
     summary["data"] = str(data_path)
     summary["wall_s"] = time.perf_counter() - t0
     return summary
@@ -67,6 +87,9 @@ def cmd_identify(args) -> int:
     if (args.data is None) == (args.follow is None):
         raise ValueError("give --data FILE [FILE ...] or --follow FILE (or data.file in the "
                          "config)")
+    if args.follow is not None and cfg.smoother_iterations:
+        raise ValueError("filter.smoother_iterations is not used with --follow (the smoother "
+                         "needs the whole window): run identify --data on the finished file")
     if args.follow is not None and cfg.data.time_offset is not None:
         raise ValueError("data.time_offset is not supported with --follow: write the times "
                          "from the laser's start")

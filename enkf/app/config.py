@@ -79,6 +79,7 @@ _FILTER_KEYS = {
     "random_walk_std", "random_walk_when_off", "inflation", "mda", "seed", "parameter_model",
     "localization_radius", "heat_mass", "transforms", "emulator", "bounds", "prior",
     "model_error", "adaptive_inflation", "coagulation", "medium", "sensor_offset_std",
+    "smoother_iterations",
 }
 _MODEL_ERROR_KEYS = {"kind", "rel_std", "time_scale", "length_xy", "length_z"}
 _ADAPTIVE_KEYS = {"enabled", "bounds", "time_scale"}
@@ -107,6 +108,9 @@ class IdentifyConfig:
     #: build each table point the first time a member needs it (the same numbers; a cold
     #: start pays only for the part of the table the ensemble visits), else all at once
     emulator_on_demand: bool = True
+    #: ES-MDA updates of the smoother over the whole window after the filter (0: none;
+    #: enkf.tissue.smooth_constant, constant optics only), reported in summary.json
+    smoother_iterations: int = 0
 
     @property
     def n_obs(self) -> int:
@@ -183,12 +187,28 @@ _LIMITS = {"sensors.noise_var": 1e4, "sensors.camera.noise_var": 1e4, "sensors.r
            "filter.sensor_offset_std": 100.0,
            "filter.random_walk_std": 10.0, "filter.random_walk_when_off": 10.0,
            "filter.inflation": 100.0, "filter.localization_radius": 1e3, "filter.mda": 100,
+           "filter.smoother_iterations": 100,
            "filter.seed": 2**63 - 1, "filter.emulator.n_photons": 10**11,
            "filter.emulator.n_mua": 1000, "filter.emulator.n_mus": 1000,
            "filter.emulator.seed": 2**63 - 1, "data.time_offset": 1e9,
            "filter.coagulation.E": 1e7, "filter.coagulation.A": 1e300,
            "filter.coagulation.nominal_factor": 1e3, "filter.coagulation.weight_exponent": 10.0,
            "filter.coagulation.mean_field_rel_std": 10.0}
+
+
+def _smoother_iterations(flt: dict, setup_kw: dict) -> int:
+    """``[filter] smoother_iterations``: ES-MDA updates after the filter (constant optics)."""
+    if "smoother_iterations" not in flt:
+        return 0
+    n = int(_num("filter.smoother_iterations", flt["smoother_iterations"], integer=True, lo=0))
+    if n and setup_kw.get("parameter_model", "random_walk") != "random_walk":
+        raise ConfigError("filter.smoother_iterations needs constant optics (parameter_model = "
+                          f"\"random_walk\"), got parameter_model = "
+                          f"{setup_kw['parameter_model']!r}")
+    if n and setup_kw.get("sensor_offset_std", 0):
+        raise ConfigError("filter.smoother_iterations does not estimate sensor offsets: set "
+                          "filter.sensor_offset_std = 0 or drop the smoother")
+    return n
 
 
 def _num(key, v, *, positive=False, integer=False, lo=None, hi=None):
@@ -379,7 +399,7 @@ def identify_config_from_dict(cfg: dict) -> IdentifyConfig:
         setup_kw["image"].n_pixels if "image" in setup_kw else 0))
     try:
         out = IdentifyConfig(model, setup_kw, grid, emulator_kw, exact, cfg, bounds, data, rate,
-                             medium, method, on_demand)
+                             medium, method, on_demand, _smoother_iterations(flt, setup_kw))
         out.setup(absorption=lambda mua, mus: None)  # validates the filter settings
         n_nodes = int(np.prod([n + 1 for n in grid]))
         table = 0 if exact else emulator_kw.get("n_mua", 12) * emulator_kw.get("n_mus", 12)

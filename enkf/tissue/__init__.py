@@ -27,7 +27,8 @@ each), :mod:`~enkf.tissue.absorption` (the :class:`Absorption` protocol of the e
 and the exact mode), :mod:`~enkf.tissue.setup` (:class:`TissueFilterSetup`),
 :mod:`~enkf.tissue.forward` (the forecast and the observation operator),
 :mod:`~enkf.tissue.coagulation` (optics that follow each member's own damage),
-:mod:`~enkf.tissue.identify` (:func:`identify`), :mod:`~enkf.tissue.online` (one reading
+:mod:`~enkf.tissue.identify` (:func:`identify`), :mod:`~enkf.tissue.smooth` (constant
+optics from a whole window: :func:`smooth_constant`), :mod:`~enkf.tissue.online` (one reading
 at a time), :mod:`~enkf.tissue.image` (a thermal camera), :mod:`~enkf.tissue.risk`
 (damage-risk maps) and :mod:`~enkf.tissue.outputs` (files every run writes).
 """
@@ -53,9 +54,11 @@ from .parameters import (
 )
 from .risk import RiskTracker
 from .setup import TissueFilterSetup
+from .smooth import SmootherEstimates, smooth_constant
 
 __all__ = [
     "Absorption",
+    "SmootherEstimates",
     "COAGULATION_NAMES",
     "Coagulation",
     "CoagulationForwardModel",
@@ -83,5 +86,6 @@ __all__ = [
     "identify",
     "observation_operator",
     "parameter_names",
+    "smooth_constant",
     "tracked_points",
 ]

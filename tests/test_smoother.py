@@ -1,0 +1,116 @@
+"""The ES-MDA smoother: the exact posterior of a linear-Gaussian problem, its checks, and
+constant optics from a whole window on the small tissue model."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from scipy.optimize import least_squares
+
+from enkf.smoother import es_mda, mda_alphas
+from enkf.tissue import TissueForwardModel
+from enkf.tissue.smooth import smooth_constant
+
+N_BIG = 4000
+
+
+def _linear_problem():
+    rng = np.random.default_rng(3)
+    G = rng.standard_normal((30, 2))
+    m0, C0 = np.array([1.0, -0.5]), np.array([[1.0, 0.3], [0.3, 0.5]])
+    R = np.full(30, 0.5)
+    u_true = np.array([1.4, -0.2])
+    y = G @ u_true + np.sqrt(R) * rng.standard_normal(30)
+    Ci = np.linalg.inv(C0) + G.T @ (G / R[:, None])
+    C = np.linalg.inv(Ci)
+    m = C @ (np.linalg.solve(C0, m0) + G.T @ (y / R))
+    return G, m0, C0, R, y, m, C
+
+
+@pytest.mark.parametrize("n_iter", [1, 4])
+def test_es_mda_gives_the_linear_gaussian_posterior(n_iter):
+    """For a linear model and a Gaussian prior, ES-MDA's ensemble has the posterior's
+    mean and covariance whatever the number of updates. Tolerances from the ensemble
+    size: the mean within 4 standard errors sqrt(2 C_ii / N) (the prior draw and the
+    perturbed data each add C/N at most), the variances within 4 sqrt(2 / N) n_iter
+    relative (the sampling error of a variance, compounded over the updates)."""
+    G, m0, C0, R, y, m, C = _linear_problem()
+    rng = np.random.default_rng(11)
+    U0 = rng.multivariate_normal(m0, C0, size=N_BIG)
+    U = es_mda(lambda U: U @ G.T, U0, y, R, rng, n_iter=n_iter)
+    se = np.sqrt(2 * np.diag(C) / N_BIG)
+    assert np.all(np.abs(U.mean(0) - m) <= 4 * se), (U.mean(0), m, se)
+    var = U.var(0, ddof=1)
+    assert np.all(np.abs(var / np.diag(C) - 1) <= 4 * np.sqrt(2 / N_BIG) * n_iter), var / np.diag(C)
+    # the data moved the ensemble: the prior's mean is many standard errors away
+    assert np.all(np.abs(m0 - m) > 10 * se)
+
+
+def test_es_mda_checks_its_inputs():
+    G, m0, C0, R, y, m, C = _linear_problem()
+    U0 = np.random.default_rng(0).multivariate_normal(m0, C0, size=50)
+    rng = np.random.default_rng(1)
+    sim = lambda U: U @ G.T  # noqa: E731
+    with pytest.raises(ValueError, match="alphas must be > 0 with inverses summing to 1"):
+        es_mda(sim, U0, y, R, rng, alphas=[2.0, 3.0])
+    with pytest.raises(ValueError, match="n_iter must be an integer >= 1"):
+        mda_alphas(0)
+    with pytest.raises(ValueError, match="y must be finite"):
+        es_mda(sim, U0, np.r_[y[:-1], np.nan], R, rng)
+    with pytest.raises(ValueError, match=r"simulate must return shape \(50, 30\)"):
+        es_mda(lambda U: U @ G[:5].T, U0, y, R, rng)
+    with pytest.raises(FloatingPointError, match="ES-MDA update 1: a member's predictions"):
+        es_mda(lambda U: np.full((50, 30), np.inf), U0, y, R, rng)
+    np.testing.assert_array_equal(mda_alphas(4), [4.0, 4.0, 4.0, 4.0])
+
+
+def _trace(s, times, theta):
+    """(M,) the surface readings of the coarse model at constant ``theta`` (mua, mus)."""
+    import fem
+
+    model = TissueForwardModel(s)
+    P = fem.probe_matrix(model.mesh, np.zeros((3, 1)))
+    T = np.full((1, model.mesh.p.shape[1]), s.T_initial)
+    out, edges = [], np.r_[0.0, times]
+    for a, b in zip(edges[:-1], edges[1:], strict=True):
+        T = model(T, np.asarray(theta, float)[None, :], a, b)
+        out.append((P @ T.T)[0, 0])
+    return np.array(out)
+
+
+def test_smooth_constant_finds_the_least_squares_optics(tissue):
+    """On a twin with constant optics and readings precise enough for a nearly Gaussian
+    posterior (noise sd 0.01 deg C: Laplace sd about 0.5% for mua and 5% for mus), the
+    smoother's ensemble mean is the least-squares fit of the same model (by Gauss-Newton,
+    another method) within half its Laplace sd (5 standard errors of an ensemble of 100),
+    and its +-2 sd band holds the truth."""
+    sigma, truth = 0.01, (1.3, 70.0)
+    s = tissue.setup(n_members=100, sensor_noise_var=sigma ** 2)
+    times = 0.1 * np.arange(1, 21)
+    rng = np.random.default_rng(4)
+    data = (_trace(s, times, truth) + sigma * rng.standard_normal(times.size))[:, None]
+    est = smooth_constant(s, times, data, n_iter=4)
+    fit = least_squares(lambda x: (_trace(s, times, np.exp(x)) - data[:, 0]) / sigma,
+                        np.log([1.0, 100.0]), diff_step=1e-5, xtol=1e-12)
+    sd = np.sqrt(np.diag(np.linalg.inv(fit.jac.T @ fit.jac)))
+    assert sd[0] < 0.01 and sd[1] < 0.1  # the nearly Gaussian case the test is about
+    assert est.names == ("mua", "mus")
+    assert np.all(np.abs(np.log(est.mean) - fit.x) <= 0.5 * sd), (np.log(est.mean), fit.x, sd)
+    for i, true in enumerate(truth):
+        lo, hi = est.band(i)
+        assert lo <= true <= hi
+    assert est.theta.shape == (100, 2) and np.all(est.theta > 0)
+
+
+def test_smooth_constant_checks_its_setup(tissue):
+    times, data = tissue.twin_data(tissue.setup(), 1.0, 100.0)
+    with pytest.raises(ValueError, match="needs constant parameters"):
+        smooth_constant(tissue.setup(parameter_model="trend"), times, data)
+    with pytest.raises(ValueError, match="set sensor_offset_std = 0"):
+        smooth_constant(tissue.setup(sensor_offset_std=0.5), times, data)
+    with pytest.raises(ValueError, match=r"data must have shape \(20, 1\)"):
+        smooth_constant(tissue.setup(), times, data[:-1])
+    with pytest.raises(ValueError, match="times must be strictly increasing and after 0"):
+        smooth_constant(tissue.setup(), times[::-1], data)
+    with pytest.raises(ValueError, match="data has no finite reading"):
+        smooth_constant(tissue.setup(), times, np.full_like(data, np.nan))
