@@ -18,9 +18,15 @@ predictions re-run from the updated parameters:
               \big(y + \sqrt{\alpha_i}\,\epsilon - G(U^i)\big),
 
 which for a linear ``G`` and Gaussian prior gives the posterior's moments, and for a
-nonlinear one takes ``n_iter`` small, nearly linear steps. Each update is the
-perturbed-observation analysis of :func:`enkf.analysis.enkf_perturbed_obs` in ensemble
-space (its cost is linear in the number of readings).
+nonlinear one takes ``n_iter`` small, nearly linear steps. Each update is one analysis of
+:func:`enkf.analysis.analysis` in ensemble space (its cost is linear in the number of
+readings): ``method="etkf"`` (default, the project's) the deterministic square root, which
+assimilating the same data ``n_iter`` times with the error covariance times
+:math:`\alpha_i` also gives the linear posterior's moments (Emerick 2016) without the
+sampling noise of the perturbations (which makes the spread of a small ensemble too
+narrow where the readings far outnumber the members, e.g. a camera); ``"enkf"`` the
+perturbed observations of Emerick & Reynolds (the term
+:math:`\sqrt{\alpha_i}\,\epsilon` above).
 """
 
 from __future__ import annotations
@@ -29,8 +35,9 @@ from collections.abc import Callable
 
 import numpy as np
 
-from .analysis import enkf_perturbed_obs
+from .analysis import analysis
 from .checks import float_array
+from .problem import DEFAULT_METHOD
 
 __all__ = ["es_mda", "mda_alphas"]
 
@@ -44,7 +51,8 @@ def mda_alphas(n_iter: int) -> np.ndarray:
 
 def es_mda(simulate: Callable[[np.ndarray], np.ndarray], U: np.ndarray, y: np.ndarray,
            R: np.ndarray, rng: np.random.Generator, *, n_iter: int = 4,
-           alphas: np.ndarray | None = None, center: bool = True,
+           alphas: np.ndarray | None = None, method: str = DEFAULT_METHOD,
+           center: bool = True,
            callback: Callable[[int, np.ndarray], None] | None = None) -> np.ndarray:
     """The parameter ensemble after ES-MDA (module doc).
 
@@ -59,6 +67,7 @@ def es_mda(simulate: Callable[[np.ndarray], np.ndarray], U: np.ndarray, y: np.nd
     rng : the generator of the perturbations
     n_iter : the number of updates, with equal factors (:func:`mda_alphas`)
     alphas : the factors instead; their inverses must sum to 1
+    method : ``"etkf"`` or ``"enkf"`` (module doc); ``center`` for ``"enkf"``
     callback : ``callback(i, U)`` after each update ``i`` (progress)
     """
     U = float_array(U, "U", 2).copy()
@@ -76,7 +85,7 @@ def es_mda(simulate: Callable[[np.ndarray], np.ndarray], U: np.ndarray, y: np.nd
         if not np.all(np.isfinite(Y)):
             raise FloatingPointError(f"ES-MDA update {i + 1}: a member's predictions are not "
                                      "finite")
-        U = enkf_perturbed_obs(U, Y, y, a * R, rng, center=center)
+        U = analysis(U, Y, y, a * R, method, rng, center=center)
         if callback is not None:
             callback(i, U)
     return U

@@ -27,8 +27,9 @@ def _linear_problem():
     return G, m0, C0, R, y, m, C
 
 
+@pytest.mark.parametrize("method", ["enkf", "etkf"])
 @pytest.mark.parametrize("n_iter", [1, 4])
-def test_es_mda_gives_the_linear_gaussian_posterior(n_iter):
+def test_es_mda_gives_the_linear_gaussian_posterior(n_iter, method):
     """For a linear model and a Gaussian prior, ES-MDA's ensemble has the posterior's
     mean and covariance whatever the number of updates. Tolerances from the ensemble
     size: the mean within 4 standard errors sqrt(2 C_ii / N) (the prior draw and the
@@ -37,7 +38,7 @@ def test_es_mda_gives_the_linear_gaussian_posterior(n_iter):
     G, m0, C0, R, y, m, C = _linear_problem()
     rng = np.random.default_rng(11)
     U0 = rng.multivariate_normal(m0, C0, size=N_BIG)
-    U = es_mda(lambda U: U @ G.T, U0, y, R, rng, n_iter=n_iter)
+    U = es_mda(lambda U: U @ G.T, U0, y, R, rng, n_iter=n_iter, method=method)
     se = np.sqrt(2 * np.diag(C) / N_BIG)
     assert np.all(np.abs(U.mean(0) - m) <= 4 * se), (U.mean(0), m, se)
     var = U.var(0, ddof=1)
@@ -59,6 +60,8 @@ def test_es_mda_checks_its_inputs():
         es_mda(sim, U0, np.r_[y[:-1], np.nan], R, rng)
     with pytest.raises(ValueError, match=r"simulate must return shape \(50, 30\)"):
         es_mda(lambda U: U @ G[:5].T, U0, y, R, rng)
+    with pytest.raises(ValueError, match="method must be one of"):
+        es_mda(sim, U0, y, R, rng, method="iterative")
     with pytest.raises(FloatingPointError, match="ES-MDA update 1: a member's predictions"):
         es_mda(lambda U: np.full((50, 30), np.inf), U0, y, R, rng)
     np.testing.assert_array_equal(mda_alphas(4), [4.0, 4.0, 4.0, 4.0])

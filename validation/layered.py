@@ -32,9 +32,7 @@ mua and mus the filter estimates; one laser pulse of 0.5 W for 5 s, 150 readings
    estimator's RMS error is at least ``sqrt(bias^2 + CRB^2)``, so a bias above 0.83 CRB
    puts the 1.3 x CRB target out of reach on that truth.
 
-    python validation/layered.py --seeds 20 --emulator --fine   # writes reports/layered.md
-    python validation/layered.py --seeds 0 --kinds sensor --truths "A (centre)" --pseudo-true \
-        --out validation/reports/layered_pseudo_true.md
+    python validation/layered.py --seeds 20 --emulator --fine --smoother 8 --pseudo-true
 """
 
 from __future__ import annotations

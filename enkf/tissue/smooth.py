@@ -71,6 +71,9 @@ def smooth_constant(setup: TissueFilterSetup, times, data, *, n_iter: int = 4,
     data : (M, p) deg C as for :func:`identify`; NaN readings are left out
     n_iter : ES-MDA updates (each re-runs the ensemble over the window)
     seed : the generator of the prior and the perturbations (default ``setup.seed``)
+
+    The update is ``setup.method``'s (:func:`enkf.smoother.es_mda`: ``"etkf"``, the
+    default, without perturbed observations).
     """
     if setup.parameter_model != "random_walk":
         raise ValueError(f"smooth_constant needs constant parameters (parameter_model = "
@@ -105,6 +108,7 @@ def smooth_constant(setup: TissueFilterSetup, times, data, *, n_iter: int = 4,
 
     R = np.tile(np.asarray(pieces.noise_var, float), times.size)[keep]
     tic = time.perf_counter()
-    U = es_mda(simulate, np.log(theta0), data.ravel()[keep], R, rng, n_iter=n_iter)
+    U = es_mda(simulate, np.log(theta0), data.ravel()[keep], R, rng, n_iter=n_iter,
+               method=setup.method)
     return SmootherEstimates(tuple(setup.parameter_names), np.exp(U), int(n_iter),
                              time.perf_counter() - tic)
