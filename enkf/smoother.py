@@ -23,10 +23,9 @@ nonlinear one takes ``n_iter`` small, nearly linear steps. Each update is one an
 readings): ``method="etkf"`` (default, the project's) the deterministic square root, which
 assimilating the same data ``n_iter`` times with the error covariance times
 :math:`\alpha_i` also gives the linear posterior's moments (Emerick 2016) without the
-sampling noise of the perturbations (which makes the spread of a small ensemble too
-narrow where the readings far outnumber the members, e.g. a camera); ``"enkf"`` the
-perturbed observations of Emerick & Reynolds (the term
-:math:`\sqrt{\alpha_i}\,\epsilon` above).
+sampling noise of the perturbations; ``"enkf"`` the perturbed observations of Emerick &
+Reynolds (the term :math:`\sqrt{\alpha_i}\,\epsilon` above). On the layered twins the
+two gave the same errors (``docs/layered.md``).
 """
 
 from __future__ import annotations
@@ -60,11 +59,12 @@ def es_mda(simulate: Callable[[np.ndarray], np.ndarray], U: np.ndarray, y: np.nd
     ----------
     simulate : callable
         ``simulate(U) -> (N, p)``: the predicted readings of the members ``U`` (N, n_par),
-        the window's readings flattened; NaN in a member's row stops the smoother.
+        the window's readings flattened; a member's non-finite prediction raises
+        FloatingPointError.
     U : (N, n_par) the prior ensemble (in the space the update is linear in, e.g. logs)
     y : (p,) the readings
     R : (p,) or (p, p) their error variances or covariance
-    rng : the generator of the perturbations
+    rng : the generator of the perturbations (``"enkf"``)
     n_iter : the number of updates, with equal factors (:func:`mda_alphas`)
     alphas : the factors instead; their inverses must sum to 1
     method : ``"etkf"`` or ``"enkf"`` (module doc); ``center`` for ``"enkf"``
