@@ -49,6 +49,7 @@ from . import _mc_outputs as O
 from ._atomic import fetch_add
 from ._mc_steps import (
     _clamp,
+    _enter_top,
     _fresnel,
     _hg_cos,
     _interface_normal,
@@ -155,17 +156,11 @@ def transport_batch(
         if not matched:
             if surface:
                 # specular reflection at the top face, Fresnel at the ray's angle; refraction
-                rf, cat = _fresnel(n_out, nref[m], uz)
-                spec = np.int64(rf * w)
+                spec, ux, uy, uz = _enter_top(n_out, nref[m], ux, uy, uz, w)
                 tally[T_SPECULAR] += spec
                 w -= spec
                 if w == 0:
                     continue
-                if uz < 1.0:
-                    ratio = n_out / nref[m]
-                    ux *= ratio
-                    uy *= ratio
-                    uz = cat
             elif nref[m] == _INF:  # emitted inside a perfect reflector: no light leaves it
                 tally[T_MISSED] += w
                 continue

@@ -42,6 +42,21 @@ def _fresnel(n1, n2, ca1):
 
 
 @numba.njit(cache=True, inline="always", fastmath=_FASTMATH)
+def _enter_top(n_out, n_in, ux, uy, uz, w):
+    """A packet of weight ``w`` (integer units) entering through the top face from a
+    medium of index ``n_out`` into one of ``n_in``: ``(spec, ux, uy, uz)``, the weight
+    reflected specularly (Fresnel at the ray's angle) and the refracted direction."""
+    rf, cat = _fresnel(n_out, n_in, uz)
+    spec = np.int64(rf * w)
+    if uz < 1.0:
+        ratio = n_out / n_in
+        ux *= ratio
+        uy *= ratio
+        uz = cat
+    return spec, ux, uy, uz
+
+
+@numba.njit(cache=True, inline="always", fastmath=_FASTMATH)
 def _hg_cos(g, xi):
     """Henyey-Greenstein deflection cosine from a uniform ``xi``."""
     if g == 0.0:

@@ -22,7 +22,7 @@ so it is the same for any number of threads.
 import numba
 import numpy as np
 
-from ._mc_steps import _cut_at_face, _fresnel, _hg_cos, _mirror, _spin_cs
+from ._mc_steps import _cut_at_face, _enter_top, _fresnel, _hg_cos, _mirror, _spin_cs
 from ._mc_tally import T_BOTTOM, T_LAUNCHED, T_MISSED, T_ROULETTE, T_SIDES, T_SPECULAR, T_TOP, W_ONE
 from ._rng import next_azimuth, next_double, next_exponential, seed_stream
 from ._sources import SI_SURFACE, launch_from
@@ -84,17 +84,11 @@ def transport_uniform_batch(
             continue
         if not matched and surface:
             # specular reflection at the top face, Fresnel at the ray's angle; refraction
-            rf, cat = _fresnel(n_out, nm, uz)
-            spec = np.int64(rf * w)
+            spec, ux, uy, uz = _enter_top(n_out, nm, ux, uy, uz, w)
             tally[T_SPECULAR] += spec
             w -= spec
             if w == 0:
                 continue
-            if uz < 1.0:
-                ratio = n_out / nm
-                ux *= ratio
-                uy *= ratio
-                uz = cat
         # ------------------------------------------------------------- hop loop
         while True:
             s0, s1, s2, s3, tau = next_exponential(s0, s1, s2, s3)

@@ -65,7 +65,7 @@ from ._mc_kernel import (
     T_TOP,
     W_ONE,
 )
-from ._mc_steps import _clamp, _fresnel, _hg_cos, _mirror, _plane_distance, _spin
+from ._mc_steps import _clamp, _enter_top, _fresnel, _hg_cos, _mirror, _plane_distance, _spin
 from ._rng import next_double, seed_stream
 from ._sources import SI_SURFACE, launch_from
 from ._white_steps import flush as _flush
@@ -146,18 +146,12 @@ def white_batch(
         w_start = np.int64(W_ONE)
         if not matched:
             if surface:
-                rf, cat = _fresnel(n_out, nref, uz)
-                spec = np.int64(rf * w_start)
+                spec, ux, uy, uz = _enter_top(n_out, nref, ux, uy, uz, w_start)
                 for k in range(K):
                     tally[T_SPECULAR, k] += spec
                 w_start -= spec
                 if w_start == 0:
                     continue
-                if uz < 1.0:
-                    ratio = n_out / nref
-                    ux *= ratio
-                    uy *= ratio
-                    uz = cat
             elif nref == _INF:
                 for k in range(K):
                     tally[T_MISSED, k] += W_ONE

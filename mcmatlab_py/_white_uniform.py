@@ -31,7 +31,7 @@ import math
 import numba
 import numpy as np
 
-from ._mc_steps import _cut_at_face, _fresnel, _hg_cos, _mirror, _spin_cs
+from ._mc_steps import _cut_at_face, _enter_top, _fresnel, _hg_cos, _mirror, _spin_cs
 from ._mc_tally import (
     T_BOTTOM,
     T_LAUNCHED,
@@ -132,18 +132,12 @@ def white_uniform_batch(
             continue
         w_start = np.int64(W_ONE)
         if not matched and surface:
-            rf, cat = _fresnel(n_out, nref, uz)
-            spec = np.int64(rf * w_start)
+            spec, ux, uy, uz = _enter_top(n_out, nref, ux, uy, uz, w_start)
             for k in range(K):
                 tally[T_SPECULAR, k] += spec
             w_start -= spec
             if w_start == 0:
                 continue
-            if uz < 1.0:
-                ratio = n_out / nref
-                ux *= ratio
-                uy *= ratio
-                uz = cat
         for k in range(K):
             q[k] = w_start
             e[k] = 1.0

@@ -269,15 +269,21 @@ def test_mc_config_asks_for_the_optional_outputs_and_gets_them_with_figures(tmp_
     assert not (tmp_path / "b").exists()
 
 
-def test_identify_reports_the_sensor_offsets(tmp_path, cache):
-    """[filter] sensor_offset_std: the offset in summary.json, estimates.csv and the printed
-    line, for a run on a file and for --follow."""
-    cfg = tmp_path / "offset.toml"
-    cfg.write_text(TINY.replace("[filter]\n", "[filter]\nsensor_offset_std = 0.5\n", 1))
+def _identify_tiny(tmp_path, cache, filter_lines: str):
+    """The tiny config with ``filter_lines`` added to [filter], run on the example data:
+    ``(config path, output dir, summary.json)``."""
+    cfg = tmp_path / "tiny_extra.toml"
+    cfg.write_text(TINY.replace("[filter]\n", "[filter]\n" + filter_lines, 1))
     out = tmp_path / "id"
     assert run("identify", cfg, "--data", EX / "tiny_data.csv", "--out", out, "--quiet",
                "--cache-dir", cache) == 0
-    s = json.loads((out / "summary.json").read_text())
+    return cfg, out, json.loads((out / "summary.json").read_text())
+
+
+def test_identify_reports_the_sensor_offsets(tmp_path, cache):
+    """[filter] sensor_offset_std: the offset in summary.json, estimates.csv and the printed
+    line, for a run on a file and for --follow."""
+    cfg, out, s = _identify_tiny(tmp_path, cache, "sensor_offset_std = 0.5\n")
     (off,) = s["sensor_offsets"]
     assert off["position_cm"] == [0.0, 0.0, 0.0] and 0 < off["std_final"] < 0.5
     header = (out / "estimates.csv").read_text().splitlines()[0].split(",")
@@ -295,12 +301,7 @@ def test_identify_reports_the_sensor_offsets(tmp_path, cache):
 def test_identify_with_the_smoother_reports_it(tmp_path, cache):
     """``[filter] smoother_iterations``: ES-MDA over the whole window after the filter, in
     summary.json beside the filter's estimates; not with --follow; bad values exit 2."""
-    cfg = tmp_path / "tiny.toml"
-    cfg.write_text(TINY.replace("seed = 0\n", "seed = 0\nsmoother_iterations = 2\n", 1))
-    out = tmp_path / "id"
-    assert run("identify", cfg, "--data", EX / "tiny_data.csv", "--out", out, "--quiet",
-               "--cache-dir", cache) == 0
-    s = json.loads((out / "summary.json").read_text())
+    cfg, _, s = _identify_tiny(tmp_path, cache, "smoother_iterations = 2\n")
     sm = s["smoother"]
     assert sm["method"] == "ES-MDA" and sm["iterations"] == 2 and set(sm["parameters"]) == {
         "mua", "mus"}
@@ -311,7 +312,7 @@ def test_identify_with_the_smoother_reports_it(tmp_path, cache):
                "--quiet", "--cache-dir", cache) == 2
     for bad in ("smoother_iterations = -1\n", "smoother_iterations = 1.5\n",
                 "smoother_iterations = 2\nparameter_model = \"trend\"\n"):
-        cfg.write_text(TINY.replace("seed = 0\n", "seed = 0\n" + bad, 1))
+        cfg.write_text(TINY.replace("[filter]\n", "[filter]\n" + bad, 1))
         assert run("identify", cfg, "--data", EX / "tiny_data.csv", "--out", tmp_path / "b",
                    "--quiet", "--cache-dir", cache) == 2
         assert not (tmp_path / "b").exists()

@@ -150,31 +150,44 @@ def fine_data(cfg, truth: dict) -> np.ndarray:
     return np.column_stack([np.interp(want, t, T[:, j]) for j in range(T.shape[1])])
 
 
-def run_seeds(cfg, emulator, kind: str, truth: dict, clean: np.ndarray, seeds,
-              overrides=None) -> dict:
-    """Final estimates of one configuration over seeds (noise and filter seed)."""
-    from enkf.tissue import identify
-
+def _over_seeds(cfg, emulator, kind: str, truth: dict, clean: np.ndarray, seeds, overrides,
+                estimate, label: str = "") -> dict:
+    """Final estimates over seeds (the noise and the estimator's seed): ``estimate(setup,
+    times, data) -> (names, mean, sd, lo, hi, seconds, stopped)``."""
     times = np.round(np.arange(1, N_STEPS + 1) * DT, 10)
     out = {"err": [], "sd": [], "covered": [], "seconds": []}
     for seed in seeds:
         setup = sensor_setup(cfg, emulator, kind, seed=seed, **(overrides or {}))
         rng = np.random.default_rng(10_000 + seed)
         data = clean + np.sqrt(0.01) * rng.standard_normal(clean.shape)
-        t0 = time.perf_counter()
-        est = identify(setup, times, data)
-        out["seconds"].append(time.perf_counter() - t0)
-        true = np.array([truth[n] for n in setup.parameter_names])
-        mean, sd = est.param_mean[-1], est.param_std[-1]
-        lo = np.array([est.param_band(i)[0][-1] for i in range(len(true))])
-        hi = np.array([est.param_band(i)[1][-1] for i in range(len(true))])
+        names, mean, sd, lo, hi, seconds, stopped = estimate(setup, times, data)
+        true = np.array([truth[n] for n in names])
         out["err"].append(np.log(mean / true))
         out["sd"].append(sd / mean)
         out["covered"].append((lo <= true) & (true <= hi))
-        print(f"  {kind} seed {seed}: mean {np.round(mean, 4)} sd {np.round(sd, 4)} "
-              f"covered {out['covered'][-1]} {out['seconds'][-1]:.1f} s"
-              + (f" stopped: {est.diverged}" if est.diverged else ""), flush=True)
+        out["seconds"].append(seconds)
+        print(f"  {kind}{label} seed {seed}: mean {np.round(mean, 4)} sd {np.round(sd, 4)} "
+              f"covered {out['covered'][-1]} {seconds:.1f} s"
+              + (f" stopped: {stopped}" if stopped else ""), flush=True)
     return {k: np.array(v) for k, v in out.items()}
+
+
+def run_seeds(cfg, emulator, kind: str, truth: dict, clean: np.ndarray, seeds,
+              overrides=None) -> dict:
+    """Final estimates of the filter over seeds (noise and filter seed)."""
+    from enkf.tissue import identify
+
+    def estimate(setup, times, data):
+        t0 = time.perf_counter()
+        est = identify(setup, times, data)
+        seconds = time.perf_counter() - t0
+        n = len(setup.parameter_names)
+        lo = np.array([est.param_band(i)[0][-1] for i in range(n)])
+        hi = np.array([est.param_band(i)[1][-1] for i in range(n)])
+        return (setup.parameter_names, est.param_mean[-1], est.param_std[-1], lo, hi, seconds,
+                est.diverged)
+
+    return _over_seeds(cfg, emulator, kind, truth, clean, seeds, overrides, estimate)
 
 
 def smooth_seeds(cfg, emulator, kind: str, truth: dict, clean: np.ndarray, seeds, n_iter: int,
@@ -183,22 +196,13 @@ def smooth_seeds(cfg, emulator, kind: str, truth: dict, clean: np.ndarray, seeds
     (:func:`enkf.tissue.smooth.smooth_constant`) from the same data."""
     from enkf.tissue.smooth import smooth_constant
 
-    times = np.round(np.arange(1, N_STEPS + 1) * DT, 10)
-    out = {"err": [], "sd": [], "covered": [], "seconds": []}
-    for seed in seeds:
-        setup = sensor_setup(cfg, emulator, kind, seed=seed, **(overrides or {}))
-        rng = np.random.default_rng(10_000 + seed)
-        data = clean + np.sqrt(0.01) * rng.standard_normal(clean.shape)
+    def estimate(setup, times, data):
         est = smooth_constant(setup, times, data, n_iter=n_iter)
-        true = np.array([truth[n] for n in est.names])
-        bands = np.array([est.band(i) for i in range(len(true))])
-        out["err"].append(np.log(est.mean / true))
-        out["sd"].append(est.std / est.mean)
-        out["covered"].append((bands[:, 0] <= true) & (true <= bands[:, 1]))
-        out["seconds"].append(est.wall_s)
-        print(f"  {kind} ES-MDA seed {seed}: mean {np.round(est.mean, 4)} covered "
-              f"{out['covered'][-1]} {est.wall_s:.1f} s", flush=True)
-    return {k: np.array(v) for k, v in out.items()}
+        bands = np.array([est.band(i) for i in range(len(est.names))])
+        return est.names, est.mean, est.std, bands[:, 0], bands[:, 1], est.wall_s, None
+
+    return _over_seeds(cfg, emulator, kind, truth, clean, seeds, overrides, estimate,
+                       " ES-MDA")
 
 
 def main(argv=None):
