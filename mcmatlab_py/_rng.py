@@ -46,6 +46,35 @@ def seed_stream(seed, stream):
     return s0, s1, s2, s3
 
 
+_MIX3 = np.uint64(0xD6E8FEB86659FD93)
+
+
+@numba.njit(cache=True, inline="always")
+def photon_stream(seed, photon):
+    """State of photon ``photon``'s own stream of generator ``seed``: four uint64. The
+    start of its splitmix64 sequence is itself hashed, so that the states of consecutive
+    photons are not shifted copies of one another (as ``seed_stream``'s would be for
+    consecutive ``stream``, whose stride is splitmix64's increment)."""
+    x, h = splitmix64(_U64(seed) * _MIX1 + _U64(photon) * _MIX3)
+    x, s0 = splitmix64(h)
+    x, s1 = splitmix64(x)
+    x, s2 = splitmix64(x)
+    x, s3 = splitmix64(x)
+    return s0, s1, s2, s3
+
+
+@numba.njit(cache=True, inline="always")
+def counter_double(seed, a, b, c):
+    """A uniform double in [0, 1) that depends only on ``(seed, a, b, c)`` (uint64 each):
+    random numbers keyed by what they are for, not by how many were drawn before (the
+    white kernels' per-weight roulette, so that a weight's numbers do not depend on the
+    other weights of the run)."""
+    x = _U64(seed) * _MIX1 + _U64(a) * _GOLDEN + _U64(b) * _MIX2 + _U64(c) * _MIX3
+    x, z = splitmix64(x)
+    x, z = splitmix64(x ^ z)
+    return (z >> _U64(11)) * _TWO_M53
+
+
 @numba.njit(cache=True, inline="always")
 def next_double(s0, s1, s2, s3):
     """xoshiro256**: returns the new state and a double uniform in [0, 1)."""

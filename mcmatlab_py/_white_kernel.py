@@ -66,9 +66,10 @@ from ._mc_kernel import (
     W_ONE,
 )
 from ._mc_steps import _clamp, _enter_top, _fresnel, _hg_cos, _mirror, _plane_distance, _spin
-from ._rng import next_double, seed_stream
+from ._rng import counter_double, next_double, photon_stream
 from ._sources import SI_SURFACE, launch_from
 from ._white_steps import flush as _flush
+from ._white_steps import settle
 from ._white_uniform import white_uniform_batch
 
 __all__ = ["N_TALLY", "W_ONE", "run_white_batches", "white_batch"]
@@ -89,7 +90,7 @@ def _next_check(q, lr):
 
 @numba.njit(cache=True, fastmath=_FASTMATH)
 def white_batch(
-    b, mua_tab, rate, Mf, mus, g, nref, nx, ny, nz, dx, dy, dz,
+    b, mua_tab, rate, kid, Mf, mus, g, nref, nx, ny, nz, dx, dy, dz,
     boundary_type, n_out, matched, roulette, weight_threshold, chance,
     si, sf, stab, svox, fold, seed, batch_size, n_total, acc, tally,
 ):  # fmt: skip
@@ -101,6 +102,8 @@ def white_batch(
         ``k``, all > 0: the estimated medium's row holds the ``mua_k``, the others' rows
         their fixed value.
     rate : (K,) the smallest ``mua_tab[m, k]`` over the media in the grid (cm^-1).
+    kid : (K,) uint64 what keys the roulette numbers of ``k`` (the bits of its ``mua``), so
+        that a weight's numbers do not depend on the other weights of the run.
     Mf : (nx*ny*nz,) int32 medium index of each voxel (C order).
     mus, g : (n_media,) scattering coefficient (cm^-1) and anisotropy of each medium.
     nref : the refractive index of every medium (one value).
@@ -118,16 +121,18 @@ def white_batch(
     Lx = nx * dx
     Ly = ny * dy
     Lz = nz * dz
-    s0, s1, s2, s3 = seed_stream(seed, b)
     st = np.empty(4, dtype=np.uint64)
     surface = si[SI_SURFACE] == 1
     q = np.zeros(K, dtype=np.int64)  # fixed-point weight of each k
     w = np.zeros(K)  # weight_k = w[k] exp(-mua[k] L)
     lr = np.zeros(K)  # path length at which weight_k falls below the threshold
     e = np.zeros(K)  # exp(-mua_k (L - pend)) of each k
+    nr = np.zeros(K, dtype=np.int64)  # roulettes of each k so far in this photon
+    done = np.zeros(K)  # the part of ``pend`` each k has had (settled for its roulette)
     first = b * batch_size
     last = min(first + batch_size, n_total)
     for _ip in range(first, last):
+        s0, s1, s2, s3 = photon_stream(seed, _ip)  # each photon its own path stream
         s0, s1, s2, s3, px, py, pz, ux, uy, uz, ok = launch_from(
             si, sf, stab, svox, nx, ny, nz, dx, dy, dz, st, s0, s1, s2, s3)
         for k in range(K):
@@ -158,6 +163,8 @@ def white_batch(
                 continue
         for k in range(K):
             q[k] = w_start
+            nr[k] = 0
+            done[k] = 0.0
             e[k] = 1.0
             w[k] = w_start / W_ONE
             lr[k] = math.log(w[k] / weight_threshold) / rate[k]
@@ -193,7 +200,7 @@ def white_batch(
                     pend += s
                     break
                 if dmin == _INF:  # outside, moving away: lost
-                    _flush(q, w, e, mua_tab[m], pend, tally[T_OUTSIDE_ABSORBED])
+                    _flush(q, w, e, mua_tab[m], pend, tally[T_OUTSIDE_ABSORBED], done)
                     pend = 0.0
                     for k in range(K):
                         tally[T_KILLED, k] += q[k]
@@ -208,10 +215,10 @@ def white_batch(
                 # leaving this voxel (or this stretch outside): deposit what was lost in it
                 if inside:
                     n_alive = _flush(q, w, e, mua_tab[m], pend,
-                                     acc[fold[(ix * ny + iy) * nz + iz]])
+                                     acc[fold[(ix * ny + iy) * nz + iz]], done)
                     pend = 0.0
                 else:
-                    n_alive = _flush(q, w, e, mua_tab[m], pend, tally[T_OUTSIDE_ABSORBED])
+                    n_alive = _flush(q, w, e, mua_tab[m], pend, tally[T_OUTSIDE_ABSORBED], done)
                     pend = 0.0
                 if n_alive == 0:  # every weight below the fixed-point resolution
                     alive = False
@@ -287,7 +294,7 @@ def white_batch(
                 or abs(py / Ly - 0.5) > 0.5 * KILLRANGE
                 or abs(pz / Lz - 0.5) > 0.5 * KILLRANGE
             ):
-                _flush(q, w, e, mua_tab[m], pend, tally[T_OUTSIDE_ABSORBED])
+                _flush(q, w, e, mua_tab[m], pend, tally[T_OUTSIDE_ABSORBED], done)
                 pend = 0.0
                 for k in range(K):
                     tally[T_KILLED, k] += q[k]
@@ -296,23 +303,25 @@ def white_batch(
             s0, s1, s2, s3, r2 = next_double(s0, s1, s2, s3)
             ux, uy, uz = _spin(ux, uy, uz, _hg_cos(g[m], r1), 2.0 * math.pi * r2)
             if L > check:
-                # some weights fell below the threshold: settle the deposits up to here,
+                # some weights fell below the threshold: settle each of them up to here,
                 # then roulette each of those weights on its own
                 if inside:
                     dst = acc[fold[(ix * ny + iy) * nz + iz]]
                 else:
                     dst = tally[T_OUTSIDE_ABSORBED]
-                _flush(q, w, e, mua_tab[m], pend, dst)
-                pend = 0.0
                 for k in range(K):
                     if q[k] == 0 or L <= lr[k]:
+                        continue
+                    settle(q, w, e, mua_tab[m], k, pend, dst, done)
+                    if q[k] == 0:  # below the fixed-point resolution already
                         continue
                     if multi and w[k] * e[k] >= weight_threshold:
                         # decayed slower than the bound: check again where it can be below
                         lr[k] = L + math.log(w[k] * e[k] / weight_threshold) / rate[k]
                         continue
                     if roulette:
-                        s0, s1, s2, s3, r1 = next_double(s0, s1, s2, s3)
+                        r1 = counter_double(seed, _ip, kid[k], nr[k])
+                        nr[k] += 1
                         if r1 < chance:
                             w[k] /= chance
                             if multi:
@@ -335,7 +344,7 @@ def white_batch(
 
 @numba.njit(cache=True, parallel=True)
 def run_white_batches(
-    mua_tab, rate, Mf, mus, g, nref, nx, ny, nz, dx, dy, dz,
+    mua_tab, rate, kid, Mf, mus, g, nref, nx, ny, nz, dx, dy, dz,
     boundary_type, n_out, matched, roulette, weight_threshold, chance,
     si, sf, stab, svox, fold, seed, batch_size, n_total, batch_start, batch_stop, acc, tally,
     uniform=-1,
@@ -359,13 +368,13 @@ def run_white_batches(
                 break
             if uniform >= 0:
                 white_uniform_batch(
-                    b, mua_tab[uniform], mus[uniform], g[uniform], nref, nx, ny, nz,
+                    b, mua_tab[uniform], kid, mus[uniform], g[uniform], nref, nx, ny, nz,
                     dx, dy, dz, n_out, matched, roulette, weight_threshold, chance,
                     si, sf, stab, svox, fold, seed, batch_size, n_total, acc[kw], tally[kw],
                 )  # fmt: skip
             else:
                 white_batch(
-                    b, mua_tab, rate, Mf, mus, g, nref, nx, ny, nz, dx, dy, dz,
+                    b, mua_tab, rate, kid, Mf, mus, g, nref, nx, ny, nz, dx, dy, dz,
                     boundary_type, n_out, matched, roulette, weight_threshold, chance,
                     si, sf, stab, svox, fold, seed, batch_size, n_total, acc[kw], tally[kw],
                 )  # fmt: skip

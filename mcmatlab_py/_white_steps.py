@@ -23,18 +23,33 @@ def exp_neg(x):
 
 
 @numba.njit(cache=True, inline="always", fastmath=_FASTMATH)
-def flush(q, w, e, mua, ds, dst):  # mua: (K,) the decay rates of the current medium
-    """Advance each live weight by a path ``ds``: ``e_k *= exp(-mua_k ds)``, then
-    ``q_k = W_ONE w_k e_k``; add what it lost into ``dst`` (K,). Returns the number of
-    weights still above the fixed-point resolution."""
+def flush(q, w, e, mua, ds, dst, done):  # mua: (K,) the decay rates of the current medium
+    """Advance each live weight by the part of a path ``ds`` it has not had yet
+    (``ds - done_k``, :func:`settle`): ``e_k *= exp(-mua_k (ds - done_k))``, then
+    ``q_k = W_ONE w_k e_k``; add what it lost into ``dst`` (K,); ``done`` back to 0.
+    Returns the number of weights still above the fixed-point resolution."""
     alive = 0
     for k in range(q.size):
+        d = ds - done[k]
+        done[k] = 0.0
         if q[k] == 0:
             continue
-        e[k] *= exp_neg(mua[k] * ds)
+        e[k] *= exp_neg(mua[k] * d)
         qn = np.int64(W_ONE * w[k] * e[k])
         dst[k] += q[k] - qn
         q[k] = qn
         if qn > 0:
             alive += 1
     return alive
+
+
+@numba.njit(cache=True, inline="always", fastmath=_FASTMATH)
+def settle(q, w, e, mua, k, ds, dst, done):
+    """Advance weight ``k`` alone to the path ``ds`` (before its roulette), the others
+    left pending: each weight's decay is then split at the same path lengths whatever
+    other weights run with it, so its numbers are the same bit for bit."""
+    e[k] *= exp_neg(mua[k] * (ds - done[k]))
+    done[k] = ds
+    qn = np.int64(W_ONE * w[k] * e[k])
+    dst[k] += q[k] - qn
+    q[k] = qn

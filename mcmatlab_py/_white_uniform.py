@@ -42,23 +42,43 @@ from ._mc_tally import (
     T_TOP,
     W_ONE,
 )
-from ._rng import next_azimuth, next_double, next_exponential, seed_stream
+from ._rng import counter_double, next_azimuth, next_double, next_exponential, photon_stream
 from ._sources import SI_SURFACE, launch_from
-from ._white_steps import exp_neg, flush
+from ._white_steps import exp_neg, flush, settle
 
 _INF = np.inf
 _FASTMATH = {"nsz", "arcp", "contract", "afn", "reassoc"}
+
+
+_SERIES_X = 0.25  # loss_point's series up to x^4 below this: error < 4e-7 of the move
+
+
+@numba.njit(cache=True, inline="always", fastmath=_FASTMATH)
+def loss_coefficients(u):
+    """The coefficients of ``x``, ..., ``x^4`` of :func:`loss_point`'s series at ``u``
+    (shared by every ``k`` of a move: one uniform number for all)."""
+    v = u * (u - 1.0)
+    h = 2.0 * u - 1.0
+    w = 6.0 * v + 1.0  # 6u^2 - 6u + 1
+    return 0.5 * v, v * h / 6.0, v * w / 24.0, v * h * (2.0 * w - 1.0) / 120.0
+
+
+@numba.njit(cache=True, inline="always", fastmath=_FASTMATH)
+def loss_point_c(u, x, lost, c1, c2, c3, c4):
+    """:func:`loss_point` with the coefficients of :func:`loss_coefficients` at ``u``."""
+    if x < _SERIES_X:
+        return u + x * (c1 + x * (c2 + x * (c3 + x * c4)))
+    return min(-math.log1p(-u * lost) / x, 1.0)
 
 
 @numba.njit(cache=True, inline="always", fastmath=_FASTMATH)
 def loss_point(u, x, lost):
     """Where along a move the loss of one weight is put, as a fraction of the move: the
     inverse of the distribution ``(1 - exp(-x t)) / (1 - exp(-x))`` on ``[0, 1]`` at ``u``,
-    with ``x = mua s`` and ``lost = 1 - exp(-x)``; for ``x < 1e-2`` its series in ``x``
-    (error below 1e-6 of the move)."""
-    if x < 1e-2:
-        return u + x * (0.5 * u * (u - 1.0) + x * u * (1.0 / 6.0 - 0.5 * u + u * u / 3.0))
-    return min(-math.log1p(-u * lost) / x, 1.0)
+    with ``x = mua s`` and ``lost = 1 - exp(-x)``; for ``x < 0.25`` its series in ``x`` to
+    ``x^4`` (error below 4e-7 of the move; no logarithm for most moves)."""
+    c1, c2, c3, c4 = loss_coefficients(u)
+    return loss_point_c(u, x, lost, c1, c2, c3, c4)
 
 
 @numba.njit(cache=True, inline="always")
@@ -77,6 +97,9 @@ def _spread(q, w, e, mua, s, u, px, py, pz, ux, uy, uz,
     voxel faces: each ``k``'s loss at its own point (:func:`loss_point` at ``u``).
     Returns the live weights."""
     alive = 0
+    c1, c2, c3, c4 = loss_coefficients(u)
+    last = -1  # the voxel of the previous deposit and its row: most k share one
+    row = 0
     for k in range(q.size):
         if q[k] == 0:
             continue
@@ -86,9 +109,12 @@ def _spread(q, w, e, mua, s, u, px, py, pz, ux, uy, uz,
         qn = np.int64(W_ONE * w[k] * e[k])
         d = q[k] - qn
         if d > 0:
-            t = loss_point(u, x, 1.0 - f) * s
-            acc[fold[_voxel(px + t * ux, py + t * uy, pz + t * uz,
-                            inv_dx, inv_dy, inv_dz, nx, ny, nz)], k] += d
+            t = loss_point_c(u, x, 1.0 - f, c1, c2, c3, c4) * s
+            v = _voxel(px + t * ux, py + t * uy, pz + t * uz, inv_dx, inv_dy, inv_dz, nx, ny, nz)
+            if v != last:
+                last = v
+                row = fold[v]
+            acc[row, k] += d
         q[k] = qn
         if qn > 0:
             alive += 1
@@ -97,7 +123,7 @@ def _spread(q, w, e, mua, s, u, px, py, pz, ux, uy, uz,
 
 @numba.njit(cache=True, fastmath=_FASTMATH)
 def white_uniform_batch(
-    b, mua, mus, g, nref, nx, ny, nz, dx, dy, dz, n_out, matched, roulette,
+    b, mua, kid, mus, g, nref, nx, ny, nz, dx, dy, dz, n_out, matched, roulette,
     weight_threshold, chance, si, sf, stab, svox, fold, seed, batch_size, n_total, acc, tally,
 ):  # fmt: skip
     """Run the photons of batch ``b`` for every absorption ``mua`` (K,) cm^-1 (all > 0)
@@ -112,16 +138,20 @@ def white_uniform_batch(
     inv_dy = 1.0 / dy
     inv_dz = 1.0 / dz
     inv_mus = 1.0 / mus
-    s0, s1, s2, s3 = seed_stream(seed, b)
     st = np.empty(4, dtype=np.uint64)
     surface = si[SI_SURFACE] == 1
     q = np.zeros(K, dtype=np.int64)
     w = np.zeros(K)
     lr = np.zeros(K)
     e = np.zeros(K)
+    nr = np.zeros(K, dtype=np.int64)  # roulettes of each k so far in this photon
+    done = np.zeros(K)  # the part of ``pend`` each k has had (settled for its roulette)
     first = b * batch_size
     last = min(first + batch_size, n_total)
     for _ip in range(first, last):
+        # each photon its own path stream, and each weight its own roulette numbers: a
+        # weight's deposits do not depend on which other weights run with it
+        s0, s1, s2, s3 = photon_stream(seed, _ip)
         s0, s1, s2, s3, px, py, pz, ux, uy, uz, ok = launch_from(
             si, sf, stab, svox, nx, ny, nz, dx, dy, dz, st, s0, s1, s2, s3)
         for k in range(K):
@@ -140,6 +170,8 @@ def white_uniform_batch(
                 continue
         for k in range(K):
             q[k] = w_start
+            nr[k] = 0
+            done[k] = 0.0
             e[k] = 1.0
             w[k] = w_start / W_ONE
             lr[k] = math.log(w[k] / weight_threshold) / mua[k]
@@ -165,7 +197,7 @@ def white_uniform_batch(
                     pend += s
                 else:
                     if pend > 0.0:
-                        flush(q, w, e, mua, pend, acc[fold[vox]])
+                        flush(q, w, e, mua, pend, acc[fold[vox]], done)
                         pend = 0.0
                     s0, s1, s2, s3, r1 = next_double(s0, s1, s2, s3)
                     n_alive = _spread(q, w, e, mua, s, r1, px, py, pz, ux, uy, uz,
@@ -187,7 +219,7 @@ def white_uniform_batch(
                         tau = max(tau - mus * s, 0.0)
                         continue
                 if pend > 0.0:
-                    flush(q, w, e, mua, pend, acc[fold[vox]])
+                    flush(q, w, e, mua, pend, acc[fold[vox]], done)
                     pend = 0.0
                 slot = (T_TOP if uz < 0.0 else T_BOTTOM) if axis == 2 else T_SIDES
                 for k in range(K):
@@ -202,16 +234,18 @@ def white_uniform_batch(
             s0, s1, s2, s3, cosp, sinp = next_azimuth(s0, s1, s2, s3)
             ux, uy, uz = _spin_cs(ux, uy, uz, cost, cosp, sinp)
             if L > check:
-                # some weights fell below the threshold: settle the path up to here, then
+                # some weights fell below the threshold: settle each of them up to here, then
                 # roulette each of those weights on its own
                 dst = acc[fold[vox]]
-                flush(q, w, e, mua, pend, dst)
-                pend = 0.0
                 for k in range(K):
                     if q[k] == 0 or L <= lr[k]:
                         continue
+                    settle(q, w, e, mua, k, pend, dst, done)
+                    if q[k] == 0:  # below the fixed-point resolution already
+                        continue
                     if roulette:
-                        s0, s1, s2, s3, r1 = next_double(s0, s1, s2, s3)
+                        r1 = counter_double(seed, _ip, kid[k], nr[k])
+                        nr[k] += 1
                         if r1 < chance:
                             w[k] /= chance
                             lr[k] = math.log(w[k] / weight_threshold) / mua[k]

@@ -42,18 +42,21 @@ __all__ = [
     "direct_member",
     "cache_key",
     "interpolate_log_na",
+    "resolve_method",
     "symmetrize",
     "table_point",
     "table_row",
     "table_rows",
     "usable_cache_dir",
+    "white_supported",
 ]
 
 CACHE_VERSION = 5
 #: build methods of :meth:`AbsorptionEmulator.build`: direct Monte Carlo per table point, or
 #: one perturbation ("white") Monte Carlo run per mus column (:mod:`mcmatlab_py.white`)
-METHODS = ("table", "white")
-WHITE_VERSION = 3  #: bumped when the white kernel's numbers change
+#: ("auto": white where the white kernel applies, see :func:`resolve_method`, else table)
+METHODS = ("table", "white", "auto")
+WHITE_VERSION = 5  #: bumped when the white kernel's numbers change
 #: The table holds log(NA + NA_OFFSET): smooth where NA is zero or noisy in voxels
 #: that (almost) no photon reaches, and exactly inverted on evaluation.
 NA_OFFSET = 1e-3  # W/cm^3/W, far below the NA of the voxels that matter
@@ -322,7 +325,7 @@ class AbsorptionEmulator:
     #: ``on_demand`` runs the Monte Carlo of the points an interpolation needs the first time
     #: a member needs them (:meth:`fill`); the others hold NaN and are never read
     have: np.ndarray = None
-    method: str = "table"  #: how missing points are built (:data:`METHODS`)
+    method: str = "table"  #: how missing points are built (:data:`METHODS`; auto resolved)
     exact = False  #: an interpolation, not Monte Carlo (enkf.tissue.absorption.Absorption)
     #: where missing points go (the cache file), the Dask client, whether to show progress
     _fill_with: tuple = field(default=(None, None, False), repr=False)
@@ -339,6 +342,7 @@ class AbsorptionEmulator:
         self.log_na = np.ascontiguousarray(self.log_na, dtype=np.float64)
         if self.have is None:
             self.have = np.ones((self.spec.n_mua, self.spec.n_mus), dtype=bool)
+        self.method = resolve_method(self.spec, self.method)
 
     def __getstate__(self):  # a Dask client does not travel (workers fill with their own cores)
         state = dict(self.__dict__)
@@ -405,7 +409,9 @@ class AbsorptionEmulator:
         ``method="table"``: one direct Monte Carlo run per table point (``n_mua * n_mus``
         runs). ``method="white"``: one perturbation Monte Carlo run per ``mus`` column,
         whose packets carry one weight per tabulated ``mua``
-        (:mod:`mcmatlab_py.white`; ``n_mus`` runs, same photons per column). Each run uses
+        (:mod:`mcmatlab_py.white`; ``n_mus`` runs, same photons per column; on demand, only
+        the rows a column still needs). ``method="auto"``: ``white`` where the white
+        kernel applies to ``spec`` (:func:`resolve_method`), else ``table``. Each run uses
         all cores (photon batches in parallel), or, with a ``dask.distributed`` ``client``
         (:func:`mcmatlab_py.distributed.connect`), one task per run on the cluster's
         workers; both give the same table. The cache file is keyed by the spec and the
@@ -417,8 +423,7 @@ class AbsorptionEmulator:
         (the paper's prior needs 7 of the 12 columns, not the costly high ``mus`` ones).
         The points are the same numbers either way.
         """
-        if method not in METHODS:
-            raise ValueError(f"method must be one of {METHODS}, got {method!r}")
+        method = resolve_method(spec, method)
         key = cache_key(spec, method)
         cache = Path(cache_dir) if cache_dir is not None else default_cache_dir()
         path = cache / f"emulator-{key}.npz"
@@ -458,15 +463,13 @@ class AbsorptionEmulator:
 
     def fill(self, points: np.ndarray) -> None:
         """Run the Monte Carlo of the table points in ``points`` ((n_mua, n_mus) bool) not
-        built yet, and add them to the cache file. ``method="white"`` builds whole ``mus``
-        columns (one run gives every ``mua``). Each point's numbers depend only on the spec
-        and its place in the table, so an emulator filled piece by piece equals one built
-        at once, bit for bit."""
+        built yet, and add them to the cache file. ``method="white"`` runs one white run per
+        ``mus`` column for the rows that column still needs. Each point's numbers depend
+        only on the spec and its place in the table, so an emulator filled piece by piece
+        equals one built at once, bit for bit."""
         import time
 
         from .distributed import run_tasks
-        from .white import white_column
-
         missing = np.asarray(points, dtype=bool) & ~self.have
         if not missing.any():
             return
@@ -479,11 +482,12 @@ class AbsorptionEmulator:
         # cost grows with mus: the expensive columns first, so the ETA is honest
         columns = [b for b in range(spec.n_mus)[::-1] if missing[:, b].any()]
         if self.method == "white":
-            results = run_tasks(functools.partial(white_column, spec), columns, client=client,
+            todo = [(b, np.flatnonzero(missing[:, b])) for b in columns]
+            results = run_tasks(functools.partial(_white_rows, spec), todo, client=client,
                                 progress=progress, label="emulator table (white)")
-            for b, (rows, fracs) in zip(columns, results, strict=True):
-                self.log_na[:, b], self.absorbed[:, b] = rows, fracs
-                self.have[:, b] = True
+            for (b, rows), (values, fracs) in zip(todo, results, strict=True):
+                self.log_na[rows, b], self.absorbed[rows, b] = values, fracs
+                self.have[rows, b] = True
         else:
             todo = [(a, b) for b in columns for a in range(spec.n_mua) if missing[a, b]]
             results = run_tasks(functools.partial(table_point, spec), todo, client=client,
@@ -497,6 +501,39 @@ class AbsorptionEmulator:
         from fem.threads import release_free_memory
 
         release_free_memory()  # the load operator's and the runs' temporaries
+
+
+def _white_rows(spec: EmulatorSpec, task: tuple) -> tuple[np.ndarray, np.ndarray]:
+    """One task of a white fill: ``(b, rows)`` -> :func:`mcmatlab_py.white.white_column`."""
+    from .white import white_column
+
+    return white_column(spec, *task)
+
+
+def white_supported(spec: EmulatorSpec) -> str | None:
+    """None when the white build applies to ``spec``, else why not: it needs one
+    refractive index for all media (or matched interfaces) and ``mua > 0`` in every
+    fixed medium (:func:`mcmatlab_py.white.white_absorbed`)."""
+    if spec.media is None:
+        return None
+    present = np.unique(spec.medium_map)
+    n = {spec.media[i][3] if i != spec.estimated else spec.n for i in present}
+    if not spec.matched_interfaces and len(n) > 1:
+        return f"media of refractive indices {sorted(n)} with mismatched interfaces"
+    bad = [int(i) for i in present if i != spec.estimated and not spec.media[i][0] > 0]
+    if bad:
+        return f"medium {bad[0]} is fixed with mua = {spec.media[bad[0]][0]!r} (needs > 0)"
+    return None
+
+
+def resolve_method(spec: EmulatorSpec, method: str) -> str:
+    """The build method for ``spec``: ``method`` itself, or for ``"auto"`` ``"white"``
+    where :func:`white_supported` allows it, else ``"table"``."""
+    if method not in METHODS:
+        raise ValueError(f"method must be one of {METHODS}, got {method!r}")
+    if method == "auto":
+        return "table" if white_supported(spec) else "white"
+    return method
 
 
 def _voxel_map(X, Y, Z, M):
@@ -585,7 +622,9 @@ def symmetrize(na: np.ndarray, spec: EmulatorSpec, voxels: bool = False) -> np.n
 
 def cache_key(spec: EmulatorSpec, method: str = "table") -> str:
     """The cache key of a table: the spec's, and for ``"white"`` the method as well (the
-    ``"table"`` key is the spec's own, so the tables cached before methods existed stay)."""
+    ``"table"`` key is the spec's own, so the tables cached before methods existed stay);
+    ``"auto"`` is first resolved (:func:`resolve_method`)."""
+    method = resolve_method(spec, method)
     if method == "table":
         return spec.key()
     text = f"{spec.key()}-{method}-{WHITE_VERSION}"

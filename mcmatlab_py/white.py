@@ -112,7 +112,8 @@ def white_absorbed(spec, mua, mus: float, *, n_photons: int, seed: int,
     fold = np.ascontiguousarray(fold, dtype=np.int64)
     acc = np.zeros((n_threads, n_rows, K), dtype=np.int64)
     tally = np.zeros((n_threads, WK.N_TALLY, K), dtype=np.int64)
-    kargs = (np.ascontiguousarray(mua_tab), rate, Mf, mus_m, g_m,
+    kid = mua.view(np.uint64)  # a weight's roulette numbers are keyed by its mua
+    kargs = (np.ascontiguousarray(mua_tab), rate, kid, Mf, mus_m, g_m,
              float(n_m[spec.estimated]), nx, ny, nz, dx, dy, dz,
              boundary_type, n_out, matched, roulette, w_thr, chance, si, sf, stab, svox, fold,
              np.uint64(seed), bs, int(n_photons))
@@ -130,16 +131,21 @@ def white_absorbed(spec, mua, mus: float, *, n_photons: int, seed: int,
                        n_photons=int(n_photons))
 
 
-def white_column(spec, b: int) -> tuple[np.ndarray, np.ndarray]:
+def white_column(spec, b: int, rows=None) -> tuple[np.ndarray, np.ndarray]:
     """Column ``b`` (one ``mus``) of the emulator table of ``spec`` by one white run:
-    log(NA + offset) at the orbit representatives (n_mua, n_unique) and the absorbed
-    fraction of every ``mua`` (n_mua,). The photons and the seed are those of the direct
-    table's points in that column (``spec.photons_at(mus)``, ``spec.seed``)."""
+    log(NA + offset) at the orbit representatives (n_rows, n_unique) and the absorbed
+    fraction of every ``mua`` (n_rows,), for the table rows ``rows`` (indices into
+    ``spec.mua_grid()``; all ``n_mua`` by default). The photons and the seed are those of
+    the direct table's points in that column (``spec.photons_at(mus)``, ``spec.seed``).
+    A row's numbers do not depend on which other rows run with it (each weight draws its
+    own roulette numbers), so a column built in pieces equals one built at once, bit for
+    bit."""
     from .emulator import table_rows
 
     mus = float(spec.mus_grid()[b])
-    res = white_absorbed(spec, spec.mua_grid(), mus, n_photons=spec.photons_at(mus),
+    mua = spec.mua_grid() if rows is None else spec.mua_grid()[np.asarray(rows, dtype=int)]
+    res = white_absorbed(spec, mua, mus, n_photons=spec.photons_at(mus),
                          seed=spec.seed, symmetrized=True)
     dV = spec.Lx * spec.Ly * spec.Lz / (spec.nx * spec.ny * spec.nz)
-    rows = table_rows(spec, res.absorbed / (res.n_photons * dV), symmetric=True)
-    return rows, res.absorbed.reshape(res.mua.size, -1).sum(axis=1) / res.n_photons
+    out = table_rows(spec, res.absorbed / (res.n_photons * dV), symmetric=True)
+    return out, res.absorbed.reshape(res.mua.size, -1).sum(axis=1) / res.n_photons

@@ -76,7 +76,7 @@ def test_the_estimated_medium_by_name_or_index(value, index):
      r"G.media\[1\].TC = 0.005 differs from the estimated medium's 0.0037"),
     (lambda c: c["G"]["media"][0].pop("VHC"), r"G.media\[0\].VHC is needed"),
     (lambda c: c["filter"]["emulator"].update(method="fast"),
-     "filter.emulator.method must be \"table\" or \"white\""),
+     "filter.emulator.method must be \"auto\", \"table\" or \"white\""),
     # the prior of the epidermis (2.5-10 cm^-1) is outside the example's table
     (lambda c: c["filter"].update(medium="epidermis"),
      r"filter.emulator.mua_range = \[0.3, 3.0\] must cover the prior of mua, \[2.5, 10\] "

@@ -16,7 +16,14 @@ import pytest
 
 from mcmatlab_py import _mc_kernel as K
 from mcmatlab_py._strict import NotBuiltError
-from mcmatlab_py.emulator import AbsorptionEmulator, EmulatorSpec, cache_key, symmetrize
+from mcmatlab_py.emulator import (
+    AbsorptionEmulator,
+    EmulatorSpec,
+    cache_key,
+    resolve_method,
+    symmetrize,
+    white_supported,
+)
 from mcmatlab_py.white import white_absorbed, white_column
 
 C = 1.1
@@ -125,6 +132,55 @@ def test_white_build_is_cached_under_its_own_key(tmp_path):
     np.testing.assert_array_equal(again.log_na, emu.log_na)
     with pytest.raises(ValueError, match="method"):
         AbsorptionEmulator.build(spec, cache_dir=tmp_path, progress=False, method="fast")
+
+
+@pytest.mark.parametrize("layered", [False, True])
+def test_a_weight_does_not_depend_on_the_other_weights(layered):
+    """Each photon has its own path stream and each weight its own roulette numbers: a
+    run of some of the mua values gives their maps and tallies bit for bit as a run of
+    all of them (the one-medium kernel, and the general kernel with two media)."""
+    spec = layered_spec_() if layered else spec_()
+    mua = np.array([0.2, 0.7, 2.0, 6.0, 20.0])
+    full = white_absorbed(spec, mua, 100.0, n_photons=1500, seed=5)
+    for rows in ([1, 2], [4], [3, 0]):
+        part = white_absorbed(spec, mua[rows], 100.0, n_photons=1500, seed=5)
+        np.testing.assert_array_equal(part.absorbed, full.absorbed[rows])
+        np.testing.assert_array_equal(part.tally, full.tally[:, rows])
+
+
+def test_white_fill_in_pieces_equals_the_whole_build(tmp_path):
+    """On demand the white fill runs only the rows a column still needs; any order of
+    pieces gives the table of one build, bit for bit."""
+    spec = spec_(mua_range=(0.5, 4.0), mus_range=(50.0, 400.0), n_mua=5, n_mus=4,
+                 n_photons=800)
+    whole = AbsorptionEmulator.build(spec, cache_dir=tmp_path / "a", progress=False,
+                                     method="white")
+    emu = AbsorptionEmulator.build(spec, cache_dir=tmp_path / "b", progress=False,
+                                   method="white", on_demand=True)
+    assert not emu.have.any()
+    for a, b in [(slice(1, 3), 2), (slice(0, 5), 2), (slice(3, 5), slice(0, 2))]:
+        piece = np.zeros_like(emu.have)
+        piece[a, b] = True
+        emu.fill(piece)
+        assert emu.have[a, b].all()
+    emu.fill(np.ones_like(emu.have))
+    np.testing.assert_array_equal(emu.log_na, whole.log_na)
+    np.testing.assert_array_equal(emu.absorbed, whole.absorbed)
+
+
+def test_auto_method_is_white_where_it_applies():
+    assert white_supported(spec_()) is None
+    assert resolve_method(spec_(), "auto") == "white"
+    assert resolve_method(spec_(), "table") == "table"
+    other_n = layered_spec_(matched_interfaces=False, media=((5.0, 150.0, 0.8, 1.45),
+                                                             (None, None, 0.9, 1.3)))
+    assert "refractive" in white_supported(other_n)
+    assert resolve_method(other_n, "auto") == "table"
+    no_decay = layered_spec_(media=((0.0, 150.0, 0.8, 1.3), (None, None, 0.9, 1.3)))
+    assert "mua = 0.0" in white_supported(no_decay)
+    assert resolve_method(layered_spec_(), "auto") == "white"
+    with pytest.raises(ValueError, match="method must be one of"):
+        resolve_method(spec_(), "fast")
 
 
 # ------------------------------------------------ several media (issue #19, part 2)

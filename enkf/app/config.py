@@ -104,7 +104,7 @@ class IdentifyConfig:
     rate: float | None = None  #: Hz, the sensor's nominal rate (sensors.rate)
     medium: int = 0  #: index in G.media of the medium whose parameters are estimated
     #: how the emulator's table is built: "table" (direct Monte Carlo per point) or "white"
-    emulator_method: str = "table"
+    emulator_method: str = "auto"
     #: build each table point the first time a member needs it (the same numbers; a cold
     #: start pays only for the part of the table the ensemble visits), else all at once
     emulator_on_demand: bool = True
@@ -376,10 +376,10 @@ def identify_config_from_dict(cfg: dict) -> IdentifyConfig:
                 raise ConfigError(
                     f"filter.emulator.{name}_range = {[t_lo, t_hi]} must cover the prior of "
                     f"{par}, [{p_lo:g}, {p_hi:g}] cm^-1 ({source})")
-    method = emu.get("method", "table")
-    if method not in ("table", "white"):
-        raise ConfigError(f"filter.emulator.method must be \"table\" or \"white\", got "
-                          f"{shorten(repr(method))}")
+    method = emu.get("method", "auto")
+    if method not in ("table", "white", "auto"):
+        raise ConfigError(f"filter.emulator.method must be \"auto\", \"table\" or \"white\", "
+                          f"got {shorten(repr(method))}")
     exact = emu.get("exact", False)
     on_demand = emu.get("on_demand", True)
     for k, v in (("exact", exact), ("on_demand", on_demand)):

@@ -53,7 +53,8 @@ def filter_setup(scenario: str, absorption, *, seed: int = 0, n_members: int = 5
 
 
 def emulator_for(coarse=(20, 20, 10), n_photons: int = 250_000, *, progress=True,
-                 cache_dir=None, mc_grid=(100, 100, 50), client=None, on_demand=True, **kw):
+                 cache_dir=None, mc_grid=(100, 100, 50), client=None, on_demand=True,
+                 method="auto", **kw):
     """The filter's absorption emulator for the paper's block (cached).
 
     The Monte Carlo of each table point runs on ``mc_grid`` (the truth's voxels) and
@@ -71,4 +72,5 @@ def emulator_for(coarse=(20, 20, 10), n_photons: int = 250_000, *, progress=True
     spec = EmulatorSpec.from_model(paper_model(mc_grid, progress=False), n_photons=n_photons,
                                    mesh_divisions=tuple(coarse), **kw)
     return AbsorptionEmulator.build(spec, cache_dir=cache_dir, progress=progress,
-                                    out_of_range="clamp", client=client, on_demand=on_demand)
+                                    out_of_range="clamp", client=client, on_demand=on_demand,
+                                    method=method)
