@@ -310,8 +310,22 @@ def test_identify_with_the_smoother_reports_it(tmp_path, cache):
         assert 0 < lo < p["estimate"] < hi and p["std"] > 0
     assert run("identify", cfg, "--follow", EX / "tiny_data.csv", "--out", tmp_path / "f",
                "--quiet", "--cache-dir", cache) == 2
+    assert sm["knots"] == 1 and sm["discrepancy"] == 0.01 and sm["discrepancy_time"] == 2.0
+    # optics drifting while heated: the values at the knots too
+    (tmp_path / "k").mkdir()
+    _, _, s = _identify_tiny(tmp_path / "k", cache, "smoother_iterations = 2\n"
+                             "smoother_knots = 3\nsmoother_discrepancy = 0\n")
+    sm = s["smoother"]
+    assert sm["knots"] == 3 and sm["discrepancy"] == 0.0
+    heated = sm["knot_times_heated_s"]
+    assert len(heated) == 3 and heated[0] == 0.0 and heated[-1] > 0
+    for name, p in sm["parameters"].items():
+        assert p["estimate"] == pytest.approx(sm["knot_estimates"][name][-1])
     for bad in ("smoother_iterations = -1\n", "smoother_iterations = 1.5\n",
-                "smoother_iterations = 2\nparameter_model = \"trend\"\n"):
+                "smoother_iterations = 2\nparameter_model = \"trend\"\n",
+                "smoother_knots = 3\n", "smoother_iterations = 2\nsmoother_knots = 0\n",
+                "smoother_iterations = 2\nsmoother_discrepancy = -0.1\n",
+                "smoother_iterations = 2\nsmoother_discrepancy_time = 0\n"):
         cfg.write_text(TINY.replace("[filter]\n", "[filter]\n" + bad, 1))
         assert run("identify", cfg, "--data", EX / "tiny_data.csv", "--out", tmp_path / "b",
                    "--quiet", "--cache-dir", cache) == 2

@@ -15,19 +15,32 @@ EXIT_BATCH_FAILED = 1  #: every file of a batch failed (batch.csv says why)
 #: what ``identify`` writes at the top of --out: what ``--follow --force`` clears first
 _OUTPUTS = ("estimates.csv", "summary.json", "run.json", "batch.csv", "fields", "figures")
 
-def _smoother_summary(setup, times, data, n_iter: int, quiet: bool) -> dict:
-    """summary.json's ``smoother``: ES-MDA over the whole window (constant optics)."""
-    from ..tissue import smooth_constant
+def _smoother_summary(setup, times, data, n_iter: int, options: dict, quiet: bool) -> dict:
+    """summary.json's ``smoother``: ES-MDA over the whole window, for constant optics
+    (``knots`` 1) or optics drifting while heated (``knots`` >= 2; the estimates are those
+    at the window's end, and the knots' values are listed)."""
+    from ..tissue import smooth_constant, smooth_drifting
 
-    est = smooth_constant(setup, times, data, n_iter=n_iter)
+    opts = dict(options or {})
+    knots = int(opts.pop("knots", 1))
+    if knots > 1:
+        est = smooth_drifting(setup, times, data, knots=knots, n_iter=n_iter, **opts)
+    else:
+        est = smooth_constant(setup, times, data, n_iter=n_iter, **opts)
     if not quiet:
         print(f"smoother (ES-MDA, {n_iter} updates, {est.wall_s:.1f} s): " + ", ".join(
             f"{n} {m:.4g} +- {s:.2g}" for n, m, s in zip(est.names, est.mean, est.std,
                                                           strict=True)), file=sys.stderr)
-    return {"method": "ES-MDA", "iterations": n_iter, "wall_s": est.wall_s,
-            "parameters": {n: {"estimate": float(est.mean[i]), "std": float(est.std[i]),
-                               "band_2sd": list(est.band(i))}
-                           for i, n in enumerate(est.names)}}
+    out = {"method": "ES-MDA", "iterations": n_iter, "knots": knots, **opts,
+           "wall_s": est.wall_s,
+           "parameters": {n: {"estimate": float(est.mean[i]), "std": float(est.std[i]),
+                              "band_2sd": list(est.band(i))}
+                          for i, n in enumerate(est.names)}}
+    if knots > 1:
+        out["knot_times_heated_s"] = est.knot_times.tolist()
+        out["knot_estimates"] = {n: est.knots[:, :, i].mean(axis=0).tolist()
+                                 for i, n in enumerate(est.names)}
+    return out
 
 
 def _identify_one(cfg, absorption, seed, data_path, out_dir, quiet=True) -> dict:
@@ -64,7 +77,7 @@ def _identify_one(cfg, absorption, seed, data_path, out_dir, quiet=True) -> dict
                                      absorption=absorption, risk=risk)
     if cfg.smoother_iterations:
         summary["smoother"] = _smoother_summary(setup, times, data, cfg.smoother_iterations,
-                                                quiet)
+                                                cfg.smoother_options, quiet)
         write_json(Path(out_dir) / "summary.json", summary)
     summary["data"] = str(data_path)
     summary["wall_s"] = time.perf_counter() - t0

@@ -79,7 +79,8 @@ _FILTER_KEYS = {
     "random_walk_std", "random_walk_when_off", "inflation", "mda", "seed", "parameter_model",
     "localization_radius", "heat_mass", "transforms", "emulator", "bounds", "prior",
     "model_error", "adaptive_inflation", "coagulation", "medium", "sensor_offset_std",
-    "smoother_iterations",
+    "smoother_iterations", "smoother_knots", "smoother_discrepancy",
+    "smoother_discrepancy_time",
 }
 _MODEL_ERROR_KEYS = {"kind", "rel_std", "time_scale", "length_xy", "length_z"}
 _ADAPTIVE_KEYS = {"enabled", "bounds", "time_scale"}
@@ -111,6 +112,9 @@ class IdentifyConfig:
     #: ES-MDA updates of the smoother over the whole window after the filter (0: none;
     #: enkf.tissue.smooth_constant, constant optics only), reported in summary.json
     smoother_iterations: int = 0
+    #: the smoother's ``knots`` (1: constant optics, smooth_constant; >= 2: optics drifting
+    #: while heated, smooth_drifting), ``discrepancy`` and ``discrepancy_time`` (s)
+    smoother_options: dict = None
 
     @property
     def n_obs(self) -> int:
@@ -187,7 +191,8 @@ _LIMITS = {"sensors.noise_var": 1e4, "sensors.camera.noise_var": 1e4, "sensors.r
            "filter.sensor_offset_std": 100.0,
            "filter.random_walk_std": 10.0, "filter.random_walk_when_off": 10.0,
            "filter.inflation": 100.0, "filter.localization_radius": 1e3, "filter.mda": 100,
-           "filter.smoother_iterations": 100,
+           "filter.smoother_iterations": 100, "filter.smoother_knots": 50,
+           "filter.smoother_discrepancy": 10.0, "filter.smoother_discrepancy_time": 1e6,
            "filter.seed": 2**63 - 1, "filter.emulator.n_photons": 10**11,
            "filter.emulator.n_mua": 1000, "filter.emulator.n_mus": 1000,
            "filter.emulator.seed": 2**63 - 1, "data.time_offset": 1e9,
@@ -197,18 +202,40 @@ _LIMITS = {"sensors.noise_var": 1e4, "sensors.camera.noise_var": 1e4, "sensors.r
 
 
 def _smoother_iterations(flt: dict, setup_kw: dict) -> int:
-    """``[filter] smoother_iterations``: ES-MDA updates after the filter (constant optics)."""
+    """``[filter] smoother_iterations``: ES-MDA updates after the filter."""
     if "smoother_iterations" not in flt:
+        for k in ("smoother_knots", "smoother_discrepancy", "smoother_discrepancy_time"):
+            if k in flt:
+                raise ConfigError(f"filter.{k} needs filter.smoother_iterations >= 1")
         return 0
     n = int(_num("filter.smoother_iterations", flt["smoother_iterations"], integer=True, lo=0))
     if n and setup_kw.get("parameter_model", "random_walk") != "random_walk":
-        raise ConfigError("filter.smoother_iterations needs constant optics (parameter_model = "
-                          f"\"random_walk\"), got parameter_model = "
+        raise ConfigError("filter.smoother_iterations needs constant or drifting optics "
+                          "(parameter_model = \"random_walk\"), got parameter_model = "
                           f"{setup_kw['parameter_model']!r}")
     if n and setup_kw.get("sensor_offset_std", 0):
         raise ConfigError("filter.smoother_iterations does not estimate sensor offsets: set "
                           "filter.sensor_offset_std = 0 or drop the smoother")
     return n
+
+
+def _smoother_options(flt: dict) -> dict:
+    """``[filter] smoother_knots``, ``smoother_discrepancy``, ``smoother_discrepancy_time``."""
+    out = dict(SMOOTHER_DEFAULTS)
+    if "smoother_knots" in flt:
+        out["knots"] = int(_num("filter.smoother_knots", flt["smoother_knots"], integer=True,
+                                lo=1))
+    if "smoother_discrepancy" in flt:
+        out["discrepancy"] = float(_num("filter.smoother_discrepancy",
+                                        flt["smoother_discrepancy"], lo=0))
+    if "smoother_discrepancy_time" in flt:
+        out["discrepancy_time"] = float(_num("filter.smoother_discrepancy_time",
+                                             flt["smoother_discrepancy_time"], positive=True))
+    return out
+
+
+#: the smoother's defaults in a config: constant optics, a 1% model discrepancy over 2 s
+SMOOTHER_DEFAULTS = {"knots": 1, "discrepancy": 0.01, "discrepancy_time": 2.0}
 
 
 def _num(key, v, *, positive=False, integer=False, lo=None, hi=None):
@@ -399,7 +426,8 @@ def identify_config_from_dict(cfg: dict) -> IdentifyConfig:
         setup_kw["image"].n_pixels if "image" in setup_kw else 0))
     try:
         out = IdentifyConfig(model, setup_kw, grid, emulator_kw, exact, cfg, bounds, data, rate,
-                             medium, method, on_demand, _smoother_iterations(flt, setup_kw))
+                             medium, method, on_demand, _smoother_iterations(flt, setup_kw),
+                             _smoother_options(flt))
         out.setup(absorption=lambda mua, mus: None)  # validates the filter settings
         n_nodes = int(np.prod([n + 1 for n in grid]))
         table = 0 if exact else emulator_kw.get("n_mua", 12) * emulator_kw.get("n_mus", 12)

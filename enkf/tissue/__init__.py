@@ -54,7 +54,7 @@ from .parameters import (
 )
 from .risk import RiskTracker
 from .setup import TissueFilterSetup
-from .smooth import SmootherEstimates, smooth_constant
+from .smooth import SmootherEstimates, heated_time, smooth_constant, smooth_drifting
 
 __all__ = [
     "Absorption",
@@ -87,5 +87,7 @@ __all__ = [
     "observation_operator",
     "parameter_names",
     "smooth_constant",
+    "smooth_drifting",
+    "heated_time",
     "tracked_points",
 ]

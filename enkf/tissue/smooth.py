@@ -1,17 +1,25 @@
-"""Constant optics from a whole window of readings: the ES-MDA smoother (:mod:`enkf.smoother`).
+"""Optics from a whole window of readings: the ES-MDA smoother (:mod:`enkf.smoother`).
 
-:func:`identify` is the online filter: one linear update per reading. Where the optics
-are constant over the window (no drift, no coagulation) the whole window can be
-analysed at once, as often as wanted afterwards: :func:`smooth_constant` starts from
+:func:`identify` is the online filter: one linear update per reading. After the readings,
+the whole window can be analysed at once, as often as wanted: the smoother starts from
 the same prior ensemble as the filter and runs ES-MDA over all the readings, each
 member's temperatures re-run from ``T_initial`` with its own optics for every update.
-On the layered twin (``docs/layered.md``) it brings the error of the dermis's mus from
-1.9 times the Cramér-Rao bound (the filter) to about the bound.
 
-What it assumes: constant parameters and the filter's coarse model without model
-error (the smoother has no model noise). On data from another model its bands are
-those of a perfect model: read them as the noise's share only (the filter's structured
-model error is the honest one there).
+* :func:`smooth_constant`: optics constant over the window. On the layered twin
+  (``docs/layered.md``) it brings the error of the dermis's mus from 1.9 times the
+  Cramér-Rao bound (the filter) to about the bound.
+* :func:`smooth_drifting`: optics that change while the tissue is heated, piecewise
+  linear in *heated time* (the seconds with the laser on so far: held while it is off)
+  through ``knots`` values per parameter. Against the independent truths of issue #18
+  (``validation/reports/smoother_drifting.md``) it meets the drifting targets the filter
+  misses on truth A.
+
+What they assume: the filter's coarse model, with no model noise. The readings' errors
+are the sensor's noise plus, with ``discrepancy > 0``, a model discrepancy: a relative
+error of the temperature rise, correlated over ``discrepancy_time`` seconds (an
+exponential correlation), the form of the coarse model's error against finer and other
+models. With ``discrepancy = 0`` the bands are those of a perfect model: the noise's
+share only.
 """
 
 from __future__ import annotations
@@ -26,21 +34,25 @@ from ..smoother import es_mda
 from .identify import assemble
 from .setup import TissueFilterSetup
 
-__all__ = ["SmootherEstimates", "smooth_constant"]
+__all__ = ["SmootherEstimates", "heated_time", "smooth_constant", "smooth_drifting"]
 
 
 @dataclass
 class SmootherEstimates:
     """The parameter ensemble after ES-MDA.
 
-    ``names`` (n_par,); ``theta`` (N, n_par) physical units (cm^-1 for mua and mus, the
-    setup's units for VHC and TC); ``n_iter`` updates; ``wall_s`` s.
+    ``names`` (n_par,); ``theta`` (N, n_par) the parameters at the end of the window,
+    physical units (cm^-1 for mua and mus, the setup's units for VHC and TC); ``n_iter``
+    updates; ``wall_s`` s. Drifting optics (:func:`smooth_drifting`): ``knot_times``
+    (K,) s of heated time and ``knots`` (N, K, n_par) the members' values there.
     """
 
     names: tuple
     theta: np.ndarray
     n_iter: int
     wall_s: float
+    knot_times: np.ndarray | None = None
+    knots: np.ndarray | None = None
 
     @property
     def mean(self) -> np.ndarray:
@@ -59,8 +71,31 @@ class SmootherEstimates:
                 float(np.quantile(self.theta[:, i], 1 - q)))
 
 
+def heated_time(power, edges) -> np.ndarray:
+    """(M + 1,) s of heated time at the step edges ``edges`` (M + 1,) s: the clock of
+    optics that change only while the laser heats (a step counts as heated when ``power``
+    is > 0 at its middle, as the filter's walk does)."""
+    edges = np.asarray(edges, float)
+    mid = 0.5 * (edges[:-1] + edges[1:])
+    on = np.array([power(float(t)) > 0 for t in mid], dtype=float)
+    return np.r_[0.0, np.cumsum(on * np.diff(edges))]
+
+
+def _knot_values(U: np.ndarray, n_knots: int, n_par: int, tk: np.ndarray,
+                 tau: np.ndarray) -> np.ndarray:
+    """(M, N, n_par): the members' parameters at the heated times ``tau`` (M,), linear in
+    the values between the knots ``tk`` (K,) whose logs are ``U`` (N, K * n_par)."""
+    V = np.exp(U).reshape(U.shape[0], n_knots, n_par)
+    if n_knots == 1:
+        return np.broadcast_to(V[:, 0], (tau.size, *V[:, 0].shape))
+    j = np.clip(np.searchsorted(tk, tau, side="right") - 1, 0, n_knots - 2)
+    w = np.clip((tau - tk[j]) / (tk[j + 1] - tk[j]), 0.0, 1.0)[:, None, None]
+    return (1 - w) * V[:, j].transpose(1, 0, 2) + w * V[:, j + 1].transpose(1, 0, 2)
+
+
 def smooth_constant(setup: TissueFilterSetup, times, data, *, n_iter: int = 4,
-                    seed: int | None = None) -> SmootherEstimates:
+                    seed: int | None = None, discrepancy: float = 0.0,
+                    discrepancy_time: float = 2.0) -> SmootherEstimates:
     """Constant optics from all the readings at once (module doc).
 
     Parameters
@@ -71,16 +106,52 @@ def smooth_constant(setup: TissueFilterSetup, times, data, *, n_iter: int = 4,
     data : (M, p) deg C as for :func:`identify`; NaN readings are left out
     n_iter : ES-MDA updates (each re-runs the ensemble over the window)
     seed : the generator of the prior and the perturbations (default ``setup.seed``)
+    discrepancy : relative sd of the model's error of the temperature rise (0: none)
+    discrepancy_time : s, its correlation time
 
     The update is ``setup.method``'s (:func:`enkf.smoother.es_mda`: ``"etkf"``, the
     default, without perturbed observations).
     """
+    return _smooth(setup, times, data, n_iter, seed, 1, 0.0, discrepancy, discrepancy_time)
+
+
+def smooth_drifting(setup: TissueFilterSetup, times, data, *, knots: int = 3,
+                    n_iter: int = 8, seed: int | None = None, drift_log_std: float = 1.0,
+                    discrepancy: float = 0.0,
+                    discrepancy_time: float = 2.0) -> SmootherEstimates:
+    """Optics that drift while heated, from all the readings at once (module doc).
+
+    Each estimated parameter is piecewise linear in heated time (:func:`heated_time`)
+    through ``knots`` values spread evenly over the window's heated time (held while the
+    laser is off, as the filter's default walk holds them). The first knot's prior is the
+    filter's; each later knot's log is the previous one's plus a normal step, their sum
+    over the window of sd ``drift_log_std``. Other arguments as :func:`smooth_constant`;
+    ``n_iter`` 8 (more unknowns, a more curved map than for constant optics).
+
+    ``theta`` of the result holds the parameters at the end of the window and ``knots``
+    the values at ``knot_times``. Measured against independent truths:
+    ``validation/reports/smoother_drifting.md``.
+    """
+    if not (isinstance(knots, (int, np.integer)) and knots >= 2):
+        raise ValueError(f"knots must be an integer >= 2 (1: smooth_constant), got {knots!r}")
+    if not (np.isfinite(drift_log_std) and drift_log_std > 0):
+        raise ValueError(f"drift_log_std must be > 0 (log units), got {drift_log_std!r}")
+    return _smooth(setup, times, data, n_iter, seed, int(knots), float(drift_log_std),
+                   discrepancy, discrepancy_time)
+
+
+def _smooth(setup, times, data, n_iter, seed, n_knots, drift_log_std, discrepancy,
+            discrepancy_time) -> SmootherEstimates:
     if setup.parameter_model != "random_walk":
-        raise ValueError(f"smooth_constant needs constant parameters (parameter_model = "
-                         f"'random_walk'), got {setup.parameter_model!r}")
+        raise ValueError(f"the smoother needs parameter_model = 'random_walk' (constant or "
+                         f"drifting optics), got {setup.parameter_model!r}")
     if setup.n_sensor_offsets:
-        raise ValueError("smooth_constant does not estimate sensor offsets: set "
+        raise ValueError("the smoother does not estimate sensor offsets: set "
                          "sensor_offset_std = 0")
+    if not (np.isfinite(discrepancy) and discrepancy >= 0):
+        raise ValueError(f"discrepancy must be >= 0 (relative sd), got {discrepancy!r}")
+    if not (np.isfinite(discrepancy_time) and discrepancy_time > 0):
+        raise ValueError(f"discrepancy_time must be > 0 s, got {discrepancy_time!r}")
     times = float_array(times, "times", 1)
     if times.size == 0 or times[0] <= 0 or np.any(np.diff(times) <= 0):
         raise ValueError("times must be strictly increasing and after 0 (s)")
@@ -96,19 +167,41 @@ def smooth_constant(setup: TissueFilterSetup, times, data, *, n_iter: int = 4,
     X0, theta0 = pieces.prior(rng, setup.n_members)
     model, P = pieces.model, pieces.P_obs
     edges = np.r_[0.0, times]
+    n_par = theta0.shape[1]
+    heated = heated_time(setup.power, edges)
+    tau = 0.5 * (heated[:-1] + heated[1:])  # each step's optics: at its middle
+    tk = np.linspace(0.0, heated[-1], n_knots)
+    if n_knots > 1 and not tk[-1] > 0:
+        raise ValueError("smooth_drifting needs readings while the laser heats (setup.power "
+                         "> 0): no heated time in the window")
+    U0 = [np.log(theta0)]
+    step = drift_log_std / np.sqrt(max(n_knots - 1, 1))
+    for _ in range(1, n_knots):
+        U0.append(U0[-1] + step * rng.standard_normal(theta0.shape))
+    U0 = np.concatenate(U0, axis=1)
 
     def simulate(U: np.ndarray) -> np.ndarray:
-        theta = np.exp(U)
+        theta = _knot_values(U, n_knots, n_par, tk, tau)
         T = X0.copy()
         out = np.empty((U.shape[0], times.size, P.shape[0]))
         for k in range(times.size):
-            T = model(T, theta, float(edges[k]), float(edges[k + 1]))
+            T = model(T, np.ascontiguousarray(theta[k]), float(edges[k]), float(edges[k + 1]))
             out[:, k] = (P @ T.T).T
         return out.reshape(U.shape[0], -1)[:, keep]
 
-    R = np.tile(np.asarray(pieces.noise_var, float), times.size)[keep]
+    noise = np.tile(np.asarray(pieces.noise_var, float), times.size)
+    R = noise[keep]
+    if discrepancy > 0:
+        rise = np.abs(data - setup.T_initial)
+        rise = np.where(np.isfinite(rise), rise, 0.0).ravel()[keep]
+        t_obs = np.repeat(times, P.shape[0])[keep]
+        corr = np.exp(-np.abs(t_obs[:, None] - t_obs[None, :]) / discrepancy_time)
+        R = np.diag(R) + (discrepancy ** 2) * np.outer(rise, rise) * corr
     tic = time.perf_counter()
-    U = es_mda(simulate, np.log(theta0), data.ravel()[keep], R, rng, n_iter=n_iter,
-               method=setup.method)
-    return SmootherEstimates(tuple(setup.parameter_names), np.exp(U), int(n_iter),
-                             time.perf_counter() - tic)
+    U = es_mda(simulate, U0, data.ravel()[keep], R, rng, n_iter=n_iter, method=setup.method)
+    wall = time.perf_counter() - tic
+    if n_knots == 1:
+        return SmootherEstimates(tuple(setup.parameter_names), np.exp(U), int(n_iter), wall)
+    V = np.exp(U).reshape(U.shape[0], n_knots, n_par)  # the end of the window: the last knot
+    return SmootherEstimates(tuple(setup.parameter_names), np.ascontiguousarray(V[:, -1]),
+                             int(n_iter), wall, knot_times=tk, knots=V)
