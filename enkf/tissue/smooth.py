@@ -81,16 +81,29 @@ def heated_time(power, edges) -> np.ndarray:
     return np.r_[0.0, np.cumsum(on * np.diff(edges))]
 
 
-def _knot_values(U: np.ndarray, n_knots: int, n_par: int, tk: np.ndarray,
-                 tau: np.ndarray) -> np.ndarray:
+def _knot_values(V: np.ndarray, tk: np.ndarray, tau: np.ndarray) -> np.ndarray:
     """(M, N, n_par): the members' parameters at the heated times ``tau`` (M,), linear in
-    the values between the knots ``tk`` (K,) whose logs are ``U`` (N, K * n_par)."""
-    V = np.exp(U).reshape(U.shape[0], n_knots, n_par)
+    the values ``V`` (N, K, n_par) between the knots ``tk`` (K,)."""
+    n_knots = V.shape[1]
     if n_knots == 1:
         return np.broadcast_to(V[:, 0], (tau.size, *V[:, 0].shape))
     j = np.clip(np.searchsorted(tk, tau, side="right") - 1, 0, n_knots - 2)
     w = np.clip((tau - tk[j]) / (tk[j + 1] - tk[j]), 0.0, 1.0)[:, None, None]
     return (1 - w) * V[:, j].transpose(1, 0, 2) + w * V[:, j + 1].transpose(1, 0, 2)
+
+
+def _knots_of(U: np.ndarray, drift: np.ndarray, n_knots: int) -> np.ndarray:
+    """(N, K, n_par) knot values from the logs ``U`` (N, n_const + K * n_drift): the
+    constant parameters' first, then the drifting ones' knot by knot."""
+    n_c = int((~drift).sum())
+    V = np.empty((U.shape[0], n_knots, drift.size))
+    V[:, :, ~drift] = np.exp(U[:, :n_c])[:, None, :]
+    V[:, :, drift] = np.exp(U[:, n_c:]).reshape(U.shape[0], n_knots, -1)
+    return V
+
+
+#: readings beyond which the discrepancy's dense covariance is refused (8 x this^2 bytes)
+MAX_DISCREPANCY_READINGS = 20_000
 
 
 def smooth_constant(setup: TissueFilterSetup, times, data, *, n_iter: int = 4,
@@ -112,21 +125,23 @@ def smooth_constant(setup: TissueFilterSetup, times, data, *, n_iter: int = 4,
     The update is ``setup.method``'s (:func:`enkf.smoother.es_mda`: ``"etkf"``, the
     default, without perturbed observations).
     """
-    return _smooth(setup, times, data, n_iter, seed, 1, 0.0, discrepancy, discrepancy_time)
+    return _smooth(setup, times, data, n_iter, seed, 1, 0.0, discrepancy, discrepancy_time, ())
 
 
 def smooth_drifting(setup: TissueFilterSetup, times, data, *, knots: int = 3,
                     n_iter: int = 8, seed: int | None = None, drift_log_std: float = 1.0,
-                    discrepancy: float = 0.0,
+                    drifting=("mua", "mus"), discrepancy: float = 0.0,
                     discrepancy_time: float = 2.0) -> SmootherEstimates:
     """Optics that drift while heated, from all the readings at once (module doc).
 
-    Each estimated parameter is piecewise linear in heated time (:func:`heated_time`)
-    through ``knots`` values spread evenly over the window's heated time (held while the
-    laser is off, as the filter's default walk holds them). The first knot's prior is the
-    filter's; each later knot's log is the previous one's plus a normal step, their sum
-    over the window of sd ``drift_log_std``. Other arguments as :func:`smooth_constant`;
-    ``n_iter`` 8 (more unknowns, a more curved map than for constant optics).
+    Each estimated parameter named in ``drifting`` (default the optics; the others are
+    constant over the window, e.g. VHC and TC) is piecewise linear in heated time
+    (:func:`heated_time`) through ``knots`` values spread evenly over the window's heated
+    time (held while the laser is off, as the filter's default walk holds them). The
+    first knot's prior is the filter's; each later knot's log is the previous one's plus a
+    normal step, their sum over the window of sd ``drift_log_std``. Other arguments as
+    :func:`smooth_constant`; ``n_iter`` 8 (more unknowns, a more curved map than for
+    constant optics).
 
     ``theta`` of the result holds the parameters at the end of the window and ``knots``
     the values at ``knot_times``. Measured against independent truths:
@@ -136,12 +151,17 @@ def smooth_drifting(setup: TissueFilterSetup, times, data, *, knots: int = 3,
         raise ValueError(f"knots must be an integer >= 2 (1: smooth_constant), got {knots!r}")
     if not (np.isfinite(drift_log_std) and drift_log_std > 0):
         raise ValueError(f"drift_log_std must be > 0 (log units), got {drift_log_std!r}")
+    names = tuple(setup.parameter_names)
+    unknown = [d for d in drifting if d not in names]
+    if unknown or not drifting:
+        raise ValueError(f"drifting must name estimated parameters {names}, got "
+                         f"{tuple(drifting)!r}")
     return _smooth(setup, times, data, n_iter, seed, int(knots), float(drift_log_std),
-                   discrepancy, discrepancy_time)
+                   discrepancy, discrepancy_time, tuple(drifting))
 
 
 def _smooth(setup, times, data, n_iter, seed, n_knots, drift_log_std, discrepancy,
-            discrepancy_time) -> SmootherEstimates:
+            discrepancy_time, drifting) -> SmootherEstimates:
     if setup.parameter_model != "random_walk":
         raise ValueError(f"the smoother needs parameter_model = 'random_walk' (constant or "
                          f"drifting optics), got {setup.parameter_model!r}")
@@ -163,25 +183,30 @@ def _smooth(setup, times, data, n_iter, seed, n_knots, drift_log_std, discrepanc
     keep = np.isfinite(data).ravel()
     if not keep.any():
         raise ValueError("data has no finite reading")
+    if discrepancy > 0 and keep.sum() > MAX_DISCREPANCY_READINGS:
+        raise ValueError(f"discrepancy = {discrepancy:g} with {int(keep.sum())} readings needs a "
+                         f"dense {int(keep.sum())}^2 covariance ({8e-9 * keep.sum() ** 2:.0f} GB):"
+                         f" set discrepancy = 0 (e.g. for a camera's images) or use fewer "
+                         f"readings (at most {MAX_DISCREPANCY_READINGS})")
     rng = np.random.default_rng([setup.seed if seed is None else seed, 20240605])
     X0, theta0 = pieces.prior(rng, setup.n_members)
     model, P = pieces.model, pieces.P_obs
     edges = np.r_[0.0, times]
-    n_par = theta0.shape[1]
+    drift = np.array([n in drifting for n in setup.parameter_names], dtype=bool)
     heated = heated_time(setup.power, edges)
     tau = 0.5 * (heated[:-1] + heated[1:])  # each step's optics: at its middle
     tk = np.linspace(0.0, heated[-1], n_knots)
     if n_knots > 1 and not tk[-1] > 0:
         raise ValueError("smooth_drifting needs readings while the laser heats (setup.power "
                          "> 0): no heated time in the window")
-    U0 = [np.log(theta0)]
+    U0 = [np.log(theta0[:, ~drift]), np.log(theta0[:, drift])]
     step = drift_log_std / np.sqrt(max(n_knots - 1, 1))
     for _ in range(1, n_knots):
-        U0.append(U0[-1] + step * rng.standard_normal(theta0.shape))
+        U0.append(U0[-1] + step * rng.standard_normal((theta0.shape[0], int(drift.sum()))))
     U0 = np.concatenate(U0, axis=1)
 
     def simulate(U: np.ndarray) -> np.ndarray:
-        theta = _knot_values(U, n_knots, n_par, tk, tau)
+        theta = _knot_values(_knots_of(U, drift, n_knots), tk, tau)
         T = X0.copy()
         out = np.empty((U.shape[0], times.size, P.shape[0]))
         for k in range(times.size):
@@ -200,8 +225,9 @@ def _smooth(setup, times, data, n_iter, seed, n_knots, drift_log_std, discrepanc
     tic = time.perf_counter()
     U = es_mda(simulate, U0, data.ravel()[keep], R, rng, n_iter=n_iter, method=setup.method)
     wall = time.perf_counter() - tic
+    V = _knots_of(U, drift, n_knots)
     if n_knots == 1:
-        return SmootherEstimates(tuple(setup.parameter_names), np.exp(U), int(n_iter), wall)
-    V = np.exp(U).reshape(U.shape[0], n_knots, n_par)  # the end of the window: the last knot
+        return SmootherEstimates(tuple(setup.parameter_names), V[:, 0].copy(), int(n_iter), wall)
+    # the end of the window: the last knot
     return SmootherEstimates(tuple(setup.parameter_names), np.ascontiguousarray(V[:, -1]),
                              int(n_iter), wall, knot_times=tk, knots=V)
