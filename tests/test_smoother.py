@@ -161,7 +161,7 @@ def test_smooth_drifting_follows_optics_that_drift_while_heated(tissue):
     assert not const.band(0)[0] <= end[0] <= const.band(0)[1]
 
 
-def test_smoother_discrepancy_widens_the_bands_and_is_checked(tissue):
+def test_smoother_discrepancy_widens_the_bands_and_is_checked(tissue, monkeypatch):
     s = tissue.setup(n_members=50)
     times, data = tissue.twin_data(s, 1.0, 100.0)
     plain = smooth_constant(s, times, data)
@@ -175,6 +175,13 @@ def test_smoother_discrepancy_widens_the_bands_and_is_checked(tissue):
         smooth_drifting(s, times, data, knots=1)
     with pytest.raises(ValueError, match="drift_log_std must be > 0"):
         smooth_drifting(s, times, data, drift_log_std=np.nan)
+    with pytest.raises(ValueError, match="drifting must name estimated parameters"):
+        smooth_drifting(s, times, data, drifting=("mua", "TC"))
+    import enkf.tissue.smooth as sm
+
+    monkeypatch.setattr(sm, "MAX_DISCREPANCY_READINGS", 10)
+    with pytest.raises(ValueError, match=r"with 20 readings needs a dense 20\^2 covariance"):
+        smooth_constant(s, times, data, discrepancy=0.01)
     off = tissue.setup(power=lambda t: 0.0)
     with pytest.raises(ValueError, match="no heated time in the window"):
         smooth_drifting(off, times, data)
