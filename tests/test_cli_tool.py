@@ -192,6 +192,16 @@ def test_identify_from_an_npz_image_series(tmp_path, cache):
     rc = run("identify", cfg, "--data", tmp_path / "frames.npz", "--out", out, "--quiet",
              "--cache-dir", cache)
     assert rc == 0 and (out / "estimates.csv").exists()
+    # the smoother's discrepancy is for point sensors: refused with a camera (exit 2)
+    cfg.write_text(cfg.read_text().replace("[filter]\n", "[filter]\nsmoother_iterations = 2\n"
+                                           "smoother_discrepancy = 0.01\n", 1))
+    assert run("identify", cfg, "--data", tmp_path / "frames.npz", "--out", tmp_path / "d",
+               "--quiet", "--cache-dir", cache) == 2
+    assert not (tmp_path / "d").exists()
+    cfg.write_text(cfg.read_text().replace("smoother_discrepancy = 0.01\n", ""))
+    from enkf.app.config import load_identify
+
+    assert load_identify(cfg).smoother_options["discrepancy"] == 0.0  # a camera's default
     np.savez(tmp_path / "wrong.npz", times=times, frames=frames[:, :1])
     assert run("identify", cfg, "--data", tmp_path / "wrong.npz", "--out", tmp_path / "w") == 2
 
@@ -296,6 +306,20 @@ def test_identify_reports_the_sensor_offsets(tmp_path, cache):
     rows = (out2 / "estimates.csv").read_text().splitlines()
     assert rows[0].split(",")[5:7] == ["sensor1_offset_mean", "sensor1_offset_std"]
     assert len(rows) == 6 and len(rows[1].split(",")) == len(rows[0].split(","))
+
+
+def test_identify_refuses_a_file_too_long_for_the_discrepancy(tmp_path, cache, monkeypatch):
+    """The smoother's dense discrepancy covariance: a data file with more readings than it
+    allows is refused before the filter runs (exit 2, nothing written)."""
+    import enkf.tissue.smooth as sm
+
+    monkeypatch.setattr(sm, "MAX_DISCREPANCY_READINGS", 5)
+    cfg = tmp_path / "long.toml"
+    cfg.write_text(TINY.replace("[filter]\n", "[filter]\nsmoother_iterations = 2\n", 1))
+    out = tmp_path / "long"
+    assert run("identify", cfg, "--data", EX / "tiny_data.csv", "--out", out, "--quiet",
+               "--cache-dir", cache) == 2
+    assert not out.exists()
 
 
 def test_identify_with_the_smoother_reports_it(tmp_path, cache):

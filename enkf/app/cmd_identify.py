@@ -43,6 +43,21 @@ def _smoother_summary(setup, times, data, n_iter: int, options: dict, quiet: boo
     return out
 
 
+def _check_smoother_size(cfg, data, data_path) -> None:
+    """The smoother's discrepancy needs a dense covariance of every reading: refuse a data
+    file too long for it before the filter runs."""
+    import numpy as np
+
+    from ..tissue.smooth import MAX_DISCREPANCY_READINGS
+
+    n = int(np.isfinite(data).sum())
+    disc = (cfg.smoother_options or {}).get("discrepancy", 0.0)
+    if cfg.smoother_iterations and disc > 0 and n > MAX_DISCREPANCY_READINGS:
+        raise ValueError(f"{data_path}: {n} readings: filter.smoother_discrepancy = {disc:g} "
+                         f"needs a dense covariance of them all (at most "
+                         f"{MAX_DISCREPANCY_READINGS}); set it to 0 or split the file")
+
+
 def _identify_one(cfg, absorption, seed, data_path, out_dir, quiet=True) -> dict:
     """Run the filter on one data file and write its outputs into ``out_dir`` (a task)."""
     from mcmatlab_py.progress import Progress
@@ -54,6 +69,7 @@ def _identify_one(cfg, absorption, seed, data_path, out_dir, quiet=True) -> dict
 
     setup = cfg.setup(absorption, seed=seed)
     times, data = cfg.read_data(data_path)
+    _check_smoother_size(cfg, data, data_path)  # before the filter, not after it
     fill_prior_points(setup)  # an on-demand emulator: the prior's points before the filter
     medium = cfg.model.G.media[cfg.medium]  # the estimated medium's damage law
     risk = None

@@ -104,13 +104,14 @@ class IdentifyConfig:
     data: DataSpec = None  #: the [data] table
     rate: float | None = None  #: Hz, the sensor's nominal rate (sensors.rate)
     medium: int = 0  #: index in G.media of the medium whose parameters are estimated
-    #: how the emulator's table is built: "table" (direct Monte Carlo per point) or "white"
+    #: how the emulator's table is built: "auto" (white where it applies, else table),
+    #: "table" (direct Monte Carlo per point) or "white"
     emulator_method: str = "auto"
     #: build each table point the first time a member needs it (the same numbers; a cold
     #: start pays only for the part of the table the ensemble visits), else all at once
     emulator_on_demand: bool = True
     #: ES-MDA updates of the smoother over the whole window after the filter (0: none;
-    #: enkf.tissue.smooth_constant, constant optics only), reported in summary.json
+    #: enkf.tissue.smooth_constant or smooth_drifting), reported in summary.json
     smoother_iterations: int = 0
     #: the smoother's ``knots`` (1: constant optics, smooth_constant; >= 2: optics drifting
     #: while heated, smooth_drifting), ``discrepancy`` and ``discrepancy_time`` (s)
@@ -219,15 +220,23 @@ def _smoother_iterations(flt: dict, setup_kw: dict) -> int:
     return n
 
 
-def _smoother_options(flt: dict) -> dict:
-    """``[filter] smoother_knots``, ``smoother_discrepancy``, ``smoother_discrepancy_time``."""
+def _smoother_options(flt: dict, camera: bool = False) -> dict:
+    """``[filter] smoother_knots``, ``smoother_discrepancy``, ``smoother_discrepancy_time``.
+    With a camera the discrepancy is 0 (its dense covariance over every pixel and reading
+    would not fit) and a value > 0 is refused."""
     out = dict(SMOOTHER_DEFAULTS)
+    if camera:
+        out["discrepancy"] = 0.0
     if "smoother_knots" in flt:
         out["knots"] = int(_num("filter.smoother_knots", flt["smoother_knots"], integer=True,
                                 lo=1))
     if "smoother_discrepancy" in flt:
         out["discrepancy"] = float(_num("filter.smoother_discrepancy",
                                         flt["smoother_discrepancy"], lo=0))
+        if camera and out["discrepancy"] > 0:
+            raise ConfigError(f"filter.smoother_discrepancy = {out['discrepancy']:g} is for point "
+                              "sensors: with [sensors.camera] its covariance over every pixel "
+                              "and reading is too large; set it to 0")
     if "smoother_discrepancy_time" in flt:
         out["discrepancy_time"] = float(_num("filter.smoother_discrepancy_time",
                                              flt["smoother_discrepancy_time"], positive=True))
@@ -427,7 +436,7 @@ def identify_config_from_dict(cfg: dict) -> IdentifyConfig:
     try:
         out = IdentifyConfig(model, setup_kw, grid, emulator_kw, exact, cfg, bounds, data, rate,
                              medium, method, on_demand, _smoother_iterations(flt, setup_kw),
-                             _smoother_options(flt))
+                             _smoother_options(flt, camera="image" in setup_kw))
         out.setup(absorption=lambda mua, mus: None)  # validates the filter settings
         n_nodes = int(np.prod([n + 1 for n in grid]))
         table = 0 if exact else emulator_kw.get("n_mua", 12) * emulator_kw.get("n_mus", 12)
