@@ -511,19 +511,13 @@ def _white_rows(spec: EmulatorSpec, task: tuple) -> tuple[np.ndarray, np.ndarray
 
 
 def white_supported(spec: EmulatorSpec) -> str | None:
-    """None when the white build applies to ``spec``, else why not: it needs one
-    refractive index for all media (or matched interfaces) and ``mua > 0`` in every
-    fixed medium (:func:`mcmatlab_py.white.white_absorbed`)."""
-    if spec.media is None:
-        return None
-    present = np.unique(spec.medium_map)
-    n = {spec.media[i][3] if i != spec.estimated else spec.n for i in present}
-    if not spec.matched_interfaces and len(n) > 1:
-        return f"media of refractive indices {sorted(n)} with mismatched interfaces"
-    bad = [int(i) for i in present if i != spec.estimated and not spec.media[i][0] > 0]
-    if bad:
-        return f"medium {bad[0]} is fixed with mua = {spec.media[bad[0]][0]!r} (needs > 0)"
-    return None
+    """None when the white build applies to ``spec``, else why not
+    (:func:`mcmatlab_py.white.white_obstacle`: one refractive index for all media or
+    matched interfaces, and ``mua > 0`` in every fixed medium)."""
+    from .white import white_obstacle
+
+    obstacle = white_obstacle(spec)
+    return None if obstacle is None else obstacle[1]
 
 
 def resolve_method(spec: EmulatorSpec, method: str) -> str:

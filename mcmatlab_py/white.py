@@ -37,7 +37,7 @@ import numpy as np
 
 from . import _white_kernel as WK
 
-__all__ = ["WhiteResult", "white_absorbed", "white_column"]
+__all__ = ["WhiteResult", "white_absorbed", "white_column", "white_obstacle"]
 
 
 @dataclass
@@ -59,6 +59,29 @@ class WhiteResult:
         return self.tally[slot] / self.n_photons
 
 
+def white_obstacle(spec) -> tuple[type, str] | None:
+    """Why the white build cannot run ``spec`` (an
+    :class:`~mcmatlab_py.emulator.EmulatorSpec`): ``(exception type, message)``, or None
+    when it can. Refraction between media is not built (``NotBuiltError`` unless they share
+    one refractive index or the interfaces are matched), and the roulette needs a decay in
+    every fixed medium (``mua > 0``)."""
+    from ._strict import NotBuiltError
+
+    if spec.media is None:  # one medium
+        return None
+    present = np.unique(spec.medium_map)
+    n = [spec.n if i == spec.estimated else spec.media[i][3] for i in present]
+    if not spec.matched_interfaces and len(set(n)) > 1:
+        return NotBuiltError, ("the white build needs one refractive index for all media (or "
+                               f"matched interfaces), got n = {n}: use the table build")
+    fixed = [int(i) for i in present if i != spec.estimated and not spec.media[i][0] > 0]
+    if fixed:
+        return ValueError, (f"the white build needs mua > 0 in every fixed medium (the "
+                            f"roulette needs a decay), got mua = {spec.media[fixed[0]][0]!r} in "
+                            f"medium {fixed[0]}")
+    return None
+
+
 def white_absorbed(spec, mua, mus: float, *, n_photons: int, seed: int,
                    n_threads: int | None = None, symmetrized: bool = False) -> WhiteResult:
     """One white Monte Carlo run of the block of ``spec`` (an
@@ -71,7 +94,6 @@ def white_absorbed(spec, mua, mus: float, *, n_photons: int, seed: int,
     is then about 8 times smaller and stays in the caches (about twice as fast on 100 x
     100 x 50 voxels).
     """
-    from ._strict import NotBuiltError
     from .monte_carlo import _kernel_args, optical_arrays
 
     mua = np.ascontiguousarray(np.atleast_1d(mua), dtype=np.float64)
@@ -84,14 +106,9 @@ def white_absorbed(spec, mua, mus: float, *, n_photons: int, seed: int,
     m.MC.validate(m.G)
     mua_m, mus_m, g_m, n_m = optical_arrays(m.G.media)
     present = np.unique(M)
-    if not spec.matched_interfaces and np.unique(n_m[present]).size > 1:
-        raise NotBuiltError("the white build needs one refractive index for all media (or "
-                            f"matched interfaces), got n = {n_m[present].tolist()}: use the "
-                            "table build")
-    fixed = [i for i in present if i != spec.estimated and not mua_m[i] > 0]
-    if fixed:
-        raise ValueError(f"the white build needs mua > 0 in every fixed medium (the roulette "
-                         f"needs a decay), got mua = {mua_m[fixed[0]]!r} in medium {fixed[0]}")
+    obstacle = white_obstacle(spec)
+    if obstacle is not None:
+        raise obstacle[0](obstacle[1])
     mua_tab = np.repeat(mua_m[:, None], mua.size, axis=1)
     mua_tab[spec.estimated] = mua
     rate = np.ascontiguousarray(mua_tab[present].min(axis=0))

@@ -185,3 +185,16 @@ def test_smoother_discrepancy_widens_the_bands_and_is_checked(tissue, monkeypatc
     off = tissue.setup(power=lambda t: 0.0)
     with pytest.raises(ValueError, match="no heated time in the window"):
         smooth_drifting(off, times, data)
+
+
+def test_smoother_estimates_at_heated_times(tissue):
+    """``at``: the knots' linear interpolation per member (the knots themselves at the knot
+    times); constant optics give ``theta`` at every time."""
+    s = tissue.setup()
+    times, data = tissue.twin_data(s, 1.0, 100.0)
+    est = smooth_drifting(s, times, data, knots=3, n_iter=2)
+    np.testing.assert_allclose(est.at(est.knot_times), est.knots.transpose(1, 0, 2))
+    mid = est.at([0.25])[0]
+    np.testing.assert_allclose(mid, 0.5 * (est.knots[:, 0] + est.knots[:, 1]))
+    const = smooth_constant(s, times, data, n_iter=2)
+    np.testing.assert_array_equal(const.at([0.0, 0.7])[1], const.theta)

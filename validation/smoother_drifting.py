@@ -47,13 +47,10 @@ def run_one(cfg, emulator, model: str, case: str, seed: int, args, discrepancy: 
     kw = dict(seed=seed, discrepancy=discrepancy, discrepancy_time=args.discrepancy_time)
     if case == "constant":
         est = smooth_constant(setup, times, data, n_iter=args.iterations_constant, **kw)
-        traj = np.broadcast_to(est.theta.mean(0), (times.size, 2))
     else:
         est = smooth_drifting(setup, times, data, knots=args.knots,
                               n_iter=args.iterations, **kw)
-        tau = heated_time(setup.power, np.r_[0.0, times])[1:]  # at each reading
-        mean_knots = est.knots.mean(0)  # (K, n_par)
-        traj = np.stack([np.interp(tau, est.knot_times, mean_knots[:, i]) for i in range(2)], 1)
+    traj = est.at(heated_time(setup.power, np.r_[0.0, times])[1:]).mean(axis=1)  # per reading
     true_traj = np.array([optics(case, float(t)) for t in times])
     final, tfinal = est.theta.mean(0), true_traj[-1]
     bands = [est.band(i) for i in range(2)]

@@ -48,14 +48,12 @@ def _check_smoother_size(cfg, data, data_path) -> None:
     file too long for it before the filter runs."""
     import numpy as np
 
-    from ..tissue.smooth import MAX_DISCREPANCY_READINGS
+    from ..tissue.smooth import check_discrepancy_size
 
-    n = int(np.isfinite(data).sum())
-    disc = (cfg.smoother_options or {}).get("discrepancy", 0.0)
-    if cfg.smoother_iterations and disc > 0 and n > MAX_DISCREPANCY_READINGS:
-        raise ValueError(f"{data_path}: {n} readings: filter.smoother_discrepancy = {disc:g} "
-                         f"needs a dense covariance of them all (at most "
-                         f"{MAX_DISCREPANCY_READINGS}); set it to 0 or split the file")
+    if cfg.smoother_iterations:
+        check_discrepancy_size(np.isfinite(data).sum(),
+                               (cfg.smoother_options or {}).get("discrepancy", 0.0),
+                               f"{data_path}: filter.smoother_")
 
 
 def _identify_one(cfg, absorption, seed, data_path, out_dir, quiet=True) -> dict:

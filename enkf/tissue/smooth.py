@@ -64,6 +64,14 @@ class SmootherEstimates:
         """(n_par,) the ensemble standard deviation."""
         return self.theta.std(axis=0, ddof=1)
 
+    def at(self, heated) -> np.ndarray:
+        """(M, N, n_par) the members' parameters at the heated times ``heated`` (M,) s
+        (:func:`heated_time`); constant optics: ``theta`` at every time."""
+        heated = np.atleast_1d(np.asarray(heated, float))
+        if self.knots is None:
+            return np.broadcast_to(self.theta, (heated.size, *self.theta.shape))
+        return _knot_values(self.knots, self.knot_times, heated)
+
     def band(self, i: int, q: float = 0.02275) -> tuple[float, float]:
         """The ``q`` and ``1 - q`` quantiles of parameter ``i`` (default: +-2 sd of a
         normal; positive like the members)."""
@@ -104,6 +112,17 @@ def _knots_of(U: np.ndarray, drift: np.ndarray, n_knots: int) -> np.ndarray:
 
 #: readings beyond which the discrepancy's dense covariance is refused (8 x this^2 bytes)
 MAX_DISCREPANCY_READINGS = 20_000
+
+
+def check_discrepancy_size(n_readings: int, discrepancy: float, where: str = "") -> None:
+    """Refuse a ``discrepancy`` > 0 over more than :data:`MAX_DISCREPANCY_READINGS`
+    readings (its covariance is dense); ``where`` prefixes the message (e.g. the file)."""
+    n = int(n_readings)
+    if discrepancy > 0 and n > MAX_DISCREPANCY_READINGS:
+        raise ValueError(f"{where}discrepancy = {discrepancy:g} with {n} readings needs a dense "
+                         f"{n}^2 covariance ({8e-9 * n ** 2:.0f} GB): set discrepancy = 0 (e.g. "
+                         f"for a camera's images) or use fewer readings (at most "
+                         f"{MAX_DISCREPANCY_READINGS})")
 
 
 def smooth_constant(setup: TissueFilterSetup, times, data, *, n_iter: int = 4,
@@ -183,11 +202,7 @@ def _smooth(setup, times, data, n_iter, seed, n_knots, drift_log_std, discrepanc
     keep = np.isfinite(data).ravel()
     if not keep.any():
         raise ValueError("data has no finite reading")
-    if discrepancy > 0 and keep.sum() > MAX_DISCREPANCY_READINGS:
-        raise ValueError(f"discrepancy = {discrepancy:g} with {int(keep.sum())} readings needs a "
-                         f"dense {int(keep.sum())}^2 covariance ({8e-9 * keep.sum() ** 2:.0f} GB):"
-                         f" set discrepancy = 0 (e.g. for a camera's images) or use fewer "
-                         f"readings (at most {MAX_DISCREPANCY_READINGS})")
+    check_discrepancy_size(keep.sum(), discrepancy)
     rng = np.random.default_rng([setup.seed if seed is None else seed, 20240605])
     X0, theta0 = pieces.prior(rng, setup.n_members)
     model, P = pieces.model, pieces.P_obs
