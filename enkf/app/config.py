@@ -19,7 +19,8 @@ Python API (``model.G``, ``model.MC``, ``model.HS`` as in MCmatlab, then
     n_members = 50
     method = "etkf"                 # or "enkf" (perturbed observations)
     estimate = ["mua", "mus"]       # or all four with "VHC", "TC"
-    medium = "dermis"               # with several media: the one estimated (name or index)
+    medium = "dermis"               # with several media: the one estimated (name or index),
+                                    # or two: ["dermis", "epidermis"] estimates mua2, mus2 too
     grid = [20, 20, 10]             # the filter's coarse voxels
     prior_range = [0.5, 2.0]        # uniform prior, times the estimated medium's values
     ...
@@ -43,6 +44,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 from pathlib import Path
+from types import SimpleNamespace
 
 import numpy as np
 
@@ -55,6 +57,7 @@ from ..tissue.parameters import (
     COAGULATION_NAMES,
     ESTIMATES,
     PARAMETER_NAMES,
+    SECOND_MEDIUM_NAMES,
     TRACKED_DEPTHS,
     tracked_points,
 )
@@ -87,7 +90,7 @@ _ADAPTIVE_KEYS = {"enabled", "bounds", "time_scale"}
 _LASER_KEYS = ("P", "duration_on", "T_initial")
 _DATA_KEYS = {"file", "columns", "time_offset"}
 _EMULATOR_KEYS = {"n_photons", "n_mua", "n_mus", "mua_range", "mus_range", "seed", "exact",
-                  "method", "on_demand"}
+                  "method", "on_demand", "mua2_range", "mus2_range", "media_nodes"}
 
 
 @dataclass
@@ -116,6 +119,12 @@ class IdentifyConfig:
     #: the smoother's ``knots`` (1: constant optics, smooth_constant; >= 2: optics drifting
     #: while heated, smooth_drifting), ``discrepancy`` and ``discrepancy_time`` (s)
     smoother_options: dict = None
+    #: index in G.media of a second estimated medium (``filter.medium = [first, second]``:
+    #: its optics are the parameters mua2, mus2), None: one
+    second_medium: int | None = None
+    #: the node grid of the second medium's optics (``filter.emulator.mua2_range``,
+    #: ``mus2_range``, ``media_nodes``): TwoMediaEmulator.build's arguments
+    media_nodes: dict = None
 
     @property
     def n_obs(self) -> int:
@@ -156,10 +165,13 @@ class IdentifyConfig:
                                        mesh_divisions=tuple(self.grid), **self.emulator_kw)
         if self.exact:
             return DirectMonteCarloAbsorption(spec, client=client)
-        return AbsorptionEmulator.build(spec, cache_dir=cache_dir, progress=progress,
-                                        out_of_range="clamp", client=client,
-                                        method=self.emulator_method,
-                                        on_demand=self.emulator_on_demand)
+        kw = dict(cache_dir=cache_dir, progress=progress, out_of_range="clamp", client=client,
+                  method=self.emulator_method, on_demand=self.emulator_on_demand)
+        if self.second_medium is not None:
+            from mcmatlab_py.emulator_media import TwoMediaEmulator
+
+            return TwoMediaEmulator.build(spec, self.second_medium, **self.media_nodes, **kw)
+        return AbsorptionEmulator.build(spec, **kw)
 
     def setup(self, absorption, seed: int | None = None):
         """The :class:`~enkf.tissue.TissueFilterSetup` with ``absorption``."""
@@ -170,6 +182,9 @@ class IdentifyConfig:
         G, HS = self.model.G, self.model.HS
         m = G.media[self.medium]  # the others keep their values (in the emulator's spec)
         nominal = {"mua": m.mua, "mus": m.mus, "VHC": m.VHC, "TC": m.TC}
+        if self.second_medium is not None:
+            m2 = G.media[self.second_medium]
+            nominal.update(mua2=m2.mua, mus2=m2.mus)
         kw = dict(self.setup_kw)
         if seed is not None:
             kw["seed"] = seed
@@ -297,9 +312,13 @@ def identify_config_from_dict(cfg: dict) -> IdentifyConfig:
     except ValueError as err:
         raise ConfigError(str(err)) from None
     flt = check_keys("filter", cfg.get("filter", {}), _FILTER_KEYS)
-    medium = _estimated_medium(flt.get("medium"), G)
+    medium, second = _estimated_media(flt.get("medium"), G)
     m = G.media[medium]
     where = f"G.media[{medium}]"
+    if second is not None:  # the nominal values of both media's parameters, for the checks
+        m2 = G.media[second]
+        m = SimpleNamespace(mua=m.mua, mus=m.mus, VHC=m.VHC, TC=m.TC, mua2=m2.mua, mus2=m2.mus,
+                            where2=f"G.media[{second}]")
     sens = check_keys("sensors", cfg.get("sensors", {}), _SENSOR_KEYS)
     setup_kw: dict = {}
     positions = _points("sensors.positions", sens.get("positions", [[0.0, 0.0, 0.0]]), G)
@@ -349,6 +368,15 @@ def identify_config_from_dict(cfg: dict) -> IdentifyConfig:
             raise ConfigError(f"filter.estimate must be one of {[list(e) for e in ESTIMATES]}, "
                               f"got {shorten(repr(est))}")
         setup_kw["estimate"] = tuple(est)
+    if second is not None:
+        est = setup_kw.setdefault("estimate", ESTIMATES[2])
+        if "mua2" not in est:
+            raise ConfigError(f"filter.medium names two media: filter.estimate must hold mua2 and "
+                              f"mus2 (the second medium's optics), e.g. {list(ESTIMATES[2])}, got "
+                              f"{list(est)}")
+    elif "mua2" in setup_kw.get("estimate", ()):
+        raise ConfigError(f"filter.estimate = {list(setup_kw['estimate'])} holds mua2, mus2: "
+                          "name the second medium in filter.medium = [first, second]")
     if "transforms" in flt and flt["transforms"] != "log":
         raise ConfigError(f"filter.transforms must be \"log\" (positive parameters), got "
                           f"{shorten(repr(flt['transforms']))}")
@@ -364,6 +392,10 @@ def identify_config_from_dict(cfg: dict) -> IdentifyConfig:
             raise ConfigError(f"filter.parameter_model must be one of {allowed}, got "
                               f"{shorten(repr(flt['parameter_model']))}")
         setup_kw["parameter_model"] = flt["parameter_model"]
+        if second is not None and flt["parameter_model"] != "random_walk":
+            raise ConfigError(f"filter.parameter_model = {flt['parameter_model']!r} is not built "
+                              "for a second estimated medium (filter.medium = [first, second]): "
+                              "use \"random_walk\"")
     coagulation_settings(flt, setup_kw)
     prior = prior_settings(flt.get("prior", {}), setup_kw)
     if prior:
@@ -412,6 +444,11 @@ def identify_config_from_dict(cfg: dict) -> IdentifyConfig:
                 raise ConfigError(
                     f"filter.emulator.{name}_range = {[t_lo, t_hi]} must cover the prior of "
                     f"{par}, [{p_lo:g}, {p_hi:g}] cm^-1 ({source})")
+    media_nodes = None if second is None else _media_nodes(emu, setup_kw, m)
+    for k in ("mua2_range", "mus2_range", "media_nodes"):
+        if k in emu and second is None:
+            raise ConfigError(f"filter.emulator.{k} is for a second estimated medium "
+                              "(filter.medium = [first, second])")
     method = emu.get("method", "auto")
     if method not in ("table", "white", "auto"):
         raise ConfigError(f"filter.emulator.method must be \"auto\", \"table\" or \"white\", "
@@ -421,6 +458,9 @@ def identify_config_from_dict(cfg: dict) -> IdentifyConfig:
     for k, v in (("exact", exact), ("on_demand", on_demand)):
         if not isinstance(v, bool):
             raise ConfigError(f"filter.emulator.{k} must be true or false, got {shorten(repr(v))}")
+    if exact and second is not None:
+        raise ConfigError("filter.emulator.exact = true is not built for two estimated media "
+                          "(filter.medium = [first, second]): use the emulator")
     if "dt" in cfg.get("HS", {}) and model.HS.dt is not None:
         setup_kw["max_dt"] = float(model.HS.dt)  # the filter's longest heat step
         try:
@@ -436,15 +476,54 @@ def identify_config_from_dict(cfg: dict) -> IdentifyConfig:
     try:
         out = IdentifyConfig(model, setup_kw, grid, emulator_kw, exact, cfg, bounds, data, rate,
                              medium, method, on_demand, _smoother_iterations(flt, setup_kw),
-                             _smoother_options(flt, camera="image" in setup_kw))
+                             _smoother_options(flt, camera="image" in setup_kw), second,
+                             media_nodes)
         out.setup(absorption=lambda mua, mus: None)  # validates the filter settings
         n_nodes = int(np.prod([n + 1 for n in grid]))
         table = 0 if exact else emulator_kw.get("n_mua", 12) * emulator_kw.get("n_mus", 12)
+        table *= 1 if media_nodes is None else media_nodes["n_nodes"] ** 2
         check_filter(setup_kw.get("n_members", 50), n_nodes, table)
     except ConfigError:
         raise
     except ValueError as err:
         raise ConfigError(str(err)) from None
+    return out
+
+
+def _estimated_media(value, G) -> tuple[int, int | None]:
+    """``filter.medium``: one medium (name or index), or a list of two whose optics are
+    both estimated (the second's as mua2, mus2): ``(first, second or None)``."""
+    if not isinstance(value, list):
+        return _estimated_medium(value, G), None
+    if len(value) == 1:
+        return _estimated_medium(value[0], G), None
+    if len(value) != 2:
+        raise ConfigError(f"filter.medium must be one medium or a list of two (whose optics are "
+                          f"estimated), got {shorten(repr(value))}")
+    first, second = (_estimated_medium(v, G) for v in value)
+    if first == second:
+        raise ConfigError(f"filter.medium = {shorten(repr(value))} names one medium twice")
+    return first, second
+
+
+def _media_nodes(emu: dict, setup_kw: dict, m) -> dict:
+    """``filter.emulator.mua2_range``, ``mus2_range`` (default: the second medium's prior)
+    and ``media_nodes`` (per axis, default 3): the node grid of its optics."""
+    from .config_params import prior_of
+
+    out = {"n_nodes": 3}
+    if "media_nodes" in emu:
+        out["n_nodes"] = _num("filter.emulator.media_nodes", emu["media_nodes"], integer=True,
+                              lo=2)
+    for name in ("mua2", "mus2"):
+        prior, source = prior_of(name, setup_kw, m, m.where2)
+        rng = prior
+        if f"{name}_range" in emu:
+            rng = _pair(f"filter.emulator.{name}_range", emu[f"{name}_range"], positive=True)
+            if not (rng[0] <= prior[0] and prior[1] <= rng[1]):
+                raise ConfigError(f"filter.emulator.{name}_range = {list(rng)} must cover the "
+                                  f"prior of {name}, [{prior[0]:g}, {prior[1]:g}] cm^-1 ({source})")
+        out[f"{name}_range"] = tuple(rng)
     return out
 
 
@@ -569,8 +648,9 @@ def check_identify_keys(cfg: dict) -> None:
         check_keys("sensors.camera", sens["camera"], _CAMERA_KEYS)
     flt = check_keys("filter", cfg.get("filter", {}), _FILTER_KEYS)
     check_keys("filter.emulator", flt.get("emulator", {}), _EMULATOR_KEYS)
-    check_keys("filter.bounds", flt.get("bounds", {}), set(PARAMETER_NAMES) | set(COAGULATION_NAMES))
-    check_keys("filter.prior", flt.get("prior", {}), set(PARAMETER_NAMES) | set(COAGULATION_NAMES))
+    names = set(PARAMETER_NAMES) | set(COAGULATION_NAMES) | set(SECOND_MEDIUM_NAMES)
+    check_keys("filter.bounds", flt.get("bounds", {}), names)
+    check_keys("filter.prior", flt.get("prior", {}), names)
     check_keys("filter.coagulation", flt.get("coagulation", {}),
                {"E", "A", "nominal_factor", "weight_exponent"})
     check_keys("filter.model_error", flt.get("model_error", {}), _MODEL_ERROR_KEYS)

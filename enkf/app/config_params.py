@@ -11,7 +11,13 @@ import numpy as np
 from fem.checks import shorten
 from mcmatlab_py.config import ConfigError, check_keys
 
-from ..tissue.parameters import COAGULATION_NAMES, ESTIMATES, PARAMETER_NAMES, parameter_names
+from ..tissue.parameters import (
+    COAGULATION_NAMES,
+    ESTIMATES,
+    PARAMETER_NAMES,
+    SECOND_MEDIUM_NAMES,
+    parameter_names,
+)
 from . import config as _cfg
 
 #: keys of [filter.coagulation] (enkf.tissue.coagulation.Coagulation)
@@ -19,6 +25,10 @@ COAGULATION_KEYS = {"E", "A", "nominal_factor", "weight_exponent", "mean_field_r
 
 __all__ = ["COAGULATION_KEYS", "bounds_settings", "coagulation_settings", "filtered_names", "nominal_of",
            "prior_of", "prior_settings"]
+
+
+#: every name [filter.prior] and [filter.bounds] may hold
+_KNOWN = set(PARAMETER_NAMES) | set(COAGULATION_NAMES) | set(SECOND_MEDIUM_NAMES)
 
 
 def filtered_names(setup_kw: dict) -> tuple:
@@ -63,7 +73,7 @@ def coagulation_settings(flt: dict, setup_kw: dict) -> None:
 def prior_settings(table, setup_kw: dict) -> dict:
     """``[filter.prior]``: a uniform prior [lo, hi] in physical units per parameter."""
     names = filtered_names(setup_kw)
-    table = check_keys("filter.prior", table, set(PARAMETER_NAMES) | set(COAGULATION_NAMES))
+    table = check_keys("filter.prior", table, _KNOWN)
     extra = sorted(set(table) - set(names))
     if extra:
         raise _not_estimated("filter.prior", extra[0], setup_kw)
@@ -78,6 +88,8 @@ def prior_of(name: str, setup_kw: dict, medium, where: str = "G.media[0]"
         return setup_kw["prior"][name], f"filter.prior.{name}"
     lo_f, hi_f = setup_kw.get("prior_range", (0.5, 2.0))
     v = nominal_of(name, setup_kw, medium)
+    if name in SECOND_MEDIUM_NAMES:  # the second estimated medium's mua or mus
+        return (lo_f * v, hi_f * v), f"filter.prior_range times {medium.where2}.{name[:3]}"
     if name in COAGULATION_NAMES:
         return (lo_f * v, hi_f * v), (f"filter.prior_range times filter.coagulation."
                                       f"nominal_factor times {where}.{name[:3]}")
@@ -98,7 +110,7 @@ def bounds_settings(table, setup_kw: dict, medium, where: str = "G.media[0]"
     from ..tissue import default_bounds
 
     names = filtered_names(setup_kw)
-    table = check_keys("filter.bounds", table, set(PARAMETER_NAMES) | set(COAGULATION_NAMES))
+    table = check_keys("filter.bounds", table, _KNOWN)
     if not table:
         return None
     extra = sorted(set(table) - set(names))

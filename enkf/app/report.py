@@ -190,8 +190,9 @@ def write_identify_outputs(out: Path, setup, est, times, data, *, absorption=Non
         point_data["T_mean"] = res.state_ensemble.mean(axis=0)
         point_data["T_std"] = res.state_ensemble.std(axis=0, ddof=1)
     if absorption is not None and getattr(absorption, "kind", "") == "load":
-        mua, mus = est.param_mean[k, 0], est.param_mean[k, 1]
-        vals = absorption.unique(np.array([mua]), np.array([mus]))[0][absorption.inverse]
+        optics = [n for n in ("mua", "mus", "mua2", "mus2") if n in est.names]
+        vals = absorption.unique(*(est.param_mean[k, [est.names.index(n)]] for n in optics))
+        vals = vals[0][absorption.inverse]
         point_data["absorbed_power_per_W"] = vals
     if risk is not None and risk.omega is not None:
         from ..tissue.risk import plot_depth_maps

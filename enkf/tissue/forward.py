@@ -40,6 +40,15 @@ class TissueForwardModel:
             self.L = (L @ expand).tocsr()  # (npoints, n_unique)
         self.steppers: dict[float, fem.HeatStepper] = {}
         self.col = {name: column(setup.estimate, name) for name in setup.estimate}
+        #: the second estimated medium's optics, passed to the absorption model after mua, mus
+        self._second = tuple(n for n in ("mua2", "mus2") if n in self.col)
+        if self._second and getattr(absorption, "n_media_estimated", 1) != 2:
+            raise ValueError(f"estimate = {setup.estimate} names a second medium's optics, but "
+                             f"the absorption model ({type(absorption).__name__}) takes one "
+                             "medium's: use mcmatlab_py.emulator_media.TwoMediaEmulator")
+        if not self._second and getattr(absorption, "n_media_estimated", 1) != 1:
+            raise ValueError("the absorption model takes two media's optics: estimate must "
+                             "name mua2 and mus2")
         self._clamp = {"calls": 0, "member_calls": 0, "lo": {}, "hi": {}}
 
     def stepper(self, dt: float) -> fem.HeatStepper:
@@ -70,6 +79,9 @@ class TissueForwardModel:
     def table_ranges(self) -> dict:
         """``{"mua": (lo, hi), "mus": (lo, hi)}`` cm^-1 of the emulator's table ({} when the
         absorption model has no table)."""
+        ranges = getattr(self.absorption, "ranges", None)
+        if ranges is not None:  # several estimated media
+            return {k: tuple(v) for k, v in ranges.items()}
         spec = getattr(self.absorption, "spec", None)
         if spec is None or not hasattr(spec, "mua_range"):
             return {}
@@ -84,7 +96,7 @@ class TissueForwardModel:
             return None
         rng = self.table_ranges()
         advice = []
-        for name in ("mua", "mus"):
+        for name in ("mua", "mus", "mua2", "mus2"):
             lo, hi = c["lo"].get(name), c["hi"].get(name)
             if lo is None and hi is None:
                 continue
@@ -98,10 +110,10 @@ class TissueForwardModel:
                 "table": {k: list(v) for k, v in rng.items()},
                 "advice": "; ".join(advice) or "widen filter.emulator's ranges"}
 
-    def _count_clamps(self, mua: np.ndarray, mus: np.ndarray) -> None:
+    def _count_clamps(self, optics: dict) -> None:
         self._clamp["calls"] += 1
-        out = np.zeros(mua.shape, bool)
-        for name, v in (("mua", mua), ("mus", mus)):
+        out = np.zeros(optics["mua"].shape, bool)
+        for name, v in optics.items():
             lo, hi = self.table_ranges().get(name, (-np.inf, np.inf))
             below, above = v < lo, v > hi
             out |= below | above
@@ -116,13 +128,13 @@ class TissueForwardModel:
 
         Members whose optics lie outside the emulator's table are clamped to its edge;
         they are counted (:meth:`clamp_report`) instead of warned about one by one."""
-        mua, mus = theta[:, self.col["mua"]], theta[:, self.col["mus"]]
+        optics = {n: theta[:, self.col[n]] for n in ("mua", "mus") + self._second}
         with warnings.catch_warnings(record=True) as caught:
             warnings.simplefilter("always")
-            vals = self.absorption.unique(mua, mus)
+            vals = self.absorption.unique(*optics.values())
         clamps = [w for w in caught if "clamped" in str(w.message)]
         if clamps:
-            self._count_clamps(mua, mus)
+            self._count_clamps(optics)
         for w in caught:
             if w not in clamps:
                 warnings.warn(str(w.message), w.category, stacklevel=3)

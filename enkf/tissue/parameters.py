@@ -13,6 +13,7 @@ __all__ = [
     "PARAMETER_LABELS",
     "PARAMETER_NAMES",
     "PARAMETER_UNITS",
+    "SECOND_MEDIUM_NAMES",
     "TRACKED_DEPTHS",
     "column",
     "default_bounds",
@@ -25,15 +26,20 @@ PARAMETER_NAMES = ("mua", "mus", "VHC", "TC")
 #: the coagulated optics the damage-driven model estimates beside the native ``mua``, ``mus``
 #: (``parameter_model = "coagulation"``, :mod:`enkf.tissue.coagulation`)
 COAGULATION_NAMES = ("mua_coag", "mus_coag")
+#: the optics of a second estimated medium of a layered block (e.g. the epidermis over the
+#: dermis whose optics are ``mua``, ``mus``; :class:`mcmatlab_py.emulator_media.TwoMediaEmulator`)
+SECOND_MEDIUM_NAMES = ("mua2", "mus2")
 #: units of each parameter (MCmatlab's and the paper's)
 PARAMETER_UNITS = {"mua": "cm^-1", "mus": "cm^-1", "VHC": "J cm^-3 K^-1", "TC": "W cm^-1 K^-1",
-                   "mua_coag": "cm^-1", "mus_coag": "cm^-1"}
+                   "mua_coag": "cm^-1", "mus_coag": "cm^-1", "mua2": "cm^-1", "mus2": "cm^-1"}
 #: the same units for matplotlib labels
 PARAMETER_LABELS = {"mua": "cm$^{-1}$", "mus": "cm$^{-1}$", "VHC": "J cm$^{-3}$ K$^{-1}$",
                     "TC": "W cm$^{-1}$ K$^{-1}$", "mua_coag": "cm$^{-1}$",
-                    "mus_coag": "cm$^{-1}$"}
-#: the parameter sets that can be estimated: the optics, or the optics and thermal properties
-ESTIMATES = (PARAMETER_NAMES[:2], PARAMETER_NAMES)
+                    "mus_coag": "cm$^{-1}$", "mua2": "cm$^{-1}$", "mus2": "cm$^{-1}$"}
+#: the parameter sets that can be estimated: the optics, or the optics and thermal properties;
+#: with a second estimated medium, its optics after the first's
+ESTIMATES = (PARAMETER_NAMES[:2], PARAMETER_NAMES, PARAMETER_NAMES[:2] + SECOND_MEDIUM_NAMES,
+             PARAMETER_NAMES[:2] + SECOND_MEDIUM_NAMES + PARAMETER_NAMES[2:])
 #: cm, depths below the sensor whose temperature the paper reports (and the tool by default)
 TRACKED_DEPTHS = (0.0, 0.1, 0.2)
 

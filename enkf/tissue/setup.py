@@ -43,7 +43,10 @@ class TissueFilterSetup:
         VHC and TC are used as known values when not estimated, and the priors are
         ``prior_range`` times the nominal values (unless ``prior`` names the parameter).
     estimate : tuple of str
-        ``("mua", "mus")`` or ``("mua", "mus", "VHC", "TC")``.
+        ``("mua", "mus")`` or ``("mua", "mus", "VHC", "TC")``; with a second estimated
+        medium (a :class:`~mcmatlab_py.emulator_media.TwoMediaEmulator` as absorption, e.g.
+        epidermis and dermis) ``("mua", "mus", "mua2", "mus2")``, optionally followed by
+        ``"VHC", "TC"``; ``nominal`` then also holds ``mua2`` and ``mus2``.
     sensor_positions : (p, 3) cm, point sensors (may be empty, shape (0, 3), with an image)
     sensor_noise_var : float or (p,), deg C^2 (the paper: 0.01)
     image : enkf.image.ThermalImage, optional
@@ -144,7 +147,7 @@ class TissueFilterSetup:
         if est not in ESTIMATES:
             raise ValueError(f"estimate must be one of {ESTIMATES}, got {self.estimate!r}")
         self.estimate = est
-        for name in PARAMETER_NAMES:
+        for name in dict.fromkeys(PARAMETER_NAMES + est):
             v = self.nominal.get(name)
             if v is None or not np.isfinite(v) or v <= 0:
                 raise ValueError(f"nominal[{name!r}] must be > 0 ({PARAMETER_UNITS[name]}), "
@@ -156,6 +159,9 @@ class TissueFilterSetup:
         if self.parameter_model not in ("random_walk", "trend", "coagulation"):
             raise ValueError(f"parameter_model must be 'random_walk', 'trend' or 'coagulation', "
                              f"got {self.parameter_model!r}")
+        if "mua2" in est and self.parameter_model != "random_walk":
+            raise ValueError(f"parameter_model = {self.parameter_model!r} is not built for a "
+                             "second estimated medium (mua2, mus2): use 'random_walk'")
         if self.parameter_model == "coagulation":
             from .coagulation import Coagulation
 
