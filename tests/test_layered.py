@@ -280,13 +280,10 @@ def test_the_second_medium_keys_need_two_media():
         identify_config_from_dict(cfg)
 
 
-def test_identify_both_layers_end_to_end(tmp_path):
-    """A tiny run estimating dermis and epidermis: twin data at (1.3, 80) and (6, 120)."""
-    from enkf.tissue import TissueForwardModel, identify, observation_operator
+def twin(cfg, emu, theta):
+    """20 readings at 10 Hz of the config's filter model at ``theta``, noise sd 0.1."""
+    from enkf.tissue import TissueForwardModel, observation_operator
 
-    cfg = identify_config_from_dict(both_layers())
-    emu = cfg.emulator(cache_dir=tmp_path, progress=False)
-    assert not emu.complete  # on demand, node by node
     setup = cfg.setup(emu)
     model = TissueForwardModel(setup)
     P, _, _ = observation_operator(setup, model.mesh)
@@ -294,9 +291,20 @@ def test_identify_both_layers_end_to_end(tmp_path):
     T = np.zeros((1, model.mesh.p.shape[1]))
     clean = []
     for t0, t1 in zip(np.r_[0.0, times[:-1]], times, strict=True):
-        T = model(T, np.array([[1.3, 80.0, 6.0, 120.0]]), float(t0), float(t1))
+        T = model(T, np.array([theta]), float(t0), float(t1))
         clean.append((P @ T.T)[:, 0])
-    data = np.array(clean) + 0.1 * np.random.default_rng(0).standard_normal((20, 1))
+    return times, np.array(clean) + 0.1 * np.random.default_rng(0).standard_normal((20, 1))
+
+
+def test_identify_both_layers_end_to_end(tmp_path):
+    """A tiny run estimating dermis and epidermis: twin data at (1.3, 80) and (6, 120)."""
+    from enkf.tissue import TissueForwardModel, identify
+
+    cfg = identify_config_from_dict(both_layers())
+    emu = cfg.emulator(cache_dir=tmp_path, progress=False)
+    assert not emu.complete  # on demand, node by node
+    setup = cfg.setup(emu)
+    times, data = twin(cfg, emu, [1.3, 80.0, 6.0, 120.0])
     est = identify(setup, times, data)
     assert est.diverged is None and est.names == ("mua", "mus", "mua2", "mus2")
     assert all(t.have.any() for t in emu.tables)  # every node's table was read
@@ -313,8 +321,10 @@ def test_the_command_line_estimates_both_layers(tmp_path):
 
     text = (EX / "two_layer.toml").read_text()
     for old, new in (("nx = 50", "nx = 10"), ("ny = 50", "ny = 10"), ("nz = 60", "nz = 10"),
-                     ("z_max = 0.008     # cm", "z_max = 0.024     # cm"), ("grid = [20, 20, 10]", "grid = [5, 5, 5]"),
-                     ("n_members = 50", "n_members = 20"), ("n_photons = 100_000", "n_photons = 3000"),
+                     ("z_max = 0.008     # cm", "z_max = 0.024     # cm"),
+                     ("grid = [20, 20, 10]", "grid = [5, 5, 5]"),
+                     ("n_members = 50", "n_members = 20"),
+                     ("n_photons = 100_000", "n_photons = 3000"),
                      ("n_mua = 8", "n_mua = 4"), ("n_mus = 8", "n_mus = 4"),
                      ("duration_on = 5.0", "duration_on = 1.0"),
                      ("duration_off = 10.0", "duration_off = 1.0"),
@@ -324,15 +334,17 @@ def test_the_command_line_estimates_both_layers(tmp_path):
         text = text.replace(old, new)
     path = tmp_path / "both.toml"
     path.write_text(text)
-    times = np.round(np.arange(1, 21) * 0.1, 10)
-    rise = 0.8 * (1 - np.exp(-times / 0.5)) + 0.05 * np.random.default_rng(1).standard_normal(20)
-    np.savetxt(tmp_path / "d.csv", np.column_stack([times, rise]), delimiter=",",
+    # twin data of the filter's own model at dermis (1.3, 80), epidermis (6, 120)
+    cfg = identify_config_from_dict(both_layers())
+    times, data = twin(cfg, cfg.emulator(cache_dir=tmp_path / "cache", progress=False),
+                       [1.3, 80.0, 6.0, 120.0])
+    np.savetxt(tmp_path / "d.csv", np.column_stack([times, data]), delimiter=",",
                header="time,T1", comments="")
     out = tmp_path / "run"
     assert main(["identify", str(path), "--data", str(tmp_path / "d.csv"), "--out", str(out),
                  "--quiet", "--cache-dir", str(tmp_path / "cache")]) == 0
     s = json.loads((out / "summary.json").read_text())
-    assert list(s["parameters"]) == ["mua", "mus", "mua2", "mus2"]
+    assert list(s["parameters"]) == ["mua", "mus", "mua2", "mus2"] and s["stopped"] is None
     assert [p["medium"] for p in s["parameters"].values()] == ["dermis"] * 2 + ["epidermis"] * 2
     points = json.loads((out / "run.json").read_text())["emulator_points"]
     assert 0 < points["built"] <= points["table"] == 9 * 16

@@ -9,6 +9,7 @@ from pathlib import Path
 
 import numpy as np
 
+from ..tissue.parameters import PARAMETER_LABELS
 from .rundir import write_json
 
 __all__ = ["manifest", "plot_identification", "write_identify_outputs"]
@@ -49,10 +50,6 @@ def manifest(path: Path, *, command: str, config: dict | None, seed, timings: di
     write_json(path, {"command": command, "argv": argv, "config": config, "seed": seed,
                       "versions": _versions(), "timings_s": timings,
                       "finished": time.strftime("%Y-%m-%dT%H:%M:%S%z"), **(extra or {})})
-
-
-_UNITS = {"mua": "cm$^{-1}$", "mus": "cm$^{-1}$", "VHC": "J cm$^{-3}$ K$^{-1}$",
-          "TC": "W cm$^{-1}$ K$^{-1}$"}
 
 
 def plot_identification(path, est, times, data, power, names_obs=None) -> None:
@@ -97,7 +94,7 @@ def plot_identification(path, est, times, data, power, names_obs=None) -> None:
             m - 2 * est.param_std[:, i], m + 2 * est.param_std[:, i])
         ax.plot(t, m, "r-", lw=1.4, label=f"{method} mean")
         ax.fill_between(t, lo, hi, color="r", alpha=0.15, lw=0, label="2.3-97.7 % of members")
-        ax.set(title=f"{name} [{_UNITS.get(name, '')}]", xlabel="time [s]")
+        ax.set(title=f"{name} [{PARAMETER_LABELS.get(name, '')}]", xlabel="time [s]")
         if i == 0:
             ax.legend(fontsize=8)
     fig.savefig(path, dpi=110)
