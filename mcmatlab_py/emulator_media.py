@@ -5,7 +5,7 @@ coefficients: ``mua``, ``mus`` of the first estimated medium (e.g. the dermis) a
 ``mua2``, ``mus2`` of a second one (e.g. the epidermis). It holds one
 :class:`~mcmatlab_py.emulator.AbsorptionEmulator` (a table over the first medium's
 ``mua`` x ``mus``) per node of a small log-spaced grid over the second medium's
-``mua2`` x ``mus2`` (``n_nodes`` x ``n_nodes``, default 3 x 3), each built with the second
+``mua2`` x ``mus2`` (``n_nodes`` x ``n_nodes``), each built with the second
 medium fixed at its node's values: the same cache, checksums, white or direct builds and
 on-demand fill as one medium, a table per node. Between the nodes, ``log(NA + offset)``
 is interpolated by Lagrange polynomials in ``log mua2`` and ``log mus2`` over all nodes
@@ -134,7 +134,7 @@ class TwoMediaEmulator:
 
     @classmethod
     def build(cls, spec: EmulatorSpec, second: int, mua2_range, mus2_range, *,
-              n_nodes: int = 3, **build_kw) -> TwoMediaEmulator:
+              n_nodes: int = 4, **build_kw) -> TwoMediaEmulator:
         """One :meth:`AbsorptionEmulator.build` of ``spec`` per node of ``n_nodes``
         log-spaced values over ``mua2_range`` x ``mus2_range`` (cm^-1) of medium
         ``second`` (``build_kw``: ``cache_dir``, ``method``, ``on_demand``, ...)."""

@@ -3,7 +3,7 @@
 The block of ``examples/two_layer.toml`` (an 80 micrometre epidermis over the dermis) with
 ``filter.medium = ["dermis", "epidermis"]``: the filter estimates the dermis's ``mua``,
 ``mus`` and the epidermis's ``mua2``, ``mus2`` (priors 0.5-2 x (1, 100) and (5, 150)
-cm^-1), with :class:`mcmatlab_py.emulator_media.TwoMediaEmulator` (a 3 x 3 grid of the
+cm^-1), with :class:`mcmatlab_py.emulator_media.TwoMediaEmulator` (a 4 x 4 grid of the
 dermis tables over the epidermis's optics).
 
 1. **Emulator** (``--emulator``): build time from an empty cache, and the relative L2 error
@@ -42,11 +42,12 @@ NAMES = ("mua", "mus", "mua2", "mus2")
 #: (dermis mua, mus, epidermis mua2, mus2): the priors' centres, and a point off them
 TRUTHS = {"A (centre)": dict(zip(NAMES, (1.0, 100.0, 5.0, 150.0), strict=True)),
           "B (off-centre)": dict(zip(NAMES, (1.6, 70.0, 3.5, 220.0), strict=True))}
-#: emulator test points: between the epidermis nodes (2.5, 5, 10 x 75, 150, 300) and at
-#: the dermis prior's corners
+#: emulator test points: between the epidermis nodes (by default 1.67, 5, 15 x 50, 150,
+#: 450 cm^-1: the prior widened 1.5 times each way), at the prior's corners, beyond them,
+#: and on the central node
 POINTS = [(1.0, 100.0, 3.5, 105.0), (1.0, 100.0, 7.0, 220.0), (0.6, 160.0, 3.5, 220.0),
           (1.6, 60.0, 7.0, 105.0), (0.5, 50.0, 2.5, 300.0), (2.0, 200.0, 10.0, 75.0),
-          (1.0, 100.0, 5.0, 150.0)]
+          (1.0, 100.0, 12.0, 380.0), (1.0, 100.0, 2.0, 60.0), (1.0, 100.0, 5.0, 150.0)]
 
 
 def both_config(layered):
@@ -92,8 +93,10 @@ def emulator_study(cfg, ref_photons: int) -> list[str]:
     n = cfg.media_nodes["n_nodes"]
     return [
         "## 1. The emulator of both layers", "",
-        f"{n} x {n} epidermis nodes over mua2 {list(cfg.media_nodes['mua2_range'])} x mus2 "
-        f"{list(cfg.media_nodes['mus2_range'])} cm^-1 (the prior), each a {spec.n_mua} x "
+        f"{n} x {n} epidermis nodes over mua2 {[round(v, 3) for v in cfg.media_nodes['mua2_range']]}"
+        " x mus2 "
+        f"{[round(v, 3) for v in cfg.media_nodes['mus2_range']]} cm^-1 (the prior widened 1.5 "
+        f"times each way), each a {spec.n_mua} x "
         f"{spec.n_mus} dermis table (`{emu.tables[0].method}`, {spec.n_photons} photons per "
         f"point at mus = 100); Monte Carlo on {spec.nx} x {spec.ny} x {spec.nz} voxels, nodal "
         f"loads on the {' x '.join(map(str, spec.mesh_divisions))} mesh. Built from an empty "

@@ -5,6 +5,7 @@ from __future__ import annotations
 import math
 import sys
 import time
+import warnings
 from pathlib import Path
 
 from .common import apply_threads, close_client, dask_client, shorten
@@ -129,6 +130,11 @@ def cmd_identify(args) -> int:
     if args.follow is not None and cfg.data.time_offset is not None:
         raise ValueError("data.time_offset is not supported with --follow: write the times "
                          "from the laser's start")
+    if cfg.second_medium is not None and "image" not in cfg.setup_kw:
+        warnings.warn("both layers from point sensors: one surface sensor hardly determines the "
+                      "second medium's optics, and the filter's bands held the truth on only "
+                      "65-90% of twin runs (docs/layered.md); a camera ([sensors.camera]) "
+                      "determines all four", RuntimeWarning, stacklevel=2)
     seed = args.seed if args.seed is not None else cfg.setup_kw.get("seed", 0)
     files = [Path(f) for f in (args.data or [])]
     if len(files) == 1:  # one dataset: bad data is bad input (exit 2, nothing written);
