@@ -365,18 +365,7 @@ class AbsorptionEmulator:
         return "NA" if self.spec.mesh_divisions is None else "load"
 
     def _check(self, name, values, lo, hi):
-        values = np.atleast_1d(np.asarray(values, dtype=np.float64))
-        if not np.all(np.isfinite(values)):
-            raise ValueError(f"{name} must be finite, got {float(values[~np.isfinite(values)][0])!r}")
-        bad = (values < lo * (1 - 1e-12)) | (values > hi * (1 + 1e-12))
-        if bad.any():
-            if self.out_of_range == "error":
-                raise ValueError(f"{name} = {float(values[bad][0])!r} cm^-1 is outside the emulator "
-                                 f"table [{lo}, {hi}]")
-            warnings.warn(f"{name} = {float(values[bad][0])!r} clamped to the emulator table "
-                          f"[{lo}, {hi}]", RuntimeWarning, stacklevel=3)
-            values = np.clip(values, lo, hi)
-        return values
+        return check_range(name, values, lo, hi, self.out_of_range, "the emulator table")
 
     def unique(self, mua, mus) -> np.ndarray:
         """NA at the orbit representatives, (N, n_unique): expand with ``[:, self.inverse]``.
@@ -501,6 +490,26 @@ class AbsorptionEmulator:
         from fem.threads import release_free_memory
 
         release_free_memory()  # the load operator's and the runs' temporaries
+
+
+def check_range(name: str, values, lo: float, hi: float, out_of_range: str,
+                what: str) -> np.ndarray:
+    """``values`` (cm^-1) as a float array inside ``[lo, hi]`` (``what``: the table or grid,
+    for the messages): non-finite values are refused; values outside are refused
+    (``out_of_range="error"``) or clamped with a ``RuntimeWarning`` that says "clamped"
+    (the filter counts those)."""
+    values = np.atleast_1d(np.asarray(values, dtype=np.float64))
+    if not np.all(np.isfinite(values)):
+        raise ValueError(f"{name} must be finite, got {float(values[~np.isfinite(values)][0])!r}")
+    bad = (values < lo * (1 - 1e-12)) | (values > hi * (1 + 1e-12))
+    if bad.any():
+        if out_of_range == "error":
+            raise ValueError(f"{name} = {float(values[bad][0])!r} cm^-1 is outside {what} "
+                             f"[{lo}, {hi}]")
+        warnings.warn(f"{name} = {float(values[bad][0])!r} clamped to {what} [{lo}, {hi}]",
+                      RuntimeWarning, stacklevel=4)
+        values = np.clip(values, lo, hi)
+    return values
 
 
 def _white_rows(spec: EmulatorSpec, task: tuple) -> tuple[np.ndarray, np.ndarray]:

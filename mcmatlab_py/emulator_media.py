@@ -24,12 +24,11 @@ from) are smoother than the noise of one table.
 from __future__ import annotations
 
 import dataclasses
-import warnings
 from dataclasses import dataclass, field
 
 import numpy as np
 
-from .emulator import AbsorptionEmulator, EmulatorSpec
+from .emulator import AbsorptionEmulator, EmulatorSpec, check_range
 
 __all__ = ["TwoMediaEmulator", "lagrange_weights", "node_specs"]
 
@@ -153,23 +152,12 @@ class TwoMediaEmulator:
         return cls(tables=tables, second=int(second), mua2_nodes=mua2, mus2_nodes=mus2,
                    out_of_range=out_of_range)
 
-    def _clip(self, name: str, values, lo: float, hi: float) -> np.ndarray:
-        v = np.atleast_1d(np.asarray(values, float))
-        if not np.all(np.isfinite(v)):
-            raise ValueError(f"{name} must be finite, got {float(v[~np.isfinite(v)][0])!r}")
-        bad = (v < lo * (1 - 1e-12)) | (v > hi * (1 + 1e-12))
-        if bad.any():
-            if self.out_of_range == "error":
-                raise ValueError(f"{name} = {float(v[bad][0])!r} cm^-1 is outside the emulator's "
-                                 f"nodes [{lo}, {hi}]")
-            warnings.warn(f"{name} = {float(v[bad][0])!r} clamped to the emulator's nodes "
-                          f"[{lo}, {hi}]", RuntimeWarning, stacklevel=3)
-        return np.clip(v, lo, hi)
-
     def weights(self, mua2, mus2) -> np.ndarray:
         """(N, n_nodes**2) interpolation weights of the node tables (C order)."""
-        mua2 = self._clip("mua2", mua2, *self.ranges["mua2"])
-        mus2 = self._clip("mus2", mus2, *self.ranges["mus2"])
+        mua2 = check_range("mua2", mua2, *self.ranges["mua2"], self.out_of_range,
+                           "the emulator's nodes")
+        mus2 = check_range("mus2", mus2, *self.ranges["mus2"], self.out_of_range,
+                           "the emulator's nodes")
         wa = lagrange_weights(np.log(mua2), self._lmua2)
         wb = lagrange_weights(np.log(mus2), self._lmus2)
         return (wa[:, :, None] * wb[:, None, :]).reshape(wa.shape[0], -1)

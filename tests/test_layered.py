@@ -152,21 +152,13 @@ def test_layered_tables_are_cached_and_corruption_is_rebuilt(tmp_path, method):
 
 def test_identify_two_layers_end_to_end(tmp_path):
     """A tiny two-layer run: twin data of the filter's own model at dermis (1.3, 80) cm^-1."""
-    from enkf.tissue import TissueForwardModel, identify, observation_operator
+    from enkf.tissue import identify
 
     cfg = identify_config_from_dict(tiny_two_layer())
     emu = cfg.emulator(cache_dir=tmp_path, progress=False)
     assert not emu.have.any()  # on demand: the points come with the members' first loads
     setup = cfg.setup(emu)
-    model = TissueForwardModel(setup)
-    P, _, _ = observation_operator(setup, model.mesh)
-    times = np.round(np.arange(1, 21) * 0.1, 10)
-    T = np.zeros((1, model.mesh.p.shape[1]))
-    clean = []
-    for t0, t1 in zip(np.r_[0.0, times[:-1]], times, strict=True):
-        T = model(T, np.array([[1.3, 80.0]]), float(t0), float(t1))
-        clean.append((P @ T.T)[:, 0])
-    data = np.array(clean) + 0.1 * np.random.default_rng(0).standard_normal((20, 1))
+    times, data = twin(cfg, emu, [1.3, 80.0])
     est = identify(setup, times, data)
     assert est.diverged is None
     assert (tmp_path / f"emulator-{cfg_key(cfg)}.npz").exists() and emu.have.any()
