@@ -132,9 +132,10 @@ def cmd_identify(args) -> int:
                          "from the laser's start")
     if cfg.second_medium is not None and "image" not in cfg.setup_kw:
         warnings.warn("both layers from point sensors: one surface sensor hardly determines the "
-                      "second medium's optics, and the filter's bands held the truth on only "
-                      "65-90% of twin runs (docs/layered.md); a camera ([sensors.camera]) "
-                      "determines all four", RuntimeWarning, stacklevel=2)
+                      "second medium's optics, and the bands were too narrow on twin runs with "
+                      "truths away from the prior's centre (docs/layered.md, 'Both layers'); a "
+                      "camera ([sensors.camera]) determines all four", RuntimeWarning,
+                      stacklevel=2)
     seed = args.seed if args.seed is not None else cfg.setup_kw.get("seed", 0)
     files = [Path(f) for f in (args.data or [])]
     if len(files) == 1:  # one dataset: bad data is bad input (exit 2, nothing written);
