@@ -88,20 +88,17 @@ def _identify_one(cfg, absorption, seed, data_path, out_dir, quiet=True) -> dict
         est = identify(setup, times, data, callback=callback, param_bounds=cfg.param_bounds)
     finally:
         bar.close()
-    summary = write_identify_outputs(Path(out_dir), setup, est, times, data,
-                                     absorption=absorption, risk=risk)
     media = cfg.model.G.media
-    if len(media) > 1:  # whose optics each parameter is
+    names = None
+    if len(media) > 1:  # whose optics each parameter is (VHC and TC: the whole block's)
         names = {"mua": media[cfg.medium].name, "mus": media[cfg.medium].name}
         if cfg.second_medium is not None:
             names.update(mua2=media[cfg.second_medium].name, mus2=media[cfg.second_medium].name)
-        for n, p in summary["parameters"].items():
-            if n in names:  # VHC and TC: the whole block's
-                p["medium"] = names[n]
+    summary = write_identify_outputs(Path(out_dir), setup, est, times, data,
+                                     absorption=absorption, risk=risk, media=names)
     if cfg.smoother_iterations:
         summary["smoother"] = _smoother_summary(setup, times, data, cfg.smoother_iterations,
                                                 cfg.smoother_options, quiet)
-    if len(media) > 1 or cfg.smoother_iterations:
         write_json(Path(out_dir) / "summary.json", summary)
     summary["data"] = str(data_path)
     summary["wall_s"] = time.perf_counter() - t0

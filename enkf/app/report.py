@@ -9,7 +9,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..tissue.parameters import PARAMETER_LABELS
+from ..tissue.parameters import OPTICS_NAMES, PARAMETER_LABELS
 from .rundir import write_json
 
 __all__ = ["manifest", "plot_identification", "write_identify_outputs"]
@@ -115,9 +115,10 @@ def _runs(t, on):
 
 
 def write_identify_outputs(out: Path, setup, est, times, data, *, absorption=None,
-                           risk=None) -> dict:
+                           risk=None, media: dict | None = None) -> dict:
     """estimates.csv, summary.json, figures/estimates.png, fields/final.vtu into ``out``.
 
+    ``media``: ``{parameter: medium name}`` (several media), written into summary.json.
     ``risk``: an :class:`enkf.risk.RiskTracker` that followed the run (media with E, A):
     its last fields go into final.vtu (``p_damage``, ``p_T_above_60C``, ``p_T_ever_above_60C``,
     ``damage_Omega_mean``), its series into fields/risk.pvd, a depth map into figures/.
@@ -136,7 +137,8 @@ def write_identify_outputs(out: Path, setup, est, times, data, *, absorption=Non
     plot_identification(out / "figures" / "estimates.png", est, times, data, setup.power)
     summary = {
         "parameters": {n: {"estimate_final": float(est.param_mean[k, i]),
-                           "std_final": float(est.param_std[k, i])}
+                           "std_final": float(est.param_std[k, i]),
+                           **({"medium": media[n]} if n in (media or {}) else {})}
                        for i, n in enumerate(est.names)},
         "tracked": [{"position_cm": [float(v) for v in est.tracked_positions[j]],
                      "T_final": float(est.tracked_mean[k, j]),
@@ -187,7 +189,7 @@ def write_identify_outputs(out: Path, setup, est, times, data, *, absorption=Non
         point_data["T_mean"] = res.state_ensemble.mean(axis=0)
         point_data["T_std"] = res.state_ensemble.std(axis=0, ddof=1)
     if absorption is not None and getattr(absorption, "kind", "") == "load":
-        optics = [n for n in ("mua", "mus", "mua2", "mus2") if n in est.names]
+        optics = [n for n in OPTICS_NAMES if n in est.names]
         vals = absorption.unique(*(est.param_mean[k, [est.names.index(n)]] for n in optics))
         vals = vals[0][absorption.inverse]
         point_data["absorbed_power_per_W"] = vals

@@ -11,7 +11,7 @@ import scipy.sparse as sp
 import fem
 
 from .absorption import as_absorption
-from .parameters import column
+from .parameters import OPTICS_NAMES, SECOND_MEDIUM_NAMES, column
 from .setup import TissueFilterSetup
 
 __all__ = ["TissueForwardModel", "observation_operator"]
@@ -41,7 +41,7 @@ class TissueForwardModel:
         self.steppers: dict[float, fem.HeatStepper] = {}
         self.col = {name: column(setup.estimate, name) for name in setup.estimate}
         #: the second estimated medium's optics, passed to the absorption model after mua, mus
-        self._second = tuple(n for n in ("mua2", "mus2") if n in self.col)
+        self._second = tuple(n for n in SECOND_MEDIUM_NAMES if n in self.col)
         if self._second and getattr(absorption, "n_media_estimated", 1) != 2:
             raise ValueError(f"estimate = {setup.estimate} names a second medium's optics, but "
                              f"the absorption model ({type(absorption).__name__}) takes one "
@@ -96,7 +96,7 @@ class TissueForwardModel:
             return None
         rng = self.table_ranges()
         advice = []
-        for name in ("mua", "mus", "mua2", "mus2"):
+        for name in OPTICS_NAMES:
             lo, hi = c["lo"].get(name), c["hi"].get(name)
             if lo is None and hi is None:
                 continue

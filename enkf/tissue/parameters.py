@@ -12,6 +12,7 @@ __all__ = [
     "ESTIMATES",
     "PARAMETER_LABELS",
     "PARAMETER_NAMES",
+    "OPTICS_NAMES",
     "PARAMETER_UNITS",
     "SECOND_MEDIUM_NAMES",
     "TRACKED_DEPTHS",
@@ -29,6 +30,8 @@ COAGULATION_NAMES = ("mua_coag", "mus_coag")
 #: the optics of a second estimated medium of a layered block (e.g. the epidermis over the
 #: dermis whose optics are ``mua``, ``mus``; :class:`mcmatlab_py.emulator_media.TwoMediaEmulator`)
 SECOND_MEDIUM_NAMES = ("mua2", "mus2")
+#: the optical parameters an absorption model takes, in its call's order
+OPTICS_NAMES = PARAMETER_NAMES[:2] + SECOND_MEDIUM_NAMES
 #: units of each parameter (MCmatlab's and the paper's)
 PARAMETER_UNITS = {"mua": "cm^-1", "mus": "cm^-1", "VHC": "J cm^-3 K^-1", "TC": "W cm^-1 K^-1",
                    "mua_coag": "cm^-1", "mus_coag": "cm^-1", "mua2": "cm^-1", "mus2": "cm^-1"}
