@@ -13,6 +13,8 @@ no knowledge of tissue, photons or meshes (it imports nothing from ``mcmatlab_py
 - :mod:`enkf.loop`: the augmented-state filter loop (:func:`run_filter`).
 - :mod:`enkf.smoother`: the ensemble smoother with multiple data assimilation
   (:func:`es_mda`) for constant parameters over a whole window.
+- :mod:`enkf.importance`: adaptive multiple importance sampling (:func:`amis`), the
+  posterior itself from an ensemble's first guess, for few parameters.
 - :mod:`enkf.toy_models`: toy models to verify the filter (linear-Gaussian with its
   exact Kalman filter, Lorenz-96).
 - :mod:`enkf.checks`: input checks shared by these modules.
@@ -41,6 +43,7 @@ from importlib.metadata import PackageNotFoundError, version
 from .adaptive import AdaptiveInflation, InflationEstimator, innovation_loglik
 from .analysis import enkf_perturbed_obs, etkf, inflate, random_rotation
 from .health import HealthCheck
+from .importance import ImportanceSample, amis
 from .loop import run_filter
 from .problem import (
     DEFAULT_METHOD,
@@ -61,6 +64,8 @@ except PackageNotFoundError:  # pragma: no cover - running from a source tree
 
 __all__ = [
     "AdaptiveInflation",
+    "ImportanceSample",
+    "amis",
     "es_mda",
     "DEFAULT_METHOD",
     "FilterConfig",

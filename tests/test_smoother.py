@@ -198,3 +198,29 @@ def test_smoother_estimates_at_heated_times(tissue):
     np.testing.assert_allclose(mid, 0.5 * (est.knots[:, 0] + est.knots[:, 1]))
     const = smooth_constant(s, times, data, n_iter=2)
     np.testing.assert_array_equal(const.at([0.0, 0.7])[1], const.theta)
+
+
+def test_the_forward_model_reads_the_absorption_once_for_constant_optics(tissue):
+    """Steps with the same optics (a smoother's window, a twin) reuse the last values of
+    the absorption model (its evaluation costs 15 times a heat step on the layered block);
+    other optics, or another number of members, are evaluated afresh; the temperatures are
+    those of a model that evaluates every step."""
+    calls = []
+
+    def counted(mua, mus):
+        calls.append(len(mua))
+        return tissue.absorption(mua, mus)
+
+    s = tissue.setup(absorption=counted)
+    model, fresh = TissueForwardModel(s), TissueForwardModel(tissue.setup())
+    theta = np.array([[1.0, 100.0], [1.5, 60.0]])
+    T = F = np.full((2, model.mesh.p.shape[1]), s.T_initial)
+    for k in range(3):
+        T = model(T, theta, 0.1 * k, 0.1 * (k + 1))
+        fresh._last_optics = None  # noqa: SLF001 - the reference evaluates every step
+        F = fresh(F, theta, 0.1 * k, 0.1 * (k + 1))
+    assert calls == [2]
+    np.testing.assert_array_equal(T, F)
+    model(T, theta * [1.0, 1.01], 0.3, 0.4)
+    model(T[:1], theta[:1] * [1.0, 1.01], 0.4, 0.5)
+    assert calls == [2, 2, 1]

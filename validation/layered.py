@@ -191,18 +191,19 @@ def run_seeds(cfg, emulator, kind: str, truth: dict, clean: np.ndarray, seeds,
 
 
 def smooth_seeds(cfg, emulator, kind: str, truth: dict, clean: np.ndarray, seeds, n_iter: int,
-                 overrides=None) -> dict:
+                 overrides=None, importance: int = 0) -> dict:
     """As :func:`run_seeds`, the estimates of the ES-MDA smoother over the whole window
-    (:func:`enkf.tissue.smooth.smooth_constant`) from the same data."""
+    (:func:`enkf.tissue.smooth.smooth_constant`) from the same data; with ``importance``
+    samples of adaptive importance sampling after it (the posterior itself)."""
     from enkf.tissue.smooth import smooth_constant
 
     def estimate(setup, times, data):
-        est = smooth_constant(setup, times, data, n_iter=n_iter)
+        est = smooth_constant(setup, times, data, n_iter=n_iter, importance=importance)
         bands = np.array([est.band(i) for i in range(len(est.names))])
         return est.names, est.mean, est.std, bands[:, 0], bands[:, 1], est.wall_s, None
 
     return _over_seeds(cfg, emulator, kind, truth, clean, seeds, overrides, estimate,
-                       " ES-MDA")
+                       " ES-MDA" + (f" + AMIS ({importance})" if importance else ""))
 
 
 def main(argv=None):
@@ -221,6 +222,9 @@ def main(argv=None):
     ap.add_argument("--mda", type=int, default=None)
     ap.add_argument("--smoother", type=int, default=0, metavar="N_ITER",
                     help="also the ES-MDA smoother with N_ITER updates on the twins (section 3)")
+    ap.add_argument("--importance", type=int, default=0, metavar="M",
+                    help="the smoother followed by M samples of adaptive importance sampling")
+    ap.add_argument("--no-filter", action="store_true", help="the smoother's rows only")
     ap.add_argument("--pseudo-true", action="store_true",
                     help="section 5 (the coarse model's best fit to the fine truth)")
     ap.add_argument("--out", default=str(HERE / "reports" / "layered.md"))
@@ -261,15 +265,18 @@ def main(argv=None):
                 print(pseudo_rows[-1], flush=True)
             if not len(seeds):
                 continue
-            res = run_seeds(cfg, emulator, kind, truth, twin_data(sensor, truth), seeds,
-                            {"model_error": "white", **overrides})
-            filt_rows.append(_filter_row(kind, "twin", label, truth, res, crb))
-            print(filt_rows[-1], flush=True)
+            if not args.no_filter:
+                res = run_seeds(cfg, emulator, kind, truth, twin_data(sensor, truth), seeds,
+                                {"model_error": "white", **overrides})
+                filt_rows.append(_filter_row(kind, "twin", label, truth, res, crb))
+                print(filt_rows[-1], flush=True)
             if args.smoother:
                 res = smooth_seeds(cfg, emulator, kind, truth, twin_data(sensor, truth), seeds,
-                                   args.smoother, {"model_error": "white", **overrides})
-                filt_rows.append(_filter_row(kind, f"twin, ES-MDA ({args.smoother})", label,
-                                             truth, res, crb))
+                                   args.smoother, {"model_error": "white", **overrides},
+                                   args.importance)
+                name = f"twin, ES-MDA ({args.smoother})" + (
+                    f" + AMIS ({args.importance})" if args.importance else "")
+                filt_rows.append(_filter_row(kind, name, label, truth, res, crb))
                 print(filt_rows[-1], flush=True)
             if args.fine and kind == "sensor" and label == next(iter(truths)):
                 fine = fine_data(cfg, truth)

@@ -182,6 +182,10 @@ def main(argv=None):
     ap.add_argument("--truths", default=",".join(TRUTHS), help="comma-separated labels")
     ap.add_argument("--kinds", default="sensor,camera")
     ap.add_argument("--smoother", type=int, default=0, metavar="N_ITER")
+    ap.add_argument("--importance", type=int, default=0, metavar="M",
+                    help="the smoother followed by M samples of adaptive importance sampling "
+                         "(enkf.importance): the posterior itself")
+    ap.add_argument("--no-filter", action="store_true", help="the smoother's rows only")
     ap.add_argument("--fine", action="store_true",
                     help="also a fine truth at A (direct Monte Carlo and heat on the voxels), "
                          "point sensor, the config's structured model error")
@@ -209,6 +213,8 @@ def main(argv=None):
     draws = "prior" in args.truths.split(",")
     crb_rows, filt_rows = [], []
     members = {} if args.n_members is None else {"n_members": args.n_members}
+    smoother = f"ES-MDA ({args.smoother})" + (
+        f" + AMIS ({args.importance})" if args.importance else "")
     for kind in kinds:
         sensor = ident.ConfigSensor(layered.sensor_setup(cfg, emulator, kind), layered.DT,
                                     layered.N_STEPS)
@@ -225,7 +231,7 @@ def main(argv=None):
             print(crb_rows[-1], flush=True)
             clean = layered.twin_data(sensor, truth)
             over = {"model_error": "white", **members}
-            if args.seeds:
+            if args.seeds and not args.no_filter:
                 res = layered.run_seeds(cfg, emulator, kind, truth, clean, range(args.seeds),
                                         over)
                 filt_rows.append(_row(kind, label, truth, res, crb)
@@ -233,9 +239,9 @@ def main(argv=None):
                 print(filt_rows[-1], flush=True)
             if args.seeds and args.smoother:
                 res = layered.smooth_seeds(cfg, emulator, kind, truth, clean, range(args.seeds),
-                                           args.smoother, over)
+                                           args.smoother, over, args.importance)
                 filt_rows.append(_row(kind, label, truth, res, crb).replace(
-                    f"| {args.seeds} |", f"| ES-MDA ({args.smoother}), {args.seeds} |"))
+                    f"| {args.seeds} |", f"| {smoother}, {args.seeds} |"))
                 print(filt_rows[-1], flush=True)
             if args.fine and args.seeds and kind == "sensor" and label.startswith("A"):
                 # the epidermis of the config is A's: fine_data sets the dermis
@@ -248,9 +254,11 @@ def main(argv=None):
                 print(filt_rows[-1], flush=True)
         if draws and args.seeds:
             over = {"model_error": "white", **members}
-            for label, runner, extra in (("filter", layered.run_seeds, (over,)),
-                                         (f"ES-MDA ({args.smoother})", layered.smooth_seeds,
-                                          (args.smoother, over)))[:2 if args.smoother else 1]:
+            runners = [("filter", layered.run_seeds, (over,))][:0 if args.no_filter else 1]
+            if args.smoother:
+                runners.append((smoother, layered.smooth_seeds,
+                                (args.smoother, over, args.importance)))
+            for label, runner, extra in runners:
                 res, crb = over_prior_draws(layered, cfg, emulator, kind, sensor,
                                             range(args.seeds), runner, *extra)
                 filt_rows.append(_row(kind, "prior draws", None, res, crb).replace(

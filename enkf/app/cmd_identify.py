@@ -20,6 +20,8 @@ def _smoother_summary(setup, times, data, n_iter: int, options: dict, quiet: boo
     """summary.json's ``smoother``: ES-MDA over the whole window, for constant optics
     (``knots`` 1) or optics drifting while heated (``knots`` >= 2; the estimates are those
     at the window's end, and the knots' values are listed)."""
+    import numpy as np
+
     from ..tissue import smooth_constant, smooth_drifting
 
     opts = dict(options or {})
@@ -29,18 +31,23 @@ def _smoother_summary(setup, times, data, n_iter: int, options: dict, quiet: boo
     else:
         est = smooth_constant(setup, times, data, n_iter=n_iter, **opts)
     if not quiet:
-        print(f"smoother (ES-MDA, {n_iter} updates, {est.wall_s:.1f} s): " + ", ".join(
+        imp = "" if est.weights is None else f", importance sampling: ESS {est.ess:.0f}"
+        print(f"smoother (ES-MDA, {n_iter} updates{imp}, {est.wall_s:.1f} s): " + ", ".join(
             f"{n} {m:.4g} +- {s:.2g}" for n, m, s in zip(est.names, est.mean, est.std,
                                                           strict=True)), file=sys.stderr)
-    out = {"method": "ES-MDA", "iterations": n_iter, "knots": knots, **opts,
-           "wall_s": est.wall_s,
+    out = {"method": "ES-MDA + AMIS" if est.weights is not None else "ES-MDA",
+           "iterations": n_iter, "knots": knots, **opts, "wall_s": est.wall_s,
            "parameters": {n: {"estimate": float(est.mean[i]), "std": float(est.std[i]),
                               "band_2sd": list(est.band(i))}
                           for i, n in enumerate(est.names)}}
     if knots > 1:
         out["knot_times_heated_s"] = est.knot_times.tolist()
-        out["knot_estimates"] = {n: est.knots[:, :, i].mean(axis=0).tolist()
+        w = est.weights if est.weights is not None else np.full(len(est.knots),
+                                                                    1 / len(est.knots))
+        out["knot_estimates"] = {n: (w @ est.knots[:, :, i]).tolist()
                                  for i, n in enumerate(est.names)}
+    if est.weights is not None:
+        out["effective_sample_size"] = float(est.ess)
     return out
 
 

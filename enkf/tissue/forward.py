@@ -50,6 +50,8 @@ class TissueForwardModel:
             raise ValueError("the absorption model takes two media's optics: estimate must "
                              "name mua2 and mus2")
         self._clamp = {"calls": 0, "member_calls": 0, "lo": {}, "hi": {}}
+        #: (optics (N, n), the absorption model's values, clamped?) of the last call
+        self._last_optics = None
 
     def stepper(self, dt: float) -> fem.HeatStepper:
         key = round(dt, 9)
@@ -129,15 +131,25 @@ class TissueForwardModel:
         Members whose optics lie outside the emulator's table are clamped to its edge;
         they are counted (:meth:`clamp_report`) instead of warned about one by one."""
         optics = {n: theta[:, self.col[n]] for n in ("mua", "mus") + self._second}
-        with warnings.catch_warnings(record=True) as caught:
-            warnings.simplefilter("always")
-            vals = self.absorption.unique(*optics.values())
-        clamps = [w for w in caught if "clamped" in str(w.message)]
-        if clamps:
-            self._count_clamps(optics)
-        for w in caught:
-            if w not in clamps:
-                warnings.warn(str(w.message), w.category, stacklevel=3)
+        key = np.column_stack(list(optics.values()))
+        last = self._last_optics
+        if last is not None and last[0].shape == key.shape and np.array_equal(last[0], key):
+            # the same optics as the last call (constant optics over a window, as the
+            # smoother and the twins run): the absorption model's values again
+            vals = last[1]
+            if last[2]:
+                self._count_clamps(optics)
+        else:
+            with warnings.catch_warnings(record=True) as caught:
+                warnings.simplefilter("always")
+                vals = self.absorption.unique(*optics.values())
+            clamps = [w for w in caught if "clamped" in str(w.message)]
+            if clamps:
+                self._count_clamps(optics)
+            for w in caught:
+                if w not in clamps:
+                    warnings.warn(str(w.message), w.category, stacklevel=3)
+            self._last_optics = (key, vals, bool(clamps))
         if self._nodal:  # np.take keeps C order (vals[:, idx] comes out in Fortran
             # order), which the heat step's kernels read row by row
             return power * np.take(vals, self.absorption.inverse, axis=1)

@@ -30,6 +30,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..checks import float_array
+from ..importance import amis, weighted_quantile
 from ..smoother import es_mda
 from .identify import assemble
 from .setup import TissueFilterSetup
@@ -45,6 +46,9 @@ class SmootherEstimates:
     physical units (cm^-1 for mua and mus, the setup's units for VHC and TC); ``n_iter``
     updates; ``wall_s`` s. Drifting optics (:func:`smooth_drifting`): ``knot_times``
     (K,) s of heated time and ``knots`` (N, K, n_par) the members' values there.
+    With ``importance`` samples (:mod:`enkf.importance`): ``theta`` (and ``knots``) hold
+    the weighted samples of the posterior, ``weights`` (N,) their weights (sum 1) and
+    ``ess`` their effective sample size; the statistics below are weighted.
     """
 
     names: tuple
@@ -53,16 +57,22 @@ class SmootherEstimates:
     wall_s: float
     knot_times: np.ndarray | None = None
     knots: np.ndarray | None = None
+    weights: np.ndarray | None = None
+    ess: float | None = None
 
     @property
     def mean(self) -> np.ndarray:
-        """(n_par,) the ensemble mean."""
-        return self.theta.mean(axis=0)
+        """(n_par,) the ensemble mean (weighted with importance weights)."""
+        if self.weights is None:
+            return self.theta.mean(axis=0)
+        return self.weights @ self.theta
 
     @property
     def std(self) -> np.ndarray:
-        """(n_par,) the ensemble standard deviation."""
-        return self.theta.std(axis=0, ddof=1)
+        """(n_par,) the ensemble standard deviation (weighted with importance weights)."""
+        if self.weights is None:
+            return self.theta.std(axis=0, ddof=1)
+        return np.sqrt(self.weights @ (self.theta - self.mean) ** 2)
 
     def at(self, heated) -> np.ndarray:
         """(M, N, n_par) the members' parameters at the heated times ``heated`` (M,) s
@@ -75,8 +85,11 @@ class SmootherEstimates:
     def band(self, i: int, q: float = 0.02275) -> tuple[float, float]:
         """The ``q`` and ``1 - q`` quantiles of parameter ``i`` (default: +-2 sd of a
         normal; positive like the members)."""
-        return (float(np.quantile(self.theta[:, i], q)),
-                float(np.quantile(self.theta[:, i], 1 - q)))
+        if self.weights is None:
+            return (float(np.quantile(self.theta[:, i], q)),
+                    float(np.quantile(self.theta[:, i], 1 - q)))
+        lo, hi = weighted_quantile(self.theta[:, i], self.weights, [q, 1 - q])
+        return float(lo), float(hi)
 
 
 def heated_time(power, edges) -> np.ndarray:
@@ -127,7 +140,8 @@ def check_discrepancy_size(n_readings: int, discrepancy: float, where: str = "")
 
 def smooth_constant(setup: TissueFilterSetup, times, data, *, n_iter: int = 4,
                     seed: int | None = None, discrepancy: float = 0.0,
-                    discrepancy_time: float = 2.0) -> SmootherEstimates:
+                    discrepancy_time: float = 2.0, importance: int = 0,
+                    importance_rounds: int = 6) -> SmootherEstimates:
     """Constant optics from all the readings at once (module doc).
 
     Parameters
@@ -140,17 +154,24 @@ def smooth_constant(setup: TissueFilterSetup, times, data, *, n_iter: int = 4,
     seed : the generator of the prior and the perturbations (default ``setup.seed``)
     discrepancy : relative sd of the model's error of the temperature rise (0: none)
     discrepancy_time : s, its correlation time
+    importance : 0 (default): the ES-MDA ensemble is the answer. > 0: that many samples of
+        adaptive importance sampling (:func:`enkf.importance.amis`), seeded by the
+        ensemble, give the posterior itself (weighted samples): for parameters the data
+        hardly determine, where the ensemble's bands are too narrow (``docs/enkf.md``)
+    importance_rounds : the proposals the samples are split over
 
     The update is ``setup.method``'s (:func:`enkf.smoother.es_mda`: ``"etkf"``, the
     default, without perturbed observations).
     """
-    return _smooth(setup, times, data, n_iter, seed, 1, 0.0, discrepancy, discrepancy_time, ())
+    return _smooth(setup, times, data, n_iter, seed, 1, 0.0, discrepancy, discrepancy_time, (),
+                   importance, importance_rounds)
 
 
 def smooth_drifting(setup: TissueFilterSetup, times, data, *, knots: int = 3,
                     n_iter: int = 8, seed: int | None = None, drift_log_std: float = 1.0,
                     drifting=("mua", "mus"), discrepancy: float = 0.0,
-                    discrepancy_time: float = 2.0) -> SmootherEstimates:
+                    discrepancy_time: float = 2.0, importance: int = 0,
+                    importance_rounds: int = 6) -> SmootherEstimates:
     """Optics that drift while heated, from all the readings at once (module doc).
 
     Each estimated parameter named in ``drifting`` (default the optics; the others are
@@ -176,11 +197,13 @@ def smooth_drifting(setup: TissueFilterSetup, times, data, *, knots: int = 3,
         raise ValueError(f"drifting must name estimated parameters {names}, got "
                          f"{tuple(drifting)!r}")
     return _smooth(setup, times, data, n_iter, seed, int(knots), float(drift_log_std),
-                   discrepancy, discrepancy_time, tuple(drifting))
+                   discrepancy, discrepancy_time, tuple(drifting), importance,
+                   importance_rounds)
 
 
 def _smooth(setup, times, data, n_iter, seed, n_knots, drift_log_std, discrepancy,
-            discrepancy_time, drifting) -> SmootherEstimates:
+            discrepancy_time, drifting, importance=0, importance_rounds=6
+            ) -> SmootherEstimates:
     if setup.parameter_model != "random_walk":
         raise ValueError(f"the smoother needs parameter_model = 'random_walk' (constant or "
                          f"drifting optics), got {setup.parameter_model!r}")
@@ -191,6 +214,8 @@ def _smooth(setup, times, data, n_iter, seed, n_knots, drift_log_std, discrepanc
         raise ValueError(f"discrepancy must be >= 0 (relative sd), got {discrepancy!r}")
     if not (np.isfinite(discrepancy_time) and discrepancy_time > 0):
         raise ValueError(f"discrepancy_time must be > 0 s, got {discrepancy_time!r}")
+    if not (isinstance(importance, (int, np.integer)) and importance >= 0):
+        raise ValueError(f"importance must be an integer >= 0 (samples), got {importance!r}")
     times = float_array(times, "times", 1)
     if times.size == 0 or times[0] <= 0 or np.any(np.diff(times) <= 0):
         raise ValueError("times must be strictly increasing and after 0 (s)")
@@ -222,7 +247,9 @@ def _smooth(setup, times, data, n_iter, seed, n_knots, drift_log_std, discrepanc
 
     def simulate(U: np.ndarray) -> np.ndarray:
         theta = _knot_values(_knots_of(U, drift, n_knots), tk, tau)
-        T = X0.copy()
+        # every member starts from the known initial field (the importance sampler's
+        # batches have their own sizes)
+        T = np.tile(X0[0], (U.shape[0], 1))
         out = np.empty((U.shape[0], times.size, P.shape[0]))
         for k in range(times.size):
             T = model(T, np.ascontiguousarray(theta[k]), float(edges[k]), float(edges[k + 1]))
@@ -238,11 +265,56 @@ def _smooth(setup, times, data, n_iter, seed, n_knots, drift_log_std, discrepanc
         corr = np.exp(-np.abs(t_obs[:, None] - t_obs[None, :]) / discrepancy_time)
         R = np.diag(R) + (discrepancy ** 2) * np.outer(rise, rise) * corr
     tic = time.perf_counter()
-    U = es_mda(simulate, U0, data.ravel()[keep], R, rng, n_iter=n_iter, method=setup.method)
+    y = data.ravel()[keep]
+    U = es_mda(simulate, U0, y, R, rng, n_iter=n_iter, method=setup.method)
+    weights = ess = None
+    if importance:
+        lo, hi = (np.log(b) for b in setup.prior_bounds())
+        log_post = _log_posterior(simulate, y, R, np.r_[lo[~drift], lo[drift]],
+                                  np.r_[hi[~drift], hi[drift]], int(drift.sum()), n_knots, step)
+        sample = amis(log_post, U, rng, n_samples=int(importance), n_rounds=importance_rounds)
+        live = sample.weights > 0
+        U, weights, ess = sample.U[live], sample.weights[live], sample.ess
     wall = time.perf_counter() - tic
     V = _knots_of(U, drift, n_knots)
+    names = tuple(setup.parameter_names)
     if n_knots == 1:
-        return SmootherEstimates(tuple(setup.parameter_names), V[:, 0].copy(), int(n_iter), wall)
+        return SmootherEstimates(names, V[:, 0].copy(), int(n_iter), wall, weights=weights,
+                                 ess=ess)
     # the end of the window: the last knot
-    return SmootherEstimates(tuple(setup.parameter_names), np.ascontiguousarray(V[:, -1]),
-                             int(n_iter), wall, knot_times=tk, knots=V)
+    return SmootherEstimates(names, np.ascontiguousarray(V[:, -1]), int(n_iter), wall,
+                             knot_times=tk, knots=V, weights=weights, ess=ess)
+
+
+#: members re-run over the window at once by the importance sampler (memory: the window's
+#: predictions of this many members)
+IMPORTANCE_CHUNK = 250
+
+
+def _log_posterior(simulate, y, R, lo, hi, n_drift, n_knots, step):
+    """``log_post(U) -> (M,)``: the smoother's log posterior of the logs ``U`` (its
+    layout: :func:`_knots_of`) up to a constant. The prior: uniform in each parameter
+    between ``lo`` and ``hi`` (logs; the first knot's for drifting ones), so ``sum(U)``
+    in the logs inside the box and ``-inf`` outside; each later knot's log a normal step
+    of sd ``step`` from the previous. The readings ``y`` Gaussian about the members'
+    predictions with covariance ``R`` (p,) or (p, p)."""
+    n_box = lo.size
+    dense = np.ndim(R) == 2
+    L = np.linalg.cholesky(R) if dense else None
+
+    def log_post(U: np.ndarray) -> np.ndarray:
+        first = U[:, :n_box]
+        out = np.where(np.all((first >= lo) & (first <= hi), axis=1), first.sum(axis=1),
+                       -np.inf)
+        if n_knots > 1:
+            walk = np.diff(U[:, n_box - n_drift:].reshape(U.shape[0], n_knots, n_drift), axis=1)
+            out += -0.5 * np.sum(walk ** 2, axis=(1, 2)) / step ** 2
+        inside = np.flatnonzero(np.isfinite(out))
+        for s in range(0, inside.size, IMPORTANCE_CHUNK):
+            rows = inside[s:s + IMPORTANCE_CHUNK]
+            r = y - simulate(U[rows])
+            z = np.linalg.solve(L, r.T) if dense else r.T / np.sqrt(R)[:, None]
+            out[rows] += -0.5 * np.sum(z * z, axis=0)
+        return out
+
+    return log_post
