@@ -159,7 +159,12 @@ def test_smoother_importance_gives_the_grid_posterior_of_the_tissue_model(tissue
     g_sd = np.sqrt(w @ (U - g_mean) ** 2)
     assert g_sd[1] > 0.15  # mus poorly determined: the case the test is about
     # from one ES update (a linear step: a poor first guess here)
-    est = smooth_constant(s, times, data[:, None], n_iter=1, importance=3000)
+    seen = []
+    est = smooth_constant(s, times, data[:, None], n_iter=1, importance=3000,
+                          callback=lambda f, note: seen.append((f, note)))
+    # progress: one report per update and per round, rising to the whole work
+    assert len(seen) == 1 + 6 and seen[-1][0] == pytest.approx(1.0)
+    assert np.all(np.diff([f for f, _ in seen]) > 0) and "ESS" in seen[-1][1]
     assert est.weights is not None and np.isclose(est.weights.sum(), 1.0)
     assert est.theta.shape[0] == est.weights.size and np.all(est.theta > 0)
     logs = np.log(est.theta)

@@ -22,14 +22,21 @@ def _smoother_summary(setup, times, data, n_iter: int, options: dict, quiet: boo
     at the window's end, and the knots' values are listed)."""
     import numpy as np
 
+    from mcmatlab_py.progress import Progress
+
     from ..tissue import smooth_constant, smooth_drifting
 
     opts = dict(options or {})
     knots = int(opts.pop("knots", 1))
-    if knots > 1:
-        est = smooth_drifting(setup, times, data, knots=knots, n_iter=n_iter, **opts)
-    else:
-        est = smooth_constant(setup, times, data, n_iter=n_iter, **opts)
+    bar = Progress(1.0, "smoother", enabled=not quiet)
+    kw = {**opts, "n_iter": n_iter, "callback": bar.update}
+    try:
+        if knots > 1:
+            est = smooth_drifting(setup, times, data, knots=knots, **kw)
+        else:
+            est = smooth_constant(setup, times, data, **kw)
+    finally:
+        bar.close()
     if not quiet:
         imp = "" if est.weights is None else f", importance sampling: ESS {est.ess:.0f}"
         print(f"smoother (ES-MDA, {n_iter} updates{imp}, {est.wall_s:.1f} s): " + ", ".join(

@@ -141,7 +141,7 @@ def check_discrepancy_size(n_readings: int, discrepancy: float, where: str = "")
 def smooth_constant(setup: TissueFilterSetup, times, data, *, n_iter: int = 4,
                     seed: int | None = None, discrepancy: float = 0.0,
                     discrepancy_time: float = 2.0, importance: int = 0,
-                    importance_rounds: int = 6) -> SmootherEstimates:
+                    importance_rounds: int = 6, callback=None) -> SmootherEstimates:
     """Constant optics from all the readings at once (module doc).
 
     Parameters
@@ -159,19 +159,21 @@ def smooth_constant(setup: TissueFilterSetup, times, data, *, n_iter: int = 4,
         ensemble, give the posterior itself (weighted samples): for parameters the data
         hardly determine, where the ensemble's bands are too narrow (``docs/enkf.md``)
     importance_rounds : the proposals the samples are split over
+    callback : ``callback(fraction, note)`` after each update and each round of the
+        sampler: the share of the work done (progress)
 
     The update is ``setup.method``'s (:func:`enkf.smoother.es_mda`: ``"etkf"``, the
     default, without perturbed observations).
     """
     return _smooth(setup, times, data, n_iter, seed, 1, 0.0, discrepancy, discrepancy_time, (),
-                   importance, importance_rounds)
+                   importance, importance_rounds, callback)
 
 
 def smooth_drifting(setup: TissueFilterSetup, times, data, *, knots: int = 3,
                     n_iter: int = 8, seed: int | None = None, drift_log_std: float = 1.0,
                     drifting=("mua", "mus"), discrepancy: float = 0.0,
                     discrepancy_time: float = 2.0, importance: int = 0,
-                    importance_rounds: int = 6) -> SmootherEstimates:
+                    importance_rounds: int = 6, callback=None) -> SmootherEstimates:
     """Optics that drift while heated, from all the readings at once (module doc).
 
     Each estimated parameter named in ``drifting`` (default the optics; the others are
@@ -198,11 +200,11 @@ def smooth_drifting(setup: TissueFilterSetup, times, data, *, knots: int = 3,
                          f"{tuple(drifting)!r}")
     return _smooth(setup, times, data, n_iter, seed, int(knots), float(drift_log_std),
                    discrepancy, discrepancy_time, tuple(drifting), importance,
-                   importance_rounds)
+                   importance_rounds, callback)
 
 
 def _smooth(setup, times, data, n_iter, seed, n_knots, drift_log_std, discrepancy,
-            discrepancy_time, drifting, importance=0, importance_rounds=6
+            discrepancy_time, drifting, importance=0, importance_rounds=6, callback=None
             ) -> SmootherEstimates:
     if setup.parameter_model != "random_walk":
         raise ValueError(f"the smoother needs parameter_model = 'random_walk' (constant or "
@@ -266,13 +268,25 @@ def _smooth(setup, times, data, n_iter, seed, n_knots, drift_log_std, discrepanc
         R = np.diag(R) + (discrepancy ** 2) * np.outer(rise, rise) * corr
     tic = time.perf_counter()
     y = data.ravel()[keep]
-    U = es_mda(simulate, U0, y, R, rng, n_iter=n_iter, method=setup.method)
+    work = n_iter * U0.shape[0] + importance  # member runs over the window
+
+    def es_done(i, _):
+        if callback is not None:
+            callback((i + 1) * U0.shape[0] / work, f"ES-MDA update {i + 1} of {n_iter}")
+
+    def is_done(r, sample):
+        if callback is not None:
+            callback((n_iter * U0.shape[0] + len(sample.U)) / work,
+                     f"importance round {r + 1} of {importance_rounds}, ESS {sample.ess:.0f}")
+
+    U = es_mda(simulate, U0, y, R, rng, n_iter=n_iter, method=setup.method, callback=es_done)
     weights = ess = None
     if importance:
         lo, hi = (np.log(b) for b in setup.prior_bounds())
         log_post = _log_posterior(simulate, y, R, np.r_[lo[~drift], lo[drift]],
                                   np.r_[hi[~drift], hi[drift]], int(drift.sum()), n_knots, step)
-        sample = amis(log_post, U, rng, n_samples=int(importance), n_rounds=importance_rounds)
+        sample = amis(log_post, U, rng, n_samples=int(importance), n_rounds=importance_rounds,
+                      callback=is_done)
         live = sample.weights > 0
         U, weights, ess = sample.U[live], sample.weights[live], sample.ess
     wall = time.perf_counter() - tic
