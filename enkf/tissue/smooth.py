@@ -76,7 +76,8 @@ class SmootherEstimates:
 
     def at(self, heated) -> np.ndarray:
         """(M, N, n_par) the members' parameters at the heated times ``heated`` (M,) s
-        (:func:`heated_time`); constant optics: ``theta`` at every time."""
+        (:func:`heated_time`); constant optics: ``theta`` at every time. With importance
+        samples, weigh the members with ``weights``."""
         heated = np.atleast_1d(np.asarray(heated, float))
         if self.knots is None:
             return np.broadcast_to(self.theta, (heated.size, *self.theta.shape))
