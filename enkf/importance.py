@@ -68,8 +68,7 @@ class ImportanceSample:
     @property
     def cov(self) -> np.ndarray:
         """(d, d) the weighted covariance."""
-        A = self.U - self.mean  # anomalies
-        return (A * self.weights[:, None]).T @ A
+        return _weighted_cov(self.U, self.weights)
 
     def quantile(self, q, i: int) -> np.ndarray:
         """The weighted ``q`` quantiles of coordinate ``i`` (linear between samples)."""
@@ -120,9 +119,13 @@ def _mixture_draw(rng, n, C, L, df) -> np.ndarray:
 
 
 def _weighted_cov(U, w) -> np.ndarray:
-    A = U - w @ U
-    C = (A * w[:, None]).T @ A
-    return C + 1e-12 * np.trace(C) / U.shape[1] * np.eye(U.shape[1])  # positive definite
+    A = U - w @ U  # anomalies
+    return (A * w[:, None]).T @ A
+
+
+def _jittered(C) -> np.ndarray:
+    """``C`` kept positive definite for its Cholesky factor."""
+    return C + 1e-12 * np.trace(C) / C.shape[0] * np.eye(C.shape[0])
 
 
 def amis(log_target: Callable[[np.ndarray], np.ndarray], U0: np.ndarray,
@@ -174,7 +177,7 @@ def amis(log_target: Callable[[np.ndarray], np.ndarray], U0: np.ndarray,
         raise ValueError(f"defensive must be in [0, 1), got {defensive!r}")
     per_round = np.full(n_rounds, n_samples // n_rounds)
     per_round[: n_samples % n_rounds] += 1
-    cov = _weighted_cov(U0, np.full(N, 1.0 / N))
+    cov = _jittered(_weighted_cov(U0, np.full(N, 1.0 / N)))
     # a proposal: components (centres (K, d), scale's Cholesky factor, samples drawn)
     proposal = [(U0, np.linalg.cholesky(cov * spread ** 2), 1.0)]
     components, Us, logp = [], [], []
@@ -213,7 +216,7 @@ def amis(log_target: Callable[[np.ndarray], np.ndarray], U0: np.ndarray,
             # a share ``defensive`` from one wide Student-t, so that no tail of the
             # posterior is left to the narrow kernels alone
             n0 = 2.0 * (d + 1)
-            cov = (sample.ess * _weighted_cov(U_all, w) + n0 * cov) / (sample.ess + n0)
+            cov = (sample.ess * _jittered(sample.cov) + n0 * cov) / (sample.ess + n0)
             h = (4.0 / ((d + 2) * min(sample.ess, n_kernels))) ** (1.0 / (d + 4))
             proposal = [(sample.resample(int(n_kernels), rng), np.linalg.cholesky(cov * h ** 2),
                          1.0 - defensive),

@@ -14,6 +14,7 @@ health check.
 from __future__ import annotations
 
 import argparse
+import functools
 import json
 import sys
 from pathlib import Path
@@ -42,15 +43,24 @@ def filter_row(seed: int, args) -> dict:
                                      for k, v in s["temperatures"].items()}}
 
 
-def smoother_row(seed: int, args) -> dict:
-    """The drifting smoother's estimates at 15 s from the same twin data as the filter's."""
-    from enkf.paper.filters import emulator_for, filter_setup
-    from enkf.paper.truth import TruthConfig, generate_truth, noisy_sensor, twin_truth
-    from enkf.tissue.smooth import smooth_drifting
+@functools.cache
+def _twin():
+    """The all-params twin truth and the emulator of :func:`run_experiment` (once)."""
+    from enkf.paper.filters import emulator_for
+    from enkf.paper.truth import TruthConfig, generate_truth, twin_truth
 
     tcfg = TruthConfig(scenario="all-params")
     emu = emulator_for(progress=False, mc_grid=tcfg.grid, n_mua=12, n_mus=12)
-    truth = twin_truth("all-params", emu, generate_truth(tcfg, progress=False))
+    return twin_truth("all-params", emu, generate_truth(tcfg, progress=False)), emu
+
+
+def smoother_row(seed: int, args) -> dict:
+    """The drifting smoother's estimates at 15 s from the same twin data as the filter's."""
+    from enkf.paper.filters import filter_setup
+    from enkf.paper.truth import noisy_sensor
+    from enkf.tissue.smooth import smooth_drifting
+
+    truth, emu = _twin()
     data = noisy_sensor(truth, seed)
     setup = filter_setup("all-params", emu, seed=seed)
     est = smooth_drifting(setup, truth.times[1:], data[:, None], knots=args.knots,

@@ -20,8 +20,6 @@ def _smoother_summary(setup, times, data, n_iter: int, options: dict, quiet: boo
     """summary.json's ``smoother``: ES-MDA over the whole window, for constant optics
     (``knots`` 1) or optics drifting while heated (``knots`` >= 2; the estimates are those
     at the window's end, and the knots' values are listed)."""
-    import numpy as np
-
     from mcmatlab_py.progress import Progress
 
     from ..tissue import smooth_constant, smooth_drifting
@@ -49,10 +47,8 @@ def _smoother_summary(setup, times, data, n_iter: int, options: dict, quiet: boo
                           for i, n in enumerate(est.names)}}
     if knots > 1:
         out["knot_times_heated_s"] = est.knot_times.tolist()
-        w = est.weights if est.weights is not None else np.full(len(est.knots),
-                                                                    1 / len(est.knots))
-        out["knot_estimates"] = {n: (w @ est.knots[:, :, i]).tolist()
-                                 for i, n in enumerate(est.names)}
+        knots = est.knot_mean()
+        out["knot_estimates"] = {n: knots[:, i].tolist() for i, n in enumerate(est.names)}
     if est.weights is not None:
         out["effective_sample_size"] = float(est.ess)
     return out

@@ -83,6 +83,12 @@ class SmootherEstimates:
             return np.broadcast_to(self.theta, (heated.size, *self.theta.shape))
         return _knot_values(self.knots, self.knot_times, heated)
 
+    def knot_mean(self) -> np.ndarray:
+        """(K, n_par) the mean of the knots' values (weighted with importance weights)."""
+        if self.weights is None:
+            return self.knots.mean(axis=0)
+        return np.tensordot(self.weights, self.knots, axes=1)
+
     def band(self, i: int, q: float = 0.02275) -> tuple[float, float]:
         """The ``q`` and ``1 - q`` quantiles of parameter ``i`` (default: +-2 sd of a
         normal; positive like the members)."""
