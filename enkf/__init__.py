@@ -15,6 +15,8 @@ no knowledge of tissue, photons or meshes (it imports nothing from ``mcmatlab_py
   (:func:`es_mda`) for constant parameters over a whole window.
 - :mod:`enkf.importance`: adaptive multiple importance sampling (:func:`amis`), the
   posterior itself from an ensemble's first guess, for few parameters.
+- :mod:`enkf.modes`: the posterior's modes from many starts (:func:`find_modes`,
+  batched Levenberg-Marquardt in a box), which seed the importance sampler.
 - :mod:`enkf.toy_models`: toy models to verify the filter (linear-Gaussian with its
   exact Kalman filter, Lorenz-96).
 - :mod:`enkf.checks`: input checks shared by these modules.
@@ -45,6 +47,7 @@ from .analysis import enkf_perturbed_obs, etkf, inflate, random_rotation
 from .health import HealthCheck
 from .importance import ImportanceSample, amis
 from .loop import run_filter
+from .modes import Modes, find_modes
 from .problem import (
     DEFAULT_METHOD,
     FilterConfig,
@@ -67,6 +70,8 @@ __all__ = [
     "ImportanceSample",
     "amis",
     "es_mda",
+    "find_modes",
+    "Modes",
     "DEFAULT_METHOD",
     "FilterConfig",
     "FilterDivergence",

@@ -25,6 +25,10 @@ degrees of freedom) and the covariance widened by ``spread`` squared. The effect
 size :math:`(\sum w)^2 / \sum w^2` says how much the estimate is worth; a small one
 (``ess < min_ess``) warns.
 
+The first guess shows the sampler one mode. Where the posterior has others, ``modes``
+(from :func:`enkf.modes.find_modes`) adds a Student-t kernel on each to every round's
+proposal, a share ``mode_share`` of the samples split by the modes' masses.
+
 Cost: ``n_samples`` evaluations of the log posterior (samples where it is ``-inf``, e.g.
 outside a bounded prior, are left to ``log_target`` to skip cheaply), a handful of
 ensemble runs for a few parameters.
@@ -131,8 +135,8 @@ def _jittered(C) -> np.ndarray:
 def amis(log_target: Callable[[np.ndarray], np.ndarray], U0: np.ndarray,
          rng: np.random.Generator | int, *, n_samples: int = 3000, n_rounds: int = 6,
          df: float = 5.0, spread: float = 1.5, n_kernels: int = 100, defensive: float = 0.2,
-         min_ess: float = 100.0,
-         callback: Callable[[int, ImportanceSample], None] | None = None
+         min_ess: float = 100.0, modes: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None,
+         mode_share: float = 0.3, callback: Callable[[int, ImportanceSample], None] | None = None
          ) -> ImportanceSample:
     """The posterior ``exp(log_target)`` by AMIS from the first guess ``U0`` (module doc).
 
@@ -154,6 +158,12 @@ def amis(log_target: Callable[[np.ndarray], np.ndarray], U0: np.ndarray,
     defensive : the share of each later round's samples drawn from one Student-t with
         the weighted covariance times ``spread`` squared (0-1)
     min_ess : a RuntimeWarning below this effective sample size
+    modes : ``(centres (K, d), covariances (K, d, d), masses (K,))``: other modes of the
+        posterior (:func:`enkf.modes.find_modes`), each drawn in every round from a
+        Student-t with its covariance times ``spread`` squared, a share ``mode_share`` of
+        the samples split in proportion to ``masses``, so that AMIS does not depend on the
+        first guess alone to find them
+    mode_share : the share of each round drawn from ``modes`` (0-1)
     callback : ``callback(r, sample)`` after each round ``r``
     """
     U0 = float_array(U0, "U0", 2)
@@ -175,11 +185,25 @@ def amis(log_target: Callable[[np.ndarray], np.ndarray], U0: np.ndarray,
         raise ValueError(f"spread must be >= 1, got {spread!r}")
     if not (np.isfinite(defensive) and 0 <= defensive < 1):
         raise ValueError(f"defensive must be in [0, 1), got {defensive!r}")
+    if not (np.isfinite(mode_share) and 0 <= mode_share < 1 - defensive):
+        raise ValueError(f"mode_share must be in [0, 1 - defensive), got {mode_share!r}")
+    extra = []
+    if modes is not None:
+        C, S, mass = (np.asarray(a, float) for a in modes)
+        if C.ndim != 2 or C.shape[1] != d or S.shape != (len(C), d, d) or mass.shape != (len(C),):
+            raise ValueError(f"modes must be (centres (K, {d}), covariances (K, {d}, {d}), "
+                             f"masses (K,)), got shapes {C.shape}, {S.shape}, {mass.shape}")
+        if not (np.all(mass >= 0) and mass.sum() > 0):
+            raise ValueError(f"modes' masses must be >= 0 and not all 0, got {mass}")
+        share = mode_share * mass / mass.sum()
+        extra = [(C[k:k + 1], np.linalg.cholesky(_jittered(S[k]) * spread ** 2), share[k])
+                 for k in range(len(C)) if share[k] > 0]
+    rest = 1.0 - sum(e[2] for e in extra)
     per_round = np.full(n_rounds, n_samples // n_rounds)
     per_round[: n_samples % n_rounds] += 1
     cov = _jittered(_weighted_cov(U0, np.full(N, 1.0 / N)))
     # a proposal: components (centres (K, d), scale's Cholesky factor, samples drawn)
-    proposal = [(U0, np.linalg.cholesky(cov * spread ** 2), 1.0)]
+    proposal = [(U0, np.linalg.cholesky(cov * spread ** 2), rest), *extra]
     components, Us, logp = [], [], []
     sample = None
     for r in range(n_rounds):
@@ -219,8 +243,9 @@ def amis(log_target: Callable[[np.ndarray], np.ndarray], U0: np.ndarray,
             cov = (sample.ess * _jittered(sample.cov) + n0 * cov) / (sample.ess + n0)
             h = (4.0 / ((d + 2) * min(sample.ess, n_kernels))) ** (1.0 / (d + 4))
             proposal = [(sample.resample(int(n_kernels), rng), np.linalg.cholesky(cov * h ** 2),
-                         1.0 - defensive),
-                        (sample.mean[None, :], np.linalg.cholesky(cov * spread ** 2), defensive)]
+                         rest - defensive),
+                        (sample.mean[None, :], np.linalg.cholesky(cov * spread ** 2), defensive),
+                        *extra]
     if sample.ess < min_ess:
         warnings.warn(f"AMIS: effective sample size {sample.ess:.0f} of {sample.U.shape[0]} "
                       f"samples is below {min_ess:g}: the posterior's estimate is noisy; use "

@@ -352,7 +352,10 @@ def test_identify_with_the_smoother_reports_it(tmp_path, cache):
                 "smoother_iterations = 2\nsmoother_discrepancy_time = 0\n",
                 "smoother_importance = 600\n",
                 "smoother_iterations = 2\nsmoother_importance = 100\n",
-                "smoother_iterations = 2\nsmoother_importance = -1\n"):
+                "smoother_iterations = 2\nsmoother_importance = -1\n",
+                "smoother_iterations = 2\nsmoother_modes = 64\n",
+                "smoother_iterations = 2\nsmoother_importance = 600\nsmoother_modes = 8\n",
+                "smoother_iterations = 2\nsmoother_importance = 600\nsmoother_modes = -1\n"):
         cfg.write_text(TINY.replace("[filter]\n", "[filter]\n" + bad, 1))
         assert run("identify", cfg, "--data", EX / "tiny_data.csv", "--out", tmp_path / "b",
                    "--quiet", "--cache-dir", cache) == 2
@@ -360,14 +363,20 @@ def test_identify_with_the_smoother_reports_it(tmp_path, cache):
 
 
 def test_identify_with_importance_sampling_after_the_smoother(tmp_path, cache):
-    """``[filter] smoother_importance``: the smoother's ensemble seeds adaptive importance
-    sampling; summary.json says so and gives the effective sample size; the weighted
-    estimate lies inside its band."""
+    """``[filter] smoother_importance``: the smoother's ensemble and the modes found from
+    256 points of the prior (the default mode search) seed adaptive importance sampling;
+    summary.json says so and gives the effective sample size; the weighted estimate lies
+    inside its band. ``smoother_modes = 0``: no mode search."""
     _, _, s = _identify_tiny(tmp_path, cache, "smoother_iterations = 2\n"
                              "smoother_importance = 600\n")
     sm = s["smoother"]
     assert sm["method"] == "ES-MDA + AMIS" and sm["importance"] == 600
+    assert sm["mode_search"] == 256 and sm["modes_found"] >= 1
     assert 1 <= sm["effective_sample_size"] <= 600
     for p in sm["parameters"].values():
         lo, hi = p["band_2sd"]
         assert 0 < lo < p["estimate"] < hi and p["std"] > 0
+    (tmp_path / "none").mkdir()
+    _, _, s = _identify_tiny(tmp_path / "none", cache, "smoother_iterations = 2\n"
+                             "smoother_importance = 600\nsmoother_modes = 0\n")
+    assert s["smoother"]["mode_search"] == 0 and "modes_found" not in s["smoother"]

@@ -122,13 +122,15 @@ def test_amis_checks_its_inputs():
         amis(lambda U: -1e4 * np.sum((U - 50.0) ** 2, axis=1), U0, rng, n_samples=600)
 
 
-def test_smoother_importance_gives_the_grid_posterior_of_the_tissue_model(tissue):
+@pytest.mark.parametrize("mode_search", [None, 0])
+def test_smoother_importance_gives_the_grid_posterior_of_the_tissue_model(tissue, mode_search):
     """Few noisy readings (sd 0.1 deg C, 1.5 s) leave mus poorly determined: its posterior
     is skewed and cut by the prior's box. The smoother with importance sampling has the
     grid posterior's mean and sd of log mua, log mus (the same coarse model evaluated on a
     100 x 100 grid of the prior box in logs) within 4 standard errors sd / sqrt(ESS) (the
     mean) and 4 sd sqrt(2 / ESS) (the sd), plus half a grid cell; the ensemble of one ES
-    update it starts from does not."""
+    update it starts from does not. With the default mode search (``None``: 256 points of
+    the prior box) and without it (0)."""
     import fem
 
     sigma = 0.1
@@ -161,9 +163,12 @@ def test_smoother_importance_gives_the_grid_posterior_of_the_tissue_model(tissue
     # from one ES update (a linear step: a poor first guess here)
     seen = []
     est = smooth_constant(s, times, data[:, None], n_iter=1, importance=3000,
+                          mode_search=mode_search,
                           callback=lambda f, note: seen.append((f, note)))
-    # progress: one report per update and per round, rising to the whole work
-    assert len(seen) == 1 + 6 and seen[-1][0] == pytest.approx(1.0)
+    # progress: one report per update, for the mode search and per round, rising to the
+    # whole work
+    assert len(seen) == 1 + (mode_search is None) + 6 and seen[-1][0] == pytest.approx(1.0)
+    assert (est.n_modes is None) == (mode_search == 0)
     assert np.all(np.diff([f for f, _ in seen]) > 0) and "ESS" in seen[-1][1]
     assert est.weights is not None and np.isclose(est.weights.sum(), 1.0)
     assert est.theta.shape[0] == est.weights.size and np.all(est.theta > 0)

@@ -65,7 +65,8 @@ def smoother_row(seed: int, args) -> dict:
     setup = filter_setup("all-params", emu, seed=seed)
     est = smooth_drifting(setup, truth.times[1:], data[:, None], knots=args.knots,
                           n_iter=args.smoother, drifting=("mua", "mus"),
-                          importance=args.importance, importance_rounds=args.rounds)
+                          importance=args.importance, importance_rounds=args.rounds,
+                          mode_search=args.modes)
     true = {k: float(truth.params[k][-1]) for k in est.names}
     bands = {k: est.band(i) for i, k in enumerate(est.names)}
     return {"seed": seed, "stopped": None, "seconds": est.wall_s, "ess": est.ess,
@@ -85,6 +86,9 @@ def main(argv=None) -> None:
     ap.add_argument("--importance", type=int, default=0, metavar="M",
                     help="the smoother followed by M samples of importance sampling")
     ap.add_argument("--rounds", type=int, default=6, help="importance sampling's proposals")
+    ap.add_argument("--modes", type=int, default=0, metavar="P",
+                    help="with --importance: P prior points screened for other modes "
+                         "(enkf.modes), which seed the sampler beside the ensemble")
     ap.add_argument("--out", default=None, help="default: reports/all_params_calibration.md, "
                     "with --smoother all_params_smoother.md")
     args = ap.parse_args(argv)
@@ -121,7 +125,9 @@ def main(argv=None) -> None:
                   f"(`enkf.tissue.smooth_drifting`, {args.knots} knots in heated time for mua "
                   f"and mus, VHC and TC constant, {args.smoother} ES-MDA updates of 50 members"
                   + (f", then {args.importance} samples of adaptive importance sampling in "
-                     f"{args.rounds} rounds: "
+                     f"{args.rounds} rounds"
+                     + (f", seeded also by the modes found from {args.modes} points of the "
+                        "prior box (`enkf.modes`)" if args.modes else "") + ": "
                      f"effective sample size {min(ess):.0f}-{max(ess):.0f}, median "
                      f"{np.median(ess):.0f}" if ess else "") + f"); median "
                   f"{np.median([r['seconds'] for r in rows]):.1f} s per run. Bands: the "

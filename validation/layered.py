@@ -191,19 +191,21 @@ def run_seeds(cfg, emulator, kind: str, truth: dict, clean: np.ndarray, seeds,
 
 
 def smooth_seeds(cfg, emulator, kind: str, truth: dict, clean: np.ndarray, seeds, n_iter: int,
-                 overrides=None, importance: int = 0) -> dict:
+                 overrides=None, importance: int = 0, mode_search: int = 0) -> dict:
     """As :func:`run_seeds`, the estimates of the ES-MDA smoother over the whole window
     (:func:`enkf.tissue.smooth.smooth_constant`) from the same data; with ``importance``
     samples of adaptive importance sampling after it (the posterior itself)."""
     from enkf.tissue.smooth import smooth_constant
 
     def estimate(setup, times, data):
-        est = smooth_constant(setup, times, data, n_iter=n_iter, importance=importance)
+        est = smooth_constant(setup, times, data, n_iter=n_iter, importance=importance,
+                              mode_search=mode_search)
         bands = np.array([est.band(i) for i in range(len(est.names))])
         return est.names, est.mean, est.std, bands[:, 0], bands[:, 1], est.wall_s, None
 
     return _over_seeds(cfg, emulator, kind, truth, clean, seeds, overrides, estimate,
-                       " ES-MDA" + (f" + AMIS ({importance})" if importance else ""))
+                       " ES-MDA" + (f" + AMIS ({importance})" if importance else "")
+                       + (f" + modes ({mode_search})" if mode_search else ""))
 
 
 def main(argv=None):

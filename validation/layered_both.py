@@ -185,6 +185,9 @@ def main(argv=None):
     ap.add_argument("--importance", type=int, default=0, metavar="M",
                     help="the smoother followed by M samples of adaptive importance sampling "
                          "(enkf.importance): the posterior itself")
+    ap.add_argument("--modes", type=int, default=0, metavar="P",
+                    help="with --importance: P prior points screened for other modes "
+                         "(enkf.modes), which seed the sampler beside the ensemble")
     ap.add_argument("--no-filter", action="store_true", help="the smoother's rows only")
     ap.add_argument("--fine", action="store_true",
                     help="also a fine truth at A (direct Monte Carlo and heat on the voxels), "
@@ -214,7 +217,8 @@ def main(argv=None):
     crb_rows, filt_rows = [], []
     members = {} if args.n_members is None else {"n_members": args.n_members}
     smoother = f"ES-MDA ({args.smoother})" + (
-        f" + AMIS ({args.importance})" if args.importance else "")
+        f" + AMIS ({args.importance})" if args.importance else "") + (
+        f" + modes ({args.modes})" if args.modes else "")
     for kind in kinds:
         sensor = ident.ConfigSensor(layered.sensor_setup(cfg, emulator, kind), layered.DT,
                                     layered.N_STEPS)
@@ -239,7 +243,7 @@ def main(argv=None):
                 print(filt_rows[-1], flush=True)
             if args.seeds and args.smoother:
                 res = layered.smooth_seeds(cfg, emulator, kind, truth, clean, range(args.seeds),
-                                           args.smoother, over, args.importance)
+                                           args.smoother, over, args.importance, args.modes)
                 filt_rows.append(_row(kind, label, truth, res, crb).replace(
                     f"| {args.seeds} |", f"| {smoother}, {args.seeds} |"))
                 print(filt_rows[-1], flush=True)
@@ -257,7 +261,7 @@ def main(argv=None):
             runners = [("filter", layered.run_seeds, (over,))][:0 if args.no_filter else 1]
             if args.smoother:
                 runners.append((smoother, layered.smooth_seeds,
-                                (args.smoother, over, args.importance)))
+                                (args.smoother, over, args.importance, args.modes)))
             for label, runner, extra in runners:
                 res, crb = over_prior_draws(layered, cfg, emulator, kind, sensor,
                                             range(args.seeds), runner, *extra)

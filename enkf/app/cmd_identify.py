@@ -37,6 +37,8 @@ def _smoother_summary(setup, times, data, n_iter: int, options: dict, quiet: boo
         bar.close()
     if not quiet:
         imp = "" if est.weights is None else f", importance sampling: ESS {est.ess:.0f}"
+        if est.n_modes is not None:
+            imp += f", {est.n_modes} mode{'s' * (est.n_modes > 1)}"
         print(f"smoother (ES-MDA, {n_iter} updates{imp}, {est.wall_s:.1f} s): " + ", ".join(
             f"{n} {m:.4g} +- {s:.2g}" for n, m, s in zip(est.names, est.mean, est.std,
                                                           strict=True)), file=sys.stderr)
@@ -51,6 +53,8 @@ def _smoother_summary(setup, times, data, n_iter: int, options: dict, quiet: boo
         out["knot_estimates"] = {n: knots[:, i].tolist() for i, n in enumerate(est.names)}
     if est.weights is not None:
         out["effective_sample_size"] = float(est.ess)
+    if est.n_modes is not None:
+        out["modes_found"] = int(est.n_modes)
     return out
 
 

@@ -83,7 +83,7 @@ _FILTER_KEYS = {
     "localization_radius", "heat_mass", "transforms", "emulator", "bounds", "prior",
     "model_error", "adaptive_inflation", "coagulation", "medium", "sensor_offset_std",
     "smoother_iterations", "smoother_knots", "smoother_discrepancy",
-    "smoother_discrepancy_time", "smoother_importance",
+    "smoother_discrepancy_time", "smoother_importance", "smoother_modes",
 }
 _MODEL_ERROR_KEYS = {"kind", "rel_std", "time_scale", "length_xy", "length_z"}
 _ADAPTIVE_KEYS = {"enabled", "bounds", "time_scale"}
@@ -209,7 +209,7 @@ _LIMITS = {"sensors.noise_var": 1e4, "sensors.camera.noise_var": 1e4, "sensors.r
            "filter.inflation": 100.0, "filter.localization_radius": 1e3, "filter.mda": 100,
            "filter.smoother_iterations": 100, "filter.smoother_knots": 50,
            "filter.smoother_discrepancy": 10.0, "filter.smoother_discrepancy_time": 1e6,
-           "filter.smoother_importance": 10**6,
+           "filter.smoother_importance": 10**6, "filter.smoother_modes": 10**6,
            "filter.seed": 2**63 - 1, "filter.emulator.n_photons": 10**11,
            "filter.emulator.n_mua": 1000, "filter.emulator.n_mus": 1000,
            "filter.emulator.seed": 2**63 - 1, "data.time_offset": 1e9,
@@ -222,7 +222,7 @@ def _smoother_iterations(flt: dict, setup_kw: dict) -> int:
     """``[filter] smoother_iterations``: ES-MDA updates after the filter."""
     if "smoother_iterations" not in flt:
         for k in ("smoother_knots", "smoother_discrepancy", "smoother_discrepancy_time",
-                  "smoother_importance"):
+                  "smoother_importance", "smoother_modes"):
             if k in flt:
                 raise ConfigError(f"filter.{k} needs filter.smoother_iterations >= 1")
         return 0
@@ -264,11 +264,26 @@ def _smoother_options(flt: dict, camera: bool = False) -> dict:
             raise ConfigError(f"filter.smoother_importance = {m}: use 0 (none) or at least "
                               f"{MIN_IMPORTANCE} samples")
         out["importance"] = m
+        if m:
+            out["mode_search"] = MODE_SEARCH
+    if "smoother_modes" in flt:
+        p = int(_num("filter.smoother_modes", flt["smoother_modes"], integer=True, lo=0))
+        if p and not out.get("importance"):
+            raise ConfigError(f"filter.smoother_modes = {p} needs filter.smoother_importance > 0 "
+                              "(the modes seed the importance sampler)")
+        if 0 < p < MIN_MODE_POINTS:
+            raise ConfigError(f"filter.smoother_modes = {p}: use 0 (no mode search) or at "
+                              f"least {MIN_MODE_POINTS} points")
+        out["mode_search"] = p
     return out
 
 
 #: the fewest importance samples a config may ask for (a few hundred per proposal)
 MIN_IMPORTANCE = 600
+#: the fewest prior points a mode search may screen (twice the searches it starts)
+MIN_MODE_POINTS = 16
+#: the points a mode search screens by default (with importance sampling)
+MODE_SEARCH = 256
 
 
 #: the smoother's defaults in a config: constant optics, a 1% model discrepancy over 2 s

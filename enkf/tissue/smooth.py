@@ -25,12 +25,14 @@ share only.
 from __future__ import annotations
 
 import time
+import warnings
 from dataclasses import dataclass
 
 import numpy as np
 
 from ..checks import float_array
 from ..importance import amis, weighted_quantile
+from ..modes import find_modes
 from ..smoother import es_mda
 from .identify import assemble
 from .setup import TissueFilterSetup
@@ -48,7 +50,8 @@ class SmootherEstimates:
     (K,) s of heated time and ``knots`` (N, K, n_par) the members' values there.
     With ``importance`` samples (:mod:`enkf.importance`): ``theta`` (and ``knots``) hold
     the weighted samples of the posterior, ``weights`` (N,) their weights (sum 1) and
-    ``ess`` their effective sample size; the statistics below are weighted.
+    ``ess`` their effective sample size; the statistics below are weighted. With a mode
+    search (``mode_search``), ``n_modes`` the modes that seeded the sampler.
     """
 
     names: tuple
@@ -59,6 +62,7 @@ class SmootherEstimates:
     knots: np.ndarray | None = None
     weights: np.ndarray | None = None
     ess: float | None = None
+    n_modes: int | None = None
 
     @property
     def mean(self) -> np.ndarray:
@@ -148,7 +152,8 @@ def check_discrepancy_size(n_readings: int, discrepancy: float, where: str = "")
 def smooth_constant(setup: TissueFilterSetup, times, data, *, n_iter: int = 4,
                     seed: int | None = None, discrepancy: float = 0.0,
                     discrepancy_time: float = 2.0, importance: int = 0,
-                    importance_rounds: int = 6, callback=None) -> SmootherEstimates:
+                    importance_rounds: int = 6, mode_search: int | None = None,
+                    callback=None) -> SmootherEstimates:
     """Constant optics from all the readings at once (module doc).
 
     Parameters
@@ -166,6 +171,10 @@ def smooth_constant(setup: TissueFilterSetup, times, data, *, n_iter: int = 4,
         ensemble, give the posterior itself (weighted samples): for parameters the data
         hardly determine, where the ensemble's bands are too narrow (``docs/enkf.md``)
     importance_rounds : the proposals the samples are split over
+    mode_search : with ``importance``, that many quasi-random points of the prior box are
+        screened for other modes of the posterior, the best searched by Levenberg-Marquardt
+        (:mod:`enkf.modes`), and the modes found seed the sampler beside the ensemble; 0:
+        none; default :data:`MODE_SEARCH` with ``importance``, else 0
     callback : ``callback(fraction, note)`` after each update and each round of the
         sampler: the share of the work done (progress)
 
@@ -173,14 +182,15 @@ def smooth_constant(setup: TissueFilterSetup, times, data, *, n_iter: int = 4,
     default, without perturbed observations).
     """
     return _smooth(setup, times, data, n_iter, seed, 1, 0.0, discrepancy, discrepancy_time, (),
-                   importance, importance_rounds, callback)
+                   importance, importance_rounds, callback, mode_search)
 
 
 def smooth_drifting(setup: TissueFilterSetup, times, data, *, knots: int = 3,
                     n_iter: int = 8, seed: int | None = None, drift_log_std: float = 1.0,
                     drifting=("mua", "mus"), discrepancy: float = 0.0,
                     discrepancy_time: float = 2.0, importance: int = 0,
-                    importance_rounds: int = 6, callback=None) -> SmootherEstimates:
+                    importance_rounds: int = 6, mode_search: int | None = None,
+                    callback=None) -> SmootherEstimates:
     """Optics that drift while heated, from all the readings at once (module doc).
 
     Each estimated parameter named in ``drifting`` (default the optics; the others are
@@ -207,12 +217,12 @@ def smooth_drifting(setup: TissueFilterSetup, times, data, *, knots: int = 3,
                          f"{tuple(drifting)!r}")
     return _smooth(setup, times, data, n_iter, seed, int(knots), float(drift_log_std),
                    discrepancy, discrepancy_time, tuple(drifting), importance,
-                   importance_rounds, callback)
+                   importance_rounds, callback, mode_search)
 
 
 def _smooth(setup, times, data, n_iter, seed, n_knots, drift_log_std, discrepancy,
-            discrepancy_time, drifting, importance=0, importance_rounds=6, callback=None
-            ) -> SmootherEstimates:
+            discrepancy_time, drifting, importance=0, importance_rounds=6, callback=None,
+            mode_search=None) -> SmootherEstimates:
     if setup.parameter_model != "random_walk":
         raise ValueError(f"the smoother needs parameter_model = 'random_walk' (constant or "
                          f"drifting optics), got {setup.parameter_model!r}")
@@ -225,6 +235,13 @@ def _smooth(setup, times, data, n_iter, seed, n_knots, drift_log_std, discrepanc
         raise ValueError(f"discrepancy_time must be > 0 s, got {discrepancy_time!r}")
     if not (isinstance(importance, (int, np.integer)) and importance >= 0):
         raise ValueError(f"importance must be an integer >= 0 (samples), got {importance!r}")
+    if mode_search is None:
+        mode_search = MODE_SEARCH if importance else 0
+    if not (isinstance(mode_search, (int, np.integer)) and mode_search >= 0):
+        raise ValueError(f"mode_search must be an integer >= 0 (points), got {mode_search!r}")
+    if mode_search and not importance:
+        raise ValueError(f"mode_search = {mode_search} needs importance > 0 (the modes seed "
+                         "the importance sampler)")
     times = float_array(times, "times", 1)
     if times.size == 0 or times[0] <= 0 or np.any(np.diff(times) <= 0):
         raise ValueError("times must be strictly increasing and after 0 (s)")
@@ -275,7 +292,10 @@ def _smooth(setup, times, data, n_iter, seed, n_knots, drift_log_std, discrepanc
         R = np.diag(R) + (discrepancy ** 2) * np.outer(rise, rise) * corr
     tic = time.perf_counter()
     y = data.ravel()[keep]
-    work = n_iter * U0.shape[0] + importance  # member runs over the window
+    # member runs over the window (the mode search's: about its points and, for each of
+    # its starts, (d + 1) per iteration over 10 iterations)
+    search = mode_search + (MODE_STARTS + 1) * (U0.shape[1] + 1) * 10 if mode_search else 0
+    work = n_iter * U0.shape[0] + search + importance
 
     def es_done(i, _):
         if callback is not None:
@@ -283,17 +303,26 @@ def _smooth(setup, times, data, n_iter, seed, n_knots, drift_log_std, discrepanc
 
     def is_done(r, sample):
         if callback is not None:
-            callback((n_iter * U0.shape[0] + len(sample.U)) / work,
+            callback((n_iter * U0.shape[0] + search + len(sample.U)) / work,
                      f"importance round {r + 1} of {importance_rounds}, ESS {sample.ess:.0f}")
 
     U = es_mda(simulate, U0, y, R, rng, n_iter=n_iter, method=setup.method, callback=es_done)
-    weights = ess = None
+    weights = ess = n_modes = None
     if importance:
         lo, hi = (np.log(b) for b in setup.prior_bounds())
-        log_post = _log_posterior(simulate, y, R, np.r_[lo[~drift], lo[drift]],
-                                  np.r_[hi[~drift], hi[drift]], int(drift.sum()), n_knots, step)
+        lo, hi = np.r_[lo[~drift], lo[drift]], np.r_[hi[~drift], hi[drift]]
+        residuals = _residuals(simulate, y, R, lo.size, int(drift.sum()), n_knots, step)
+        log_post = _log_posterior(residuals, lo, hi)
+        found = None
+        if mode_search:
+            found = _search_modes(residuals, U, lo, hi, int(drift.sum()), n_knots, step,
+                                  mode_search, rng)
+            n_modes = 0 if found is None else len(found[0])
+            if callback is not None:
+                callback((n_iter * U0.shape[0] + search) / work,
+                         f"mode search: {n_modes} mode{'s' * (n_modes > 1)}")
         sample = amis(log_post, U, rng, n_samples=int(importance), n_rounds=importance_rounds,
-                      callback=is_done)
+                      callback=is_done, modes=found)
         live = sample.weights > 0
         U, weights, ess = sample.U[live], sample.weights[live], sample.ess
     wall = time.perf_counter() - tic
@@ -301,10 +330,11 @@ def _smooth(setup, times, data, n_iter, seed, n_knots, drift_log_std, discrepanc
     names = tuple(setup.parameter_names)
     if n_knots == 1:
         return SmootherEstimates(names, V[:, 0].copy(), int(n_iter), wall, weights=weights,
-                                 ess=ess)
+                                 ess=ess, n_modes=n_modes)
     # the end of the window: the last knot
     return SmootherEstimates(names, np.ascontiguousarray(V[:, -1]), int(n_iter), wall,
-                             knot_times=tk, knots=V, weights=weights, ess=ess)
+                             knot_times=tk, knots=V, weights=weights, ess=ess,
+                             n_modes=n_modes)
 
 
 #: members re-run over the window at once by the importance sampler (memory: the window's
@@ -312,30 +342,85 @@ def _smooth(setup, times, data, n_iter, seed, n_knots, drift_log_std, discrepanc
 IMPORTANCE_CHUNK = 250
 
 
-def _log_posterior(simulate, y, R, lo, hi, n_drift, n_knots, step):
-    """``log_post(U) -> (M,)``: the smoother's log posterior of the logs ``U`` (its
-    layout: :func:`_knots_of`) up to a constant. The prior: uniform in each parameter
-    between ``lo`` and ``hi`` (logs; the first knot's for drifting ones), so ``sum(U)``
-    in the logs inside the box and ``-inf`` outside; each later knot's log a normal step
-    of sd ``step`` from the previous. The readings ``y`` Gaussian about the members'
-    predictions with covariance ``R`` (p,) or (p, p)."""
+#: the prior's points screened for modes by default (with importance sampling)
+MODE_SEARCH = 256
+#: the screened points' best that start a local search, beside the ensemble's mean
+MODE_STARTS = 8
+#: modes of less Laplace mass than this share of the largest's are not sampled
+MIN_MODE_MASS = 1e-8
+
+
+def _search_modes(residuals, U, lo, hi, n_drift, n_knots, step, n_points, rng):
+    """Other modes of the posterior for the importance sampler (:mod:`enkf.modes`):
+    ``n_points`` quasi-random points of the prior box screened by their cost, the best
+    :data:`MODE_STARTS` and the ensemble's mean ``U`` started by Levenberg-Marquardt.
+    Returns ``(centres, covariances, masses)``: each mode's Laplace mass, its cost and the
+    uniform prior's ``sum(u)`` in the logs, relative to the largest; None if no start
+    gave finite residuals."""
+    from scipy.stats import qmc
+
     n_box = lo.size
+    with warnings.catch_warnings():  # Sobol's balance wants a power of 2; any number will do
+        warnings.simplefilter("ignore", UserWarning)
+        first = lo + (hi - lo) * qmc.Sobol(n_box, seed=rng).random(int(n_points))
+    # drifting parameters start constant: their later knots at the first's
+    P = np.hstack([first] + [first[:, n_box - n_drift:]] * (n_knots - 1))
+    z = residuals(P)
+    best = P[np.argsort(np.sum(z * z, axis=1))[:MODE_STARTS]]
+    span_lo = np.r_[lo, np.tile(lo[n_box - n_drift:], n_knots - 1)]
+    span_hi = np.r_[hi, np.tile(hi[n_box - n_drift:], n_knots - 1)]
+    if n_knots > 1:  # later knots: the box widened by 3 sd of the walk
+        reach = np.r_[np.zeros(n_box), 3 * step * np.sqrt(np.repeat(np.arange(1, n_knots),
+                                                                     n_drift))]
+        span_lo, span_hi = span_lo - reach, span_hi + reach
+    modes = find_modes(residuals, np.vstack([U.mean(axis=0), best]), span_lo, span_hi)
+    if not len(modes.U):
+        return None
+    log_mass = (-modes.cost + modes.U[:, :n_box].sum(axis=1)
+                + 0.5 * np.linalg.slogdet(modes.cov)[1])
+    mass = np.exp(log_mass - log_mass.max())
+    keep = mass >= MIN_MODE_MASS
+    return modes.U[keep], modes.cov[keep], mass[keep]
+
+
+def _residuals(simulate, y, R, n_box, n_drift, n_knots, step):
+    """``residuals(U) -> (M, n)``: the smoother's whitened residuals of the logs ``U`` (its
+    layout: :func:`_knots_of`): the readings ``y`` against the members' predictions with
+    covariance ``R`` (p,) or (p, p), and each later knot's step from the previous (sd
+    ``step``) for drifting parameters. Minus half their squared sum is the log posterior
+    inside the box, but for the uniform prior's ``sum(U)`` (:func:`_log_posterior`)."""
     dense = np.ndim(R) == 2
     L = np.linalg.cholesky(R) if dense else None
+
+    def residuals(U: np.ndarray) -> np.ndarray:
+        out = []
+        for s in range(0, U.shape[0], IMPORTANCE_CHUNK):
+            r = y - simulate(U[s:s + IMPORTANCE_CHUNK])
+            out.append((np.linalg.solve(L, r.T) if dense else r.T / np.sqrt(R)[:, None]).T)
+        z = np.vstack(out)
+        if n_knots > 1:
+            walk = np.diff(U[:, n_box - n_drift:].reshape(U.shape[0], n_knots, n_drift), axis=1)
+            z = np.hstack([z, walk.reshape(U.shape[0], -1) / step])
+        return z
+
+    return residuals
+
+
+def _log_posterior(residuals, lo, hi):
+    """``log_post(U) -> (M,)``: the smoother's log posterior of the logs ``U`` up to a
+    constant. The prior: uniform in each parameter between ``lo`` and ``hi`` (logs; the
+    first knot's for drifting ones), so ``sum(U)`` in the logs inside the box and ``-inf``
+    outside; the rest from ``residuals`` (:func:`_residuals`)."""
+    n_box = lo.size
 
     def log_post(U: np.ndarray) -> np.ndarray:
         first = U[:, :n_box]
         out = np.where(np.all((first >= lo) & (first <= hi), axis=1), first.sum(axis=1),
                        -np.inf)
-        if n_knots > 1:
-            walk = np.diff(U[:, n_box - n_drift:].reshape(U.shape[0], n_knots, n_drift), axis=1)
-            out += -0.5 * np.sum(walk ** 2, axis=(1, 2)) / step ** 2
         inside = np.flatnonzero(np.isfinite(out))
-        for s in range(0, inside.size, IMPORTANCE_CHUNK):
-            rows = inside[s:s + IMPORTANCE_CHUNK]
-            r = y - simulate(U[rows])
-            z = np.linalg.solve(L, r.T) if dense else r.T / np.sqrt(R)[:, None]
-            out[rows] += -0.5 * np.sum(z * z, axis=0)
+        if inside.size:
+            z = residuals(U[inside])
+            out[inside] += -0.5 * np.sum(z * z, axis=1)
         return out
 
     return log_post
