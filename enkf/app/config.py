@@ -61,6 +61,7 @@ from ..tissue.parameters import (
     TRACKED_DEPTHS,
     tracked_points,
 )
+from ..tissue.smooth import MODE_SEARCH
 from .readers import apply_time_offset, load_frames, read_sensor_csv
 
 __all__ = ["DataSpec", "IdentifyConfig", "check_identify_keys", "identify_config_from_dict",
@@ -282,8 +283,6 @@ def _smoother_options(flt: dict, camera: bool = False) -> dict:
 MIN_IMPORTANCE = 600
 #: the fewest prior points a mode search may screen (twice the searches it starts)
 MIN_MODE_POINTS = 16
-#: the points a mode search screens by default (with importance sampling)
-MODE_SEARCH = 256
 
 
 #: the smoother's defaults in a config: constant optics, a 1% model discrepancy over 2 s
