@@ -235,19 +235,33 @@ class _Filter:
                                    self.rec.result(k, self.X, self.theta))
         return Y
 
-    def adapt(self, k: int, Y: np.ndarray, y: np.ndarray) -> float:
+    def obs_cov_for(self, Y: np.ndarray) -> np.ndarray:
+        """The observation-error covariance of this step: ``obs_cov``, plus
+        ``obs_error`` of the forecast's mean observation when the problem has one."""
+        if self.P.obs_error is None:
+            return self.P.obs_cov
+        ym = Y.mean(axis=0)
+        extra = np.asarray(self.P.obs_error(ym), dtype=float)
+        if extra.shape != (self.p, self.p) or not np.all(np.isfinite(extra)):
+            raise ValueError(f"obs_error must return a finite ({self.p}, {self.p}) covariance, "
+                             f"got shape {extra.shape}")
+        R = self.P.obs_cov
+        return (np.diag(R) if R.ndim == 1 else R) + extra
+
+    def adapt(self, k: int, Y: np.ndarray, y: np.ndarray, R: np.ndarray) -> float:
         """Update the adaptive inflation with this step's forecast innovations; the
         factor on the covariance (1 without adaptive inflation)."""
         if self.adaptive is None:
             return 1.0
-        rho = self.adaptive.update(Y, y, self.P.obs_cov)
+        rho = self.adaptive.update(Y, y, R)
         self.rec.inflation[k - 1] = rho
         return rho
 
-    def evidence(self, k: int, Y: np.ndarray, y: np.ndarray, rho: float) -> None:
+    def evidence(self, k: int, Y: np.ndarray, y: np.ndarray, rho: float, R: np.ndarray) -> None:
         """Record the log-density of this step's data under the forecast the analysis uses
-        (with the adaptive factor ``rho``): summed, the model's log evidence."""
-        self.rec.loglik[k - 1] = innovation_loglik(Y, y, self.P.obs_cov, rho)
+        (with the adaptive factor ``rho``, error covariance ``R``): summed, the model's log
+        evidence."""
+        self.rec.loglik[k - 1] = innovation_loglik(Y, y, R, rho)
 
     def inflate_by(self, Z: np.ndarray, rho: float) -> np.ndarray:
         """Anomalies of the augmented ensemble times sqrt(rho): the state part, or all."""
@@ -287,8 +301,9 @@ class _Filter:
         # a structured model error is drawn with the first forecast, then belongs to the step
         Xf, Uf, v = self.advance(X0, U0, self.physical(U0), t_a, t_b, v, dU)
         Y = self.observe(Xf, Uf, k, tic)
-        rho = self.adapt(k, Y, y)
-        self.evidence(k, Y, y, rho)
+        R = self.obs_cov_for(Y)
+        rho = self.adapt(k, Y, y, R)
+        self.evidence(k, Y, y, rho, R)
         V = v if v is not None else np.zeros((self.N, 0))
         D = dU if dU is not None else np.zeros((self.N, 0))
         cuts = np.cumsum([self.n_state, self.n_par, V.shape[1]])
@@ -297,7 +312,7 @@ class _Filter:
                 Xf, Uf, _ = self.advance(X0, U0, self.physical(U0), t_a, t_b,
                                          V if v is not None else None, D if dU is not None else None)
             Y = self.observe(Xf, Uf, k, tic)
-            Z = self.analyse(np.concatenate([X0, U0, V, D], axis=1), Y, y, mda * self.P.obs_cov)
+            Z = self.analyse(np.concatenate([X0, U0, V, D], axis=1), Y, y, mda * R)
             X0, U0, V, D = np.split(Z, cuts, axis=1)
         X, U, _ = self.advance(X0, U0, self.physical(U0), t_a, t_b, V if v is not None else None,
                                D if dU is not None else None)
@@ -325,12 +340,13 @@ class _Filter:
                 tic_a = time.perf_counter()
                 Y = self.observe(self.X, self.U, k, tic)
                 Z = np.concatenate([self.X, self.U], axis=1)
-                rho = self.adapt(k, Y, y)
-                self.evidence(k, Y, y, rho)
+                R = self.obs_cov_for(Y)
+                rho = self.adapt(k, Y, y, R)
+                self.evidence(k, Y, y, rho, R)
                 if rho != 1.0:  # prior inflation: widen the forecast, observe it again
                     Z = self.inflate_by(Z, rho)
                     Y = self.observe(Z[:, :self.n_state], Z[:, self.n_state:], k, tic)
-                self.X, self.U = self.spread_out(self.analyse(Z, Y, y, self.P.obs_cov))
+                self.X, self.U = self.spread_out(self.analyse(Z, Y, y, R))
         if observed:
             self.rec.analysed[k - 1] = True
             self.rec.analysis_latency[k - 1] = time.perf_counter() - tic_a

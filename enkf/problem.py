@@ -169,6 +169,11 @@ class FilterProblem:
         parameters (physical units), added to ``observation``'s: ``Y = G(E_state) +
         offset(theta)``, e.g. an unknown calibration offset of each sensor carried as a
         parameter of the ensemble. Default: none.
+    obs_error : callable, optional
+        ``obs_error(y_mean) -> (p, p)``: a covariance added to ``obs_cov`` at each
+        analysis, from the forecast's mean observation ``y_mean`` (p,), e.g. a model error
+        in observation space that grows with the predicted signal
+        (:meth:`enkf.tissue.image.ThermalImage.error_covariance`). Default: none.
     """
 
     forecast: Forecast
@@ -192,9 +197,14 @@ class FilterProblem:
     localization: tuple | None = None
     #: optional ``offset(theta) -> (N, p)`` added to the observation (sensor offsets)
     observation_offset: Callable[[np.ndarray], np.ndarray] | None = None
+    #: optional ``obs_error(y_mean (p,)) -> (p, p)`` added to obs_cov at each analysis
+    obs_error: Callable[[np.ndarray], np.ndarray] | None = None
 
     def __post_init__(self):
         set_ = object.__setattr__  # frozen: store the validated arrays
+        if self.obs_error is not None and not callable(self.obs_error):
+            raise ValueError(f"obs_error must be callable or None, got "
+                             f"{type(self.obs_error).__name__}")
         if self.observation_offset is not None and not callable(self.observation_offset):
             raise ValueError(f"observation_offset must be callable or None, got "
                              f"{type(self.observation_offset).__name__}")

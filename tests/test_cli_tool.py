@@ -9,6 +9,7 @@ import numpy as np
 import pytest
 
 from enkf.app.cli import main
+from mcmatlab_py.config import ConfigError
 
 EX = Path(__file__).parents[1] / "examples"
 TINY = (EX / "tiny.toml").read_text()
@@ -204,6 +205,23 @@ def test_identify_from_an_npz_image_series(tmp_path, cache):
     assert load_identify(cfg).smoother_options["discrepancy"] == 0.0  # a camera's default
     np.savez(tmp_path / "wrong.npz", times=times, frames=frames[:, :1])
     assert run("identify", cfg, "--data", tmp_path / "wrong.npz", "--out", tmp_path / "w") == 2
+    # the camera's model error: defaults, set, refused when negative (exit 2, nothing written)
+    cam = load_identify(cfg).setup_kw["image"]
+    assert (cam.model_error_rel_std, cam.model_error_lengths) == (0.04, (0.02, 0.1))
+    cfg.write_text(cfg.read_text().replace("shape = [2, 3]\n", "shape = [2, 3]\n"
+                                           "model_error_rel_std = 0.0\nmodel_error_lengths = [0.05]\n"))
+    cam = load_identify(cfg).setup_kw["image"]
+    assert (cam.model_error_rel_std, cam.model_error_lengths) == (0.0, (0.05,))
+    for bad in ("[]", "0.05", "[-0.1]"):
+        text = cfg.read_text()
+        cfg.write_text(text.replace("model_error_lengths = [0.05]", f"model_error_lengths = {bad}"))
+        with pytest.raises(ConfigError, match="model_error_lengths"):
+            load_identify(cfg)
+        cfg.write_text(text)
+    cfg.write_text(cfg.read_text().replace("model_error_rel_std = 0.0", "model_error_rel_std = -0.1"))
+    assert run("identify", cfg, "--data", tmp_path / "frames.npz", "--out", tmp_path / "m",
+               "--quiet", "--cache-dir", cache) == 2
+    assert not (tmp_path / "m").exists()
 
 
 def test_run_table_and_damage_field(tmp_path, cache, capsys):

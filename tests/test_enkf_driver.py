@@ -234,6 +234,7 @@ def test_bad_config(kwargs, field):
         ({"observation": np.ones((2, 2))}, "observation"),
         ({"tracked": [-1]}, "tracked"),
         ({"forecast": 3}, "forecast"),
+        ({"obs_error": 0.1}, "obs_error"),
     ],
 )
 def test_bad_problem(kwargs, field):
@@ -252,6 +253,8 @@ def test_bad_problem(kwargs, field):
         ({"observation": lambda X: X}, "observation"),  # maps to 2 values, data has 1
         ({"prior": lambda rng, N: (np.zeros((N - 1, 2)), np.zeros((N - 1, 1)))}, "prior"),
         ({"transforms": [LogTransform(), LogTransform()]}, "transforms"),
+        ({"obs_error": lambda y: np.ones(1)}, "obs_error"),
+        ({"obs_error": lambda y: np.full((1, 1), np.nan)}, "obs_error"),
     ],
 )
 def test_bad_sizes_found_at_run(kwargs, field):
@@ -330,3 +333,26 @@ def test_observation_offset_is_learned_as_a_parameter():
         FilterProblem(forecast=lambda X, th, t0, t1: X, observation=np.array([[1.0]]),
                       obs_times=[1.0], obs_data=[[1.0]], obs_cov=[1.0],
                       prior=lambda r, n: (np.zeros((n, 1)), None), observation_offset=3.0)
+
+
+@pytest.mark.parametrize("method", ["enkf", "etkf"])
+def test_obs_error_adds_to_the_observation_covariance_of_each_step(method):
+    """A constant ``obs_error`` is the same filter as its sum with ``obs_cov``, bit for bit;
+    one that depends on the forecast's mean observation gets that mean."""
+    extra = 0.3
+    a = run_filter(linear_problem(obs_error=lambda y: np.array([[extra]])),
+                   FilterConfig(n_members=30, method=method, seed=2))
+    b = run_filter(linear_problem(obs_cov=R + extra), FilterConfig(n_members=30, method=method,
+                                                                    seed=2))
+    np.testing.assert_array_equal(a.param_mean, b.param_mean)
+    np.testing.assert_array_equal(a.tracked_std, b.tracked_std)
+    seen = []
+
+    def relative(y_mean):
+        seen.append(y_mean.copy())
+        return np.array([[0.1 * y_mean[0] ** 2]])
+
+    res = run_filter(linear_problem(obs_error=relative), FilterConfig(n_members=30, seed=2))
+    assert len(seen) == res.analysed.sum() and all(v.shape == (1,) for v in seen)
+    c = run_filter(linear_problem(), FilterConfig(n_members=30, seed=2))
+    assert res.param_std[-1, 0] > c.param_std[-1, 0]  # less information

@@ -51,6 +51,10 @@ def test_pixel_average_of_a_curved_field_converges_with_subsamples():
     (dict(x_range=(0.1, -0.1)), "x_range"),
     (dict(shape=(0, 3)), "shape"),
     (dict(noise_var=-1.0), "noise_var"),
+    (dict(model_error_rel_std=-0.01), "model_error_rel_std"),
+    (dict(model_error_rel_std=float("nan")), "model_error_rel_std"),
+    (dict(model_error_lengths=(0.02, -1.0)), "model_error_lengths"),
+    (dict(model_error_lengths=()), "model_error_lengths"),
 ])
 def test_bad_camera(kw, pattern):
     args = dict(x_range=(-0.1, 0.1), y_range=(-0.1, 0.1), shape=(2, 2))
@@ -128,3 +132,43 @@ def test_identify_from_an_image_with_dead_pixels(kw, tissue):
     assert abs(est.param_mean[-1, 0] - 1.4) < 3 * est.param_std[-1, 0] + 0.05
     with pytest.raises(ValueError, match="nothing observed"):
         tissue.setup(sensor_positions=np.zeros((0, 3)))
+
+
+def test_image_error_covariance_is_relative_to_the_rise_and_correlated_over_the_length():
+    cam = ThermalImage(x_range=(-0.1, 0.1), y_range=(-0.05, 0.05), shape=(2, 4),
+                       model_error_rel_std=0.05, model_error_lengths=(0.04, 0.0))
+    T0 = 37.0
+    rise = np.array([0.0, 1.0, 2.0, 4.0, 8.0, 4.0, 2.0, 1.0])
+    R = cam.error_covariance(T0 + rise, T0)
+    xy = cam.pixel_centers()[:, :2]
+    i, j = 2, 3  # neighbours along x in the first row, 0.05 cm apart
+    d = np.linalg.norm(xy[i] - xy[j])
+    assert d == pytest.approx(0.05)
+    assert R[i, i] == pytest.approx(2 * (0.05 * 2.0) ** 2)  # one error at each length
+    assert R[i, j] == pytest.approx(0.05**2 * 2.0 * 4.0 * np.exp(-0.5 * (d / 0.04) ** 2))
+    assert np.all(R[0] == 0) and np.allclose(R, R.T)
+    assert np.linalg.eigvalsh(R).min() > -1e-12  # a covariance
+    # a fall below the initial temperature is an error of the same size
+    assert np.allclose(cam.error_covariance(T0 - rise, T0), R)
+    # no correlation length: independent pixels
+    flat = ThermalImage(cam.x_range, cam.y_range, cam.shape, model_error_rel_std=0.05,
+                        model_error_lengths=[0.0])
+    assert np.allclose(flat.error_covariance(T0 + rise, T0), np.diag((0.05 * rise) ** 2))
+    with pytest.raises(ValueError, match="predicted"):
+        cam.error_covariance(np.zeros(3), T0)
+
+
+def test_the_image_model_error_widens_the_bands_and_can_be_turned_off(tissue):
+    """A model error of the pixels is less information: wider parameter bands than the
+    pixel noise alone gives, on the same data and random numbers."""
+    import dataclasses
+
+    sd = {}
+    for rel in (0.0, 0.05):
+        cam = dataclasses.replace(CAMERA, model_error_rel_std=rel)
+        s = tissue.setup(sensor_positions=np.zeros((0, 3)), image=cam)
+        times, frames = twin_image(s, 1.4, 100.0)
+        est = identify(s, times, frames)
+        assert est.diverged is None
+        sd[rel] = est.param_std[-1]
+    assert np.all(sd[0.05] > 1.2 * sd[0.0])

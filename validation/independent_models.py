@@ -238,6 +238,17 @@ class CartesianFD:
             out.append((9 * col[0] - col[1]) / 8 if d <= zc[0] else np.interp(d, zc, col))
         return np.array(out)
 
+    def surface(self, T, xy):
+        """T on the top face at the points ``xy`` (m, 2) cm: the zero-flux parabola through
+        the first two cell layers, bilinear between cell centres (nearest centre beyond)."""
+        from scipy.interpolate import RegularGridInterpolator
+
+        T = T.reshape(self.shape)
+        top = (9 * T[:, :, 0] - T[:, :, 1]) / 8
+        cx, cy = self.centres[0], self.centres[1]
+        pts = np.column_stack([np.clip(xy[:, 0], cx[0], cx[-1]), np.clip(xy[:, 1], cy[0], cy[-1])])
+        return RegularGridInterpolator((cx, cy), top)(pts)
+
     def step(self, T, q, dt):
         assert abs(dt - self.dt) < 1e-12
         return self.solve(T + dt * q / VHC)
@@ -280,6 +291,15 @@ class AxisymmetricFV:
         return np.array([(9 * col[0] - col[1]) / 8 if d <= zc[0] else np.interp(d, zc, col)
                          for d in DEPTHS])
 
+    def surface(self, T, xy):
+        """T on the top face at the points ``xy`` (m, 2) cm, linear in the radius between
+        ring centres (the axis by symmetry)."""
+        nr, nz = self.shape
+        T = T.reshape(nr, nz)
+        top = (9 * T[:, 0] - T[:, 1]) / 8
+        rc = np.r_[0.0, self.centres[0]]
+        return np.interp(np.hypot(xy[:, 0], xy[:, 1]), rc, np.r_[(9 * top[0] - top[1]) / 8, top])
+
     def step(self, T, q, dt):
         assert abs(dt - self.dt) < 1e-12
         return self.solve(self.rhs @ T + dt * q / VHC)
@@ -292,6 +312,31 @@ def independent_truth(model: str, case: str, n_photons: int = 200_000) -> np.nda
     path = CACHE / f"truth-{tag}.npy"
     if path.exists():
         return np.load(path)
+    temps = _run(model, case, n_photons)[0]
+    CACHE.mkdir(parents=True, exist_ok=True)
+    np.save(path, temps)
+    return temps
+
+
+def independent_surface(model: str, case: str, xy: np.ndarray, n_photons: int = 200_000
+                        ) -> np.ndarray:
+    """Top-face temperatures (151, m) deg C at the points ``xy`` (m, 2) cm, every 0.1 s
+    from 0 to 15 s (cached): what a camera of the model's truth sees."""
+    xy = np.ascontiguousarray(xy, dtype=float)
+    key = hashlib.sha256(xy.tobytes()).hexdigest()[:12]
+    tag = hashlib.sha256(f"surface-{model}-{case}-{n_photons}-{key}-v1".encode()).hexdigest()[:16]
+    path = CACHE / f"surface-{tag}.npy"
+    if path.exists():
+        return np.load(path)
+    surf = _run(model, case, n_photons, xy)[1]
+    CACHE.mkdir(parents=True, exist_ok=True)
+    np.save(path, surf)
+    return surf
+
+
+def _run(model: str, case: str, n_photons: int, xy: np.ndarray | None = None):
+    """The truth of ``model`` for ``case``: temperatures (151, 3) at the tracked depths,
+    and (151, m) on the top face at ``xy`` (None without points)."""
     knots, maps, edges = absorbed_maps(model, case, n_photons)
     solver = CartesianFD() if model == "A" else AxisymmetricFV()
     # the heat each map puts into the block: its integral over the annuli inside the box
@@ -299,6 +344,7 @@ def independent_truth(model: str, case: str, n_photons: int = 200_000) -> np.nda
               for m in maps]
     T = np.zeros(solver.r.size)
     out = [solver.probes(T)]
+    surf = None if xy is None else [solver.surface(T, xy)]
     dt = solver.dt
     n_sub = int(round(0.1 / dt))
     t = 0.0
@@ -314,10 +360,9 @@ def independent_truth(model: str, case: str, n_photons: int = 200_000) -> np.nda
             T = solver.step(T, q, dt)
             t += dt
         out.append(solver.probes(T))
-    temps = np.array(out)
-    CACHE.mkdir(parents=True, exist_ok=True)
-    np.save(path, temps)
-    return temps
+        if surf is not None:
+            surf.append(solver.surface(T, xy))
+    return np.array(out), None if surf is None else np.array(surf)
 
 
 if __name__ == "__main__":

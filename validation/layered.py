@@ -68,7 +68,9 @@ def sensor_setup(cfg, absorption, kind: str, seed: int = 0, **overrides):
     cfg.setup_kw = {**cfg.setup_kw, **overrides}
     if kind == "camera":
         cfg.setup_kw["sensor_positions"] = np.zeros((0, 3))
-        cfg.setup_kw["image"] = ThermalImage((-0.2, 0.2), (-0.2, 0.2), (16, 16), noise_var=0.01)
+        # identical twins: the filter's model is the truth's, so no model error of the pixels
+        cfg.setup_kw["image"] = ThermalImage((-0.2, 0.2), (-0.2, 0.2), (16, 16), noise_var=0.01,
+                                             model_error_rel_std=0.0)
     return cfg.setup(absorption, seed=seed)
 
 

@@ -15,6 +15,8 @@ Python API (``model.G``, ``model.MC``, ``model.HS`` as in MCmatlab, then
     x_range = [-0.2, 0.2]
     y_range = [-0.2, 0.2]
     shape = [16, 16]
+    model_error_rel_std = 0.04      # the model's error per pixel, of the predicted rise,
+    model_error_lengths = [0.02, 0.1]   # at each correlation length (cm; docs/beyond.md)
     [filter]
     n_members = 50
     method = "etkf"                 # or "enkf" (perturbed observations)
@@ -77,7 +79,8 @@ class DataSpec:
     time_offset: float | None = None  #: s, the laser's start on the data's clock
 
 _SENSOR_KEYS = {"positions", "noise_var", "tracked", "camera", "rate"}
-_CAMERA_KEYS = {"x_range", "y_range", "shape", "noise_var", "subsamples"}
+_CAMERA_KEYS = {"x_range", "y_range", "shape", "noise_var", "subsamples", "model_error_rel_std",
+                "model_error_lengths"}
 _FILTER_KEYS = {
     "n_members", "method", "estimate", "grid", "prior_range", "model_noise_std",
     "random_walk_std", "random_walk_when_off", "inflation", "mda", "seed", "parameter_model",
@@ -202,7 +205,9 @@ class IdentifyConfig:
 #: upper limits of the config's numbers: far beyond any use, small enough that nothing
 #: overflows (filter.model_noise_std = 1e300 gave a traceback): deg C^2, Hz, deg C, log
 #: units, cm, counts, s
-_LIMITS = {"sensors.noise_var": 1e4, "sensors.camera.noise_var": 1e4, "sensors.rate": 1e6,
+_LIMITS = {"sensors.noise_var": 1e4, "sensors.camera.noise_var": 1e4,
+           "sensors.camera.model_error_rel_std": 1.0, "sensors.camera.model_error_lengths": 100.0,
+           "sensors.rate": 1e6,
            "sensors.camera.shape": 4096, "sensors.camera.subsamples": 64,
            "filter.n_members": 100_000, "filter.grid": 1000, "filter.model_noise_std": 100.0,
            "filter.sensor_offset_std": 100.0,
@@ -312,6 +317,22 @@ def _points(key, v, G) -> np.ndarray:
     return pts
 
 
+def _camera_model_error(cam: dict) -> dict:
+    """``ThermalImage`` keywords of the camera's model error (only those given)."""
+    out = {}
+    if "model_error_rel_std" in cam:
+        out["model_error_rel_std"] = _num("sensors.camera.model_error_rel_std",
+                                          cam["model_error_rel_std"], lo=0.0)
+    if "model_error_lengths" in cam:
+        v = cam["model_error_lengths"]
+        if not (isinstance(v, list) and v):
+            raise ConfigError(f"sensors.camera.model_error_lengths must be a list of lengths "
+                              f"(cm), got {shorten(repr(v))}")
+        out["model_error_lengths"] = tuple(_num(f"sensors.camera.model_error_lengths[{i}]", x,
+                                                lo=0.0) for i, x in enumerate(v))
+    return out
+
+
 def _pair(key, v, positive=False):
     if not isinstance(v, list) or len(v) != 2:
         raise ConfigError(f"{key} must be [lo, hi], got {shorten(repr(v))}")
@@ -377,7 +398,8 @@ def identify_config_from_dict(cfg: dict) -> IdentifyConfig:
             xr, yr, shape, noise_var=_num("sensors.camera.noise_var",
                                           cam.get("noise_var", 0.01), positive=True),
             subsamples=_num("sensors.camera.subsamples", cam.get("subsamples", 4),
-                            integer=True, lo=1))
+                            integer=True, lo=1),
+            **_camera_model_error(cam))
     rate = None
     if "rate" in sens:
         rate = _num("sensors.rate", sens["rate"], positive=True)

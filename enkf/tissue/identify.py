@@ -114,6 +114,8 @@ class FilterPieces:
     n: int
     #: the sensors' estimated offsets in the readings (setup.sensor_offset_std > 0)
     observation_offset: Callable | None = None
+    #: the image's model error in the readings' covariance (ThermalImage.error_covariance)
+    obs_error: Callable | None = None
 
     def model_noise(self):
         """The model error of a new run: a :class:`StructuredModelError` on the mesh nodes,
@@ -141,7 +143,7 @@ class FilterPieces:
             param_noise=self.rw,
             transforms=self.transforms, t0=t0, param_dynamics=self.dynamics,
             localization=self.localization, param_noise_scale=self.walk_scale,
-            observation_offset=self.observation_offset)
+            observation_offset=self.observation_offset, obs_error=self.obs_error)
 
 
 def assemble(setup: TissueFilterSetup, param_bounds=None, warm_dt: float | None = None
@@ -213,6 +215,19 @@ def assemble(setup: TissueFilterSetup, param_bounds=None, warm_dt: float | None 
         n_theta = len(names) * (2 if setup.parameter_model == "trend" else 1) + n_off
         rho_xy = np.vstack([gaspari_cohn(d_xy / c), np.ones((n_theta, obs_xyz.shape[0]))])
         localization = (rho_xy, gaspari_cohn(d_yy / c))
+    obs_error = None
+    image = setup.image
+    if image is not None and image.model_error_rel_std > 0:
+        # the camera's model error, relative to each pixel's predicted rise: the pixels
+        # follow the point sensors in the readings
+        C_img, p_pts, p_all = image.error_correlation(), setup.sensor_positions.shape[0], \
+            P_obs.shape[0]
+        T_ref = float(setup.T_initial)
+
+        def obs_error(y_mean):
+            R = np.zeros((p_all, p_all))
+            R[p_pts:, p_pts:] = image.error_covariance(y_mean[p_pts:], T_ref, C_img)
+            return R
     adaptive = None
     if setup.adaptive_inflation:
         adaptive = AdaptiveInflation(bounds=setup.adaptive_inflation_bounds,
@@ -229,7 +244,7 @@ def assemble(setup: TissueFilterSetup, param_bounds=None, warm_dt: float | None 
                          min_param_std=min_std)
     return FilterPieces(model, P_obs, noise_var, P_track, prior, rw, transforms, dynamics,
                    localization, None if setup.random_walk_when_off == 1.0 else walk_scale,
-                   config, health, n, observation_offset)
+                   config, health, n, observation_offset, obs_error)
 
 
 def identify(setup: TissueFilterSetup, times: np.ndarray, data: np.ndarray, *,

@@ -38,6 +38,13 @@ class ThermalImage:
         deg C^2, the noise variance of one pixel reading (D = noise_var I).
     subsamples : int
         Probes per pixel side used to average the surface field over a footprint.
+    model_error_rel_std : float
+        The filter's model error in each pixel, as a fraction of the pixel's predicted
+        rise above the initial temperature, at each of the correlation lengths (see
+        :meth:`error_covariance`); 0 turns it off.
+    model_error_lengths : tuple of float
+        cm, the correlation lengths of that error between pixels (squared exponential),
+        an error of ``model_error_rel_std`` at each; 0: independent pixels.
     """
 
     x_range: tuple[float, float]
@@ -45,6 +52,14 @@ class ThermalImage:
     shape: tuple[int, int]
     noise_var: float = 0.01
     subsamples: int = 4
+    #: sized from the coarse model against independent models (2-5% of the rise,
+    #: validation/reports/model_error_coverage.md) and the emulator (1-3%)
+    model_error_rel_std: float = 0.04
+    #: a pixel-scale error (0.02 cm, 0.8 pixel pitch of the paper's 250 um camera: the
+    #: interpolation, the Monte Carlo's noise) and a beam-scale one (0.1 cm: a hot spot too
+    #: wide or too narrow, as the independent models' images differ from ours);
+    #: docs/beyond.md, "The model's error in the image"
+    model_error_lengths: tuple = (0.02, 0.1)
 
     def __post_init__(self):
         for name in ("x_range", "y_range"):
@@ -59,6 +74,49 @@ class ThermalImage:
             raise ValueError(f"ThermalImage.noise_var must be > 0 (deg C^2), got {self.noise_var!r}")
         if int(self.subsamples) < 1:
             raise ValueError(f"ThermalImage.subsamples must be >= 1, got {self.subsamples!r}")
+        v = self.model_error_rel_std
+        if not (np.isfinite(v) and v >= 0):
+            raise ValueError(f"ThermalImage.model_error_rel_std must be a finite number >= 0, "
+                             f"got {v!r}")
+        lengths = np.atleast_1d(np.asarray(self.model_error_lengths, dtype=float))
+        if lengths.ndim != 1 or lengths.size == 0 or not np.all(np.isfinite(lengths)
+                                                                 & (lengths >= 0)):
+            raise ValueError(f"ThermalImage.model_error_lengths must be one or more finite "
+                             f"lengths >= 0 (cm), got {self.model_error_lengths!r}")
+        object.__setattr__(self, "model_error_lengths", tuple(float(x) for x in lengths))
+
+    def error_correlation(self) -> np.ndarray:
+        """(n_pixels, n_pixels): the sum over ``model_error_lengths`` of the correlations
+        ``exp(-d^2 / (2 length^2))`` between pixel centres (the identity for length 0)."""
+        xy = self.pixel_centers()[:, :2]
+        d2 = np.sum((xy[:, None, :] - xy[None, :, :]) ** 2, axis=-1)
+        return sum(np.eye(self.n_pixels) if ell == 0 else np.exp(-0.5 * d2 / ell ** 2)
+                   for ell in self.model_error_lengths)
+
+    def error_covariance(self, predicted: np.ndarray, T_ref: float,
+                         correlation: np.ndarray | None = None) -> np.ndarray:
+        r"""(n_pixels, n_pixels) deg C^2: the model error of the pixels, added to their noise.
+
+        .. math::
+
+            R_{ij} = \alpha^2\,|\bar y_i - T_0|\,|\bar y_j - T_0|\,
+                     \sum_\ell \exp\!\big(-d_{ij}^2 / 2\ell^2\big),
+
+        with :math:`\alpha` = ``model_error_rel_std``, :math:`\ell` over
+        ``model_error_lengths``, :math:`\bar y` the forecast's mean of each pixel
+        (``predicted``, deg C) and :math:`T_0` = ``T_ref``. A model that is a few percent
+        wrong in the absorbed power or the conduction is wrong by a few percent of the
+        rise, in many pixels of the hot spot at once; hundreds of pixels read as
+        independent would otherwise weigh that error as information and pull the optics
+        and the unseen temperatures beneath the surface away from the truth with a
+        collapsed spread. ``correlation``: :meth:`error_correlation`, if already computed.
+        """
+        rise = np.abs(np.asarray(predicted, float) - float(T_ref))
+        if rise.shape != (self.n_pixels,):
+            raise ValueError(f"predicted must have shape ({self.n_pixels},), got {rise.shape}")
+        C = self.error_correlation() if correlation is None else correlation
+        a = self.model_error_rel_std * rise
+        return np.outer(a, a) * C
 
     @property
     def n_pixels(self) -> int:
