@@ -45,6 +45,8 @@ from independent_models import independent_surface, independent_truth, optics  #
 #: the trend model's walk on the levels (log units per step): the drift is carried by the
 #: rates, so the levels only need a small walk (docs/enkf.md, "trend")
 TREND_WALK = 0.005
+ROOT = Path(__file__).resolve().parents[1]
+DEFAULT_OUT = str(ROOT / "validation" / "reports" / "image_vs_point.md")
 
 
 def camera_truth(truth: str, scenario: str, camera):
@@ -57,6 +59,12 @@ def camera_truth(truth: str, scenario: str, camera):
     return SimpleNamespace(times=times, temps=independent_truth(truth, scenario),
                            images=camera.average(surf),
                            params={"mua": opt[:, 0], "mus": opt[:, 1]})
+
+
+def _shown(path: str) -> str:
+    """``path`` relative to the repository when it lies inside it."""
+    p = Path(path).resolve()
+    return str(p.relative_to(ROOT)) if p.is_relative_to(ROOT) else str(p)
 
 
 def noisy_images(images: np.ndarray, seed: int, variance: float = 0.01) -> np.ndarray:
@@ -101,7 +109,7 @@ def main(argv=None):
                          "filter is the paper's")
     ap.add_argument("--image-error", type=float, default=None,
                     help="the camera's model_error_rel_std (default: ThermalImage's)")
-    ap.add_argument("--out", default=str(Path(__file__).parent / "reports" / "image_vs_point.md"))
+    ap.add_argument("--out", default=DEFAULT_OUT)
     args = ap.parse_args(argv)
     me = {"model_error": args.model_error}
     if args.parameter_model == "trend":
@@ -113,7 +121,8 @@ def main(argv=None):
     command = (f"python validation/image_vs_point.py --seeds {' '.join(map(str, args.seeds))} "
                f"--scenarios {' '.join(args.scenarios)} --model-error {args.model_error} "
                f"--truth {args.truth} --parameter-model {args.parameter_model}"
-               + ("" if args.image_error is None else f" --image-error {args.image_error}"))
+               + ("" if args.image_error is None else f" --image-error {args.image_error}")
+               + ("" if args.out == DEFAULT_OUT else f" --out {_shown(args.out)}"))
     truth_name = {"fine": "the paper's fine grid (our Monte Carlo and FEM on 100 x 100 x 50)",
                   "A": "independent model A (analog Monte Carlo, finite-difference box)",
                   "B": "independent model B (attenuation Monte Carlo, finite-volume cylinder)"}
