@@ -140,6 +140,10 @@ def main(argv=None):
              "parameters relative to the truth at t = 15 s; 'covered': the share of seeds whose "
              "+-2 sd band holds the truth at 15 s; temperature coverage over all steps, and "
              "while the laser is on (t <= 5 s) and off.", ""]
+    figure = Path(args.out).with_suffix(".png")
+    lines += [f"Figure: `{figure.name}` (the first seed: each filter's error of the temperatures "
+              "with its +-2 sd band; the band holds the truth where it holds zero).", ""]
+    shown = {}
     for sc in args.scenarios:
         truth = camera_truth(args.truth, sc, camera)
         rows = {"point": [], "image": []}
@@ -147,10 +151,14 @@ def main(argv=None):
             point = filter_setup(sc, emu, seed=seed, model_error=args.model_error)
             est = identify(point, truth.times[1:], noisy_sensor(truth, seed)[:, None])
             rows["point"].append(metrics(est, truth))
+            if seed == args.seeds[0]:
+                shown[sc] = (truth, {"one point": est})
             image = filter_setup(sc, emu, seed=seed, sensor_positions=np.zeros((0, 3)),
                                  image=filter_camera, **me)
             est = identify(image, truth.times[1:], noisy_images(truth.images, seed))
             rows["image"].append(metrics(est, truth))
+            if seed == args.seeds[0]:
+                shown[sc][1]["whole image"] = est
             print(sc, seed, {k: {m: round(float(v), 3) for m, v in r[-1].items()
                                  if "coverage" in m or "error" in m}
                              for k, r in rows.items()}, flush=True)
@@ -166,8 +174,36 @@ def main(argv=None):
             lines.append(f"| {k} | {fmt(a)} | {fmt(b)} | {ratio} |")
         lines.append("")
     Path(args.out).parent.mkdir(parents=True, exist_ok=True)
+    plot_temperatures(figure, shown, f"truth {args.truth}, seed {args.seeds[0]}")
     Path(args.out).write_text("\n".join(lines) + "\n")
-    print(f"report written to {args.out}")
+    print(f"report written to {args.out}, figure {figure}")
+
+
+def plot_temperatures(path: Path, shown: dict, title: str) -> None:
+    """One row per scenario, one panel per tracked depth: each filter's error (mean minus
+    truth) with its +-2 sd band; the band holds the truth where it holds zero."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, axes = plt.subplots(len(shown), len(TRACKED_DEPTHS), squeeze=False,
+                             figsize=(4 * len(TRACKED_DEPTHS), 3.2 * len(shown)),
+                             constrained_layout=True)
+    for row, (sc, (truth, ests)) in zip(axes, shown.items(), strict=True):
+        for j, (ax, z) in enumerate(zip(row, TRACKED_DEPTHS, strict=True)):
+            ax.axhline(0.0, color="k", lw=1, label="truth")
+            for name, est in ests.items():
+                err = est.tracked_mean[:, j] - truth.temps[: len(est.times), j]
+                sd = est.tracked_std[:, j]
+                ax.plot(est.times, err, lw=1, label=name)
+                ax.fill_between(est.times, err - 2 * sd, err + 2 * sd, alpha=0.25)
+            ax.set(xlabel="time [s]", ylabel="estimate - truth [deg C]",
+                   title=f"{sc}, z = {z} cm ({title})")
+            ax.title.set_fontsize(9)
+        row[0].legend(fontsize=8)
+    fig.savefig(path, dpi=100)
+    plt.close(fig)
 
 
 if __name__ == "__main__":
