@@ -40,7 +40,12 @@ from enkf.paper import (
 from enkf.tissue import TRACKED_DEPTHS, identify
 
 sys.path.insert(0, str(Path(__file__).parent))
-from independent_models import independent_surface, independent_truth, optics  # noqa: E402
+from independent_models import (  # noqa: E402
+    TIMES,
+    independent_surface,
+    independent_truth,
+    optics,
+)
 
 #: the trend model's walk on the levels (log units per step): the drift is carried by the
 #: rates, so the levels only need a small walk (docs/enkf.md, "trend")
@@ -53,10 +58,9 @@ def camera_truth(truth: str, scenario: str, camera):
     """``times (n,), temps (n, 3), images (n, n_pixels), params {name: (n,)}`` of a truth."""
     if truth == "fine":
         return generate_truth(TruthConfig(scenario=scenario, camera=CAMERA))
-    times = np.round(0.1 * np.arange(151), 10)
     surf = independent_surface(truth, scenario, camera.sample_points()[:, :2])
-    opt = np.array([optics(scenario, float(t)) for t in times])
-    return SimpleNamespace(times=times, temps=independent_truth(truth, scenario),
+    opt = np.array([optics(scenario, float(t)) for t in TIMES])
+    return SimpleNamespace(times=TIMES, temps=independent_truth(truth, scenario),
                            images=camera.average(surf),
                            params={"mua": opt[:, 0], "mus": opt[:, 1]})
 

@@ -197,6 +197,12 @@ def _lookup(density, edges, r, z):
 # ---------------------------------------------------------------------------- heat solvers
 
 
+def _end_value(first, second):
+    """The value at a zero-flux face from the first two cell centres next to it: the
+    parabola with zero slope at the face (cells of equal width)."""
+    return (9 * first - second) / 8
+
+
 def _laplacian_1d(n: int, h: float) -> sp.csr_matrix:
     """Cell-centred second difference with zero-flux ends (W/(cm^2) per K once times TC)."""
     main = -2.0 * np.ones(n)
@@ -235,7 +241,7 @@ class CartesianFD:
         zc = self.centres[2]
         out = []
         for d in DEPTHS:
-            out.append((9 * col[0] - col[1]) / 8 if d <= zc[0] else np.interp(d, zc, col))
+            out.append(_end_value(col[0], col[1]) if d <= zc[0] else np.interp(d, zc, col))
         return np.array(out)
 
     def surface(self, T, xy):
@@ -244,7 +250,7 @@ class CartesianFD:
         from scipy.interpolate import RegularGridInterpolator
 
         T = T.reshape(self.shape)
-        top = (9 * T[:, :, 0] - T[:, :, 1]) / 8
+        top = _end_value(T[:, :, 0], T[:, :, 1])
         cx, cy = self.centres[0], self.centres[1]
         pts = np.column_stack([np.clip(xy[:, 0], cx[0], cx[-1]), np.clip(xy[:, 1], cy[0], cy[-1])])
         return RegularGridInterpolator((cx, cy), top)(pts)
@@ -286,9 +292,9 @@ class AxisymmetricFV:
     def probes(self, T):
         nr, nz = self.shape
         T = T.reshape(nr, nz)
-        col = (9 * T[0] - T[1]) / 8  # the axis, by symmetry (zero radial slope)
+        col = _end_value(T[0], T[1])  # the axis, by symmetry (zero radial slope)
         zc = self.centres[1]
-        return np.array([(9 * col[0] - col[1]) / 8 if d <= zc[0] else np.interp(d, zc, col)
+        return np.array([_end_value(col[0], col[1]) if d <= zc[0] else np.interp(d, zc, col)
                          for d in DEPTHS])
 
     def surface(self, T, xy):
@@ -296,9 +302,9 @@ class AxisymmetricFV:
         ring centres (the axis by symmetry)."""
         nr, nz = self.shape
         T = T.reshape(nr, nz)
-        top = (9 * T[:, 0] - T[:, 1]) / 8
+        top = _end_value(T[:, 0], T[:, 1])
         rc = np.r_[0.0, self.centres[0]]
-        return np.interp(np.hypot(xy[:, 0], xy[:, 1]), rc, np.r_[(9 * top[0] - top[1]) / 8, top])
+        return np.interp(np.hypot(xy[:, 0], xy[:, 1]), rc, np.r_[_end_value(top[0], top[1]), top])
 
     def step(self, T, q, dt):
         assert abs(dt - self.dt) < 1e-12
@@ -308,14 +314,10 @@ class AxisymmetricFV:
 def independent_truth(model: str, case: str, n_photons: int = 200_000) -> np.ndarray:
     """Temperatures (151, 3) deg C at z = 0, 0.1, 0.2 cm below the beam centre, every 0.1 s
     from 0 to 15 s (cached)."""
-    tag = hashlib.sha256(f"truth-{model}-{case}-{n_photons}-v1".encode()).hexdigest()[:16]
-    path = CACHE / f"truth-{tag}.npy"
+    path = _truth_path(model, case, n_photons)
     if path.exists():
         return np.load(path)
-    temps = _run(model, case, n_photons)[0]
-    CACHE.mkdir(parents=True, exist_ok=True)
-    np.save(path, temps)
-    return temps
+    return _run(model, case, n_photons)[0]
 
 
 def independent_surface(model: str, case: str, xy: np.ndarray, n_photons: int = 200_000
@@ -329,14 +331,18 @@ def independent_surface(model: str, case: str, xy: np.ndarray, n_photons: int = 
     if path.exists():
         return np.load(path)
     surf = _run(model, case, n_photons, xy)[1]
-    CACHE.mkdir(parents=True, exist_ok=True)
     np.save(path, surf)
     return surf
 
 
+def _truth_path(model: str, case: str, n_photons: int) -> Path:
+    tag = hashlib.sha256(f"truth-{model}-{case}-{n_photons}-v1".encode()).hexdigest()[:16]
+    return CACHE / f"truth-{tag}.npy"
+
+
 def _run(model: str, case: str, n_photons: int, xy: np.ndarray | None = None):
-    """The truth of ``model`` for ``case``: temperatures (151, 3) at the tracked depths,
-    and (151, m) on the top face at ``xy`` (None without points)."""
+    """The truth of ``model`` for ``case``: temperatures (151, 3) at the tracked depths
+    (written to the cache), and (151, m) on the top face at ``xy`` (None without points)."""
     knots, maps, edges = absorbed_maps(model, case, n_photons)
     solver = CartesianFD() if model == "A" else AxisymmetricFV()
     # the heat each map puts into the block: its integral over the annuli inside the box
@@ -362,7 +368,11 @@ def _run(model: str, case: str, n_photons: int, xy: np.ndarray | None = None):
         out.append(solver.probes(T))
         if surf is not None:
             surf.append(solver.surface(T, xy))
-    return np.array(out), None if surf is None else np.array(surf)
+    temps = np.array(out)
+    # the tracked temperatures come with every run: cached, so a camera's run serves both
+    CACHE.mkdir(parents=True, exist_ok=True)
+    np.save(_truth_path(model, case, n_photons), temps)
+    return temps, None if surf is None else np.array(surf)
 
 
 if __name__ == "__main__":
