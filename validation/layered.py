@@ -23,7 +23,10 @@ mua and mus the filter estimates; one laser pulse of 0.5 W for 5 s, 150 readings
 4. **Filter on a fine truth** (``--fine``): the data from direct Monte Carlo (10^6
    photons) of the layered block and the heat simulation on the Monte Carlo's voxels, for
    the point sensor, with the config's model error (``structured``: data from another
-   model) and, for comparison, the white floor.
+   model) and, for comparison, the white floor; ``--fine-smoother``: the smoother on it too.
+   ``--grid``, ``--emulator-photons`` and ``--fine-photons`` change the filter's FEM, its
+   emulator's photons and the fine truth's photons: how much of the fine truth's error is
+   the coarse model's (``docs/layered.md``).
 
 5. **What the model can say about the fine truth** (``--pseudo-true``): the filter's coarse
    model fitted by least squares to the noise-free fine-truth trace (the "pseudo-true"
@@ -136,13 +139,13 @@ def twin_data(sensor, truth: dict) -> np.ndarray:
     return sensor.readings(theta)[:, :, 0]
 
 
-def fine_data(cfg, truth: dict) -> np.ndarray:
-    """(N_STEPS, 1) the surface sensor from direct Monte Carlo (10^6 photons) and the heat
-    simulation on the Monte Carlo's voxels, with the dermis at ``truth``."""
+def fine_data(cfg, truth: dict, photons: int = 10**6) -> np.ndarray:
+    """(N_STEPS, 1) the surface sensor from direct Monte Carlo (``photons``, seed 4242) and
+    the heat simulation on the Monte Carlo's voxels, with the dermis at ``truth``."""
     model = copy.deepcopy(cfg.model)
     m = model.G.media[cfg.medium]
     m.mua, m.mus = truth["mua"], truth["mus"]
-    model.MC.n_photons_requested = 10**6
+    model.MC.n_photons_requested = int(photons)
     model.MC.seed = 4242
     model.HS.temp_sensor_positions = [tuple(p) for p in cfg.setup_kw["sensor_positions"]]
     model.MC.progress = model.HS.progress = False
@@ -229,18 +232,37 @@ def main(argv=None):
     ap.add_argument("--importance", type=int, default=0, metavar="M",
                     help="the smoother followed by M samples of adaptive importance sampling")
     ap.add_argument("--no-filter", action="store_true", help="the smoother's rows only")
+    ap.add_argument("--no-twin", action="store_true",
+                    help="no twin rows (the fine truth's only, with --fine)")
     ap.add_argument("--pseudo-true", action="store_true",
                     help="section 5 (the coarse model's best fit to the fine truth)")
+    ap.add_argument("--grid", type=int, nargs=3, default=None, metavar=("NX", "NY", "NZ"),
+                    help="the filter's FEM divisions (default: the config's 20 20 10)")
+    ap.add_argument("--emulator-photons", type=int, default=None,
+                    help="the filter's emulator photons at mus = 100 (default: the config's)")
+    ap.add_argument("--fine-photons", type=int, default=10**6,
+                    help="photons of the fine truth's direct Monte Carlo (sections 4-5)")
+    ap.add_argument("--fine-smoother", action="store_true",
+                    help="with --fine and --smoother: the smoother on the fine truth too")
     ap.add_argument("--out", default=str(HERE / "reports" / "layered.md"))
     args = ap.parse_args(argv)
     ident = load_script(validation_dir(), "identifiability")
     cfg = load_identify(CONFIG)
+    if args.grid is not None:
+        cfg.grid = tuple(args.grid)
+    if args.emulator_photons is not None:
+        cfg.emulator_kw = {**cfg.emulator_kw, "n_photons": args.emulator_photons}
     cmd = "python validation/layered.py " + " ".join(argv if argv is not None else
                                                        __import__("sys").argv[1:])
     lines = ["# Identification under a known epidermis (two layers)", "",
              f"Command: `{cmd.strip()}`; config `examples/two_layer.toml` (epidermis 80 um: "
              "mua 5, mus 150 cm^-1, g 0.8; dermis estimated, prior 0.5-2 x (1, 100) cm^-1; "
-             "emulator `method = \"white\"`).", ""]
+             "emulator `method = \"white\"`" + "".join(
+                 f"; {what}" for flag, what in (
+                     (args.grid, f"filter grid {_grid(cfg.grid)}"),
+                     (args.emulator_photons, f"emulator {args.emulator_photons:,} photons"),
+                     (args.fine_photons != 10**6, f"fine truth {_photons(args.fine_photons)} "
+                                                  "photons")) if flag) + ").", ""]
     if args.emulator:
         lines += emulator_study(cfg, args.photons, args.ref_photons)
     t0 = time.perf_counter()
@@ -265,16 +287,16 @@ def main(argv=None):
             print(crb_rows[-1], flush=True)
             if args.pseudo_true and kind == "sensor":
                 pseudo_rows.append(_pseudo_row(label, truth, pseudo_true(sensor, fine_data(
-                    cfg, truth), truth), crb))
+                    cfg, truth, args.fine_photons), truth), crb))
                 print(pseudo_rows[-1], flush=True)
             if not len(seeds):
                 continue
-            if not args.no_filter:
+            if not (args.no_filter or args.no_twin):
                 res = run_seeds(cfg, emulator, kind, truth, twin_data(sensor, truth), seeds,
                                 {"model_error": "white", **overrides})
                 filt_rows.append(_filter_row(kind, "twin", label, truth, res, crb))
                 print(filt_rows[-1], flush=True)
-            if args.smoother:
+            if args.smoother and not args.no_twin:
                 res = smooth_seeds(cfg, emulator, kind, truth, twin_data(sensor, truth), seeds,
                                    args.smoother, {"model_error": "white", **overrides},
                                    args.importance)
@@ -283,7 +305,7 @@ def main(argv=None):
                 filt_rows.append(_filter_row(kind, name, label, truth, res, crb))
                 print(filt_rows[-1], flush=True)
             if args.fine and kind == "sensor" and label == next(iter(truths)):
-                fine = fine_data(cfg, truth)
+                fine = fine_data(cfg, truth, args.fine_photons)
                 for me in (cfg.setup_kw.get("model_error", "white"), "white")[:2]:
                     res = run_seeds(cfg, emulator, kind, truth, fine, seeds,
                                     {"model_error": me, **overrides})
@@ -291,6 +313,12 @@ def main(argv=None):
                     print(filt_rows[-1], flush=True)
                     if me == "white":
                         break
+                if args.smoother and args.fine_smoother:
+                    res = smooth_seeds(cfg, emulator, kind, truth, fine, seeds, args.smoother,
+                                       {"model_error": "white", **overrides}, args.importance)
+                    filt_rows.append(_filter_row(kind, f"fine, ES-MDA ({args.smoother})",
+                                                 label, truth, res, crb))
+                    print(filt_rows[-1], flush=True)
     if kinds:
         lines += [
             "## 2. What one sensor and a camera can determine (Cramér-Rao bounds)", "",
@@ -316,9 +344,10 @@ def main(argv=None):
     if pseudo_rows:
         lines += [
             "## 5. What the filter's model can say about the fine truth (pseudo-true optics)",
-            "", "The filter's coarse model (the emulator's layered loads on the 20 x 20 x 10 "
-            "FEM) fitted by least squares to the noise-free surface trace of the fine truth "
-            "(direct Monte Carlo of 10^6 photons and the heat simulation on the Monte "
+            "", "The filter's coarse model (the emulator's layered loads on the "
+            f"{_grid(cfg.grid)} FEM) fitted by least squares to the noise-free surface trace "
+            f"of the fine truth (direct Monte Carlo of {_photons(args.fine_photons)} photons "
+            "and the heat simulation on the Monte "
             "Carlo's voxels; section 4). An estimator using this model converges to the fit, "
             "so its RMS error is at least sqrt(bias^2 + CRB^2) (bias: the fit's log error; "
             "CRB: section 2): the last columns are that floor over the CRB, against the "
@@ -329,6 +358,14 @@ def main(argv=None):
     Path(args.out).parent.mkdir(parents=True, exist_ok=True)
     Path(args.out).write_text("\n".join(lines) + "\n")
     print(f"wrote {args.out}")
+
+
+def _grid(grid) -> str:
+    return " x ".join(str(n) for n in grid)
+
+
+def _photons(n: int) -> str:
+    return "10^6" if n == 10**6 else f"{n:,}"
 
 
 def pseudo_true(sensor, clean: np.ndarray, truth: dict) -> dict:
