@@ -139,14 +139,14 @@ def twin_data(sensor, truth: dict) -> np.ndarray:
     return sensor.readings(theta)[:, :, 0]
 
 
-def fine_data(cfg, truth: dict, photons: int = 10**6) -> np.ndarray:
-    """(N_STEPS, 1) the surface sensor from direct Monte Carlo (``photons``, seed 4242) and
+def fine_data(cfg, truth: dict, photons: int = 10**6, seed: int = 4242) -> np.ndarray:
+    """(N_STEPS, 1) the surface sensor from direct Monte Carlo (``photons``, ``seed``) and
     the heat simulation on the Monte Carlo's voxels, with the dermis at ``truth``."""
     model = copy.deepcopy(cfg.model)
     m = model.G.media[cfg.medium]
     m.mua, m.mus = truth["mua"], truth["mus"]
     model.MC.n_photons_requested = int(photons)
-    model.MC.seed = 4242
+    model.MC.seed = seed
     model.HS.temp_sensor_positions = [tuple(p) for p in cfg.setup_kw["sensor_positions"]]
     model.MC.progress = model.HS.progress = False
     model.run_monte_carlo().simulate_heat_distribution()
@@ -242,6 +242,10 @@ def main(argv=None):
                     help="the filter's emulator photons at mus = 100 (default: the config's)")
     ap.add_argument("--fine-photons", type=int, default=10**6,
                     help="photons of the fine truth's direct Monte Carlo (sections 4-5)")
+    ap.add_argument("--emulator-seed", type=int, default=None,
+                    help="the emulator's Monte Carlo seed (default: the config's)")
+    ap.add_argument("--fine-seed", type=int, default=4242,
+                    help="the fine truth's Monte Carlo seed")
     ap.add_argument("--fine-smoother", action="store_true",
                     help="with --fine and --smoother: the smoother on the fine truth too")
     ap.add_argument("--out", default=str(HERE / "reports" / "layered.md"))
@@ -250,19 +254,16 @@ def main(argv=None):
     cfg = load_identify(CONFIG)
     if args.grid is not None:
         cfg.grid = tuple(args.grid)
-    if args.emulator_photons is not None:
-        cfg.emulator_kw = {**cfg.emulator_kw, "n_photons": args.emulator_photons}
+    for key, value in (("n_photons", args.emulator_photons), ("seed", args.emulator_seed)):
+        if value is not None:
+            cfg.emulator_kw = {**cfg.emulator_kw, key: value}
     cmd = "python validation/layered.py " + " ".join(argv if argv is not None else
                                                        __import__("sys").argv[1:])
     lines = ["# Identification under a known epidermis (two layers)", "",
              f"Command: `{cmd.strip()}`; config `examples/two_layer.toml` (epidermis 80 um: "
              "mua 5, mus 150 cm^-1, g 0.8; dermis estimated, prior 0.5-2 x (1, 100) cm^-1; "
-             "emulator `method = \"white\"`" + "".join(
-                 f"; {what}" for flag, what in (
-                     (args.grid, f"filter grid {_grid(cfg.grid)}"),
-                     (args.emulator_photons, f"emulator {args.emulator_photons:,} photons"),
-                     (args.fine_photons != 10**6, f"fine truth {_photons(args.fine_photons)} "
-                                                  "photons")) if flag) + ").", ""]
+             "emulator `method = \"white\"`" + "".join(f"; {v}" for v in _changes(args, cfg))
+             + ").", ""]
     if args.emulator:
         lines += emulator_study(cfg, args.photons, args.ref_photons)
     t0 = time.perf_counter()
@@ -287,7 +288,7 @@ def main(argv=None):
             print(crb_rows[-1], flush=True)
             if args.pseudo_true and kind == "sensor":
                 pseudo_rows.append(_pseudo_row(label, truth, pseudo_true(sensor, fine_data(
-                    cfg, truth, args.fine_photons), truth), crb))
+                    cfg, truth, args.fine_photons, args.fine_seed), truth), crb))
                 print(pseudo_rows[-1], flush=True)
             if not len(seeds):
                 continue
@@ -305,7 +306,7 @@ def main(argv=None):
                 filt_rows.append(_filter_row(kind, name, label, truth, res, crb))
                 print(filt_rows[-1], flush=True)
             if args.fine and kind == "sensor" and label == next(iter(truths)):
-                fine = fine_data(cfg, truth, args.fine_photons)
+                fine = fine_data(cfg, truth, args.fine_photons, args.fine_seed)
                 for me in (cfg.setup_kw.get("model_error", "white"), "white")[:2]:
                     res = run_seeds(cfg, emulator, kind, truth, fine, seeds,
                                     {"model_error": me, **overrides})
@@ -358,6 +359,22 @@ def main(argv=None):
     Path(args.out).parent.mkdir(parents=True, exist_ok=True)
     Path(args.out).write_text("\n".join(lines) + "\n")
     print(f"wrote {args.out}")
+
+
+def _changes(args, cfg) -> list[str]:
+    """What the command line changed of the config's model and of the fine truth."""
+    out = []
+    if args.grid is not None:
+        out.append(f"filter grid {_grid(cfg.grid)}")
+    if args.emulator_photons is not None:
+        out.append(f"emulator {args.emulator_photons:,} photons")
+    if args.emulator_seed is not None:
+        out.append(f"emulator seed {args.emulator_seed}")
+    if args.fine_photons != 10**6:
+        out.append(f"fine truth {_photons(args.fine_photons)} photons")
+    if args.fine_seed != 4242:
+        out.append(f"fine truth seed {args.fine_seed}")
+    return out
 
 
 def _grid(grid) -> str:
