@@ -246,6 +246,10 @@ def main(argv=None):
                     help="the emulator's Monte Carlo seed (default: the config's)")
     ap.add_argument("--fine-seed", type=int, default=4242,
                     help="the fine truth's Monte Carlo seed")
+    ap.add_argument("--fine-model-error", nargs="+", default=None,
+                    choices=["structured", "white"],
+                    help="the filter's model error on the fine truth (default: the config's, "
+                         "then white)")
     ap.add_argument("--fine-smoother", action="store_true",
                     help="with --fine and --smoother: the smoother on the fine truth too")
     ap.add_argument("--out", default=str(HERE / "reports" / "layered.md"))
@@ -307,13 +311,12 @@ def main(argv=None):
                 print(filt_rows[-1], flush=True)
             if args.fine and kind == "sensor" and label == next(iter(truths)):
                 fine = fine_data(cfg, truth, args.fine_photons, args.fine_seed)
-                for me in (cfg.setup_kw.get("model_error", "white"), "white")[:2]:
+                for me in dict.fromkeys(args.fine_model_error or (
+                        cfg.setup_kw.get("model_error", "white"), "white")):
                     res = run_seeds(cfg, emulator, kind, truth, fine, seeds,
                                     {"model_error": me, **overrides})
                     filt_rows.append(_filter_row(kind, f"fine, {me}", label, truth, res, crb))
                     print(filt_rows[-1], flush=True)
-                    if me == "white":
-                        break
                 if args.smoother and args.fine_smoother:
                     res = smooth_seeds(cfg, emulator, kind, truth, fine, seeds, args.smoother,
                                        {"model_error": "white", **overrides}, args.importance)

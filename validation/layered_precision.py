@@ -11,7 +11,7 @@ heat simulation on the Monte Carlo's voxels, ``validation/layered.py``'s ``fine_
 the truth A = (1, 100) cm^-1: the pseudo-true optics that an efficient estimator with this
 model converges to. Its log error is the model's share of the error; ``floor``:
 ``sqrt(bias^2 + CRB^2) / CRB``, which must stay below 1.3 for the issue's target to be
-within reach. The cases vary one source of model error at a time:
+within reach. The cases vary one source of model error at a time (the report's sections):
 
 1. the emulator's Monte Carlo draw (its seed) and photons, on the example's 20 x 20 x 10 FEM;
 2. the fine truth's own Monte Carlo draw and photons;
