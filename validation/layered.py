@@ -42,6 +42,7 @@ from __future__ import annotations
 
 import argparse
 import copy
+import shlex
 import tempfile
 import time
 from pathlib import Path
@@ -261,7 +262,7 @@ def main(argv=None):
     for key, value in (("n_photons", args.emulator_photons), ("seed", args.emulator_seed)):
         if value is not None:
             cfg.emulator_kw = {**cfg.emulator_kw, key: value}
-    cmd = "python validation/layered.py " + " ".join(argv if argv is not None else
+    cmd = "python validation/layered.py " + shlex.join(argv if argv is not None else
                                                        __import__("sys").argv[1:])
     lines = ["# Identification under a known epidermis (two layers)", "",
              f"Command: `{cmd.strip()}`; config `examples/two_layer.toml` (epidermis 80 um: "

@@ -28,6 +28,7 @@ from __future__ import annotations
 import argparse
 import copy
 import dataclasses
+import shlex
 import tempfile
 import time
 from pathlib import Path
@@ -199,7 +200,7 @@ def main(argv=None):
     layered = load_script(validation_dir(), "layered")
     ident = load_script(validation_dir(), "identifiability")
     cfg = both_config(layered)
-    cmd = "python validation/layered_both.py " + " ".join(argv if argv is not None else
+    cmd = "python validation/layered_both.py " + shlex.join(argv if argv is not None else
                                                             __import__("sys").argv[1:])
     lines = ["# Both layers estimated: the dermis's and the epidermis's optics", "",
              f"Command: `{cmd.strip()}`; config `examples/two_layer.toml` with `filter.medium = "
