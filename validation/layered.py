@@ -282,6 +282,14 @@ def main(argv=None):
                                    ("n_members", args.n_members), ("mda", args.mda))
                  if v is not None}
     crb_rows, filt_rows, pseudo_rows = [], [], []
+    fines = {}  # one fine truth per truth, for sections 4 and 5
+
+    def fine_of(truth):
+        key = (truth["mua"], truth["mus"])
+        if key not in fines:
+            fines[key] = fine_data(cfg, truth, args.fine_photons, args.fine_seed)
+        return fines[key]
+
     for kind in kinds:
         sensor = ident.ConfigSensor(sensor_setup(cfg, emulator, kind), DT, N_STEPS)
         for label, truth in truths.items():
@@ -292,8 +300,8 @@ def main(argv=None):
                             f"{100 * crb[0]:.2f}% | {100 * crb[1]:.2f}% | {rho:+.2f} |")
             print(crb_rows[-1], flush=True)
             if args.pseudo_true and kind == "sensor":
-                pseudo_rows.append(_pseudo_row(label, truth, pseudo_true(sensor, fine_data(
-                    cfg, truth, args.fine_photons, args.fine_seed), truth), crb))
+                pseudo_rows.append(_pseudo_row(label, truth, pseudo_true(sensor, fine_of(truth),
+                                                                  truth), crb))
                 print(pseudo_rows[-1], flush=True)
             if not len(seeds):
                 continue
@@ -311,7 +319,7 @@ def main(argv=None):
                 filt_rows.append(_filter_row(kind, name, label, truth, res, crb))
                 print(filt_rows[-1], flush=True)
             if args.fine and kind == "sensor" and label == next(iter(truths)):
-                fine = fine_data(cfg, truth, args.fine_photons, args.fine_seed)
+                fine = fine_of(truth)
                 for me in dict.fromkeys(args.fine_model_error or (
                         cfg.setup_kw.get("model_error", "white"), "white")):
                     res = run_seeds(cfg, emulator, kind, truth, fine, seeds,
