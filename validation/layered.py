@@ -201,8 +201,6 @@ def least_squares_seeds(cfg, emulator, kind: str, truth: dict, clean: np.ndarray
     """As :func:`run_seeds`, the least-squares fit of the same data with the filter's own
     model (no prior), its band +-2 sd of the Gauss-Newton covariance at the fit: what an
     efficient estimator does with exactly these noise draws."""
-    from scipy.optimize import least_squares
-
     ident = load_script(validation_dir(), "identifiability")
 
     def estimate(setup, times, data):
@@ -210,13 +208,8 @@ def least_squares_seeds(cfg, emulator, kind: str, truth: dict, clean: np.ndarray
         sensor = ident.ConfigSensor(setup, DT, N_STEPS)
         sd_noise = np.sqrt(np.broadcast_to(np.asarray(sensor.noise_var, float),
                                            (data.shape[1],)))
-
-        def residual(x):
-            return ((sensor.readings(np.exp(x)[None, :])[:, :, 0] - data) / sd_noise).ravel()
-
-        x0 = np.log([truth[n] for n in setup.parameter_names])
-        fit = least_squares(residual, x0, diff_step=1e-4, xtol=1e-12, ftol=1e-12,
-                            x_scale=1e-3)
+        fit = _fit(sensor, data, np.log([truth[n] for n in setup.parameter_names]),
+                   sd_noise, diff_step=1e-4, xtol=1e-12, ftol=1e-12, x_scale=1e-3)
         sd = np.sqrt(np.diag(np.linalg.inv(fit.jac.T @ fit.jac)))
         mean = np.exp(fit.x)
         return (setup.parameter_names, mean, sd * mean, np.exp(fit.x - 2 * sd),
@@ -439,18 +432,23 @@ def _photons(n: int) -> str:
     return "10^6" if n == 10**6 else f"{n:,}"
 
 
+def _fit(sensor, data: np.ndarray, x0: np.ndarray, noise_sd, **options):
+    """``scipy.optimize.least_squares`` of the log parameters: the readings of ``sensor``
+    (:class:`ConfigSensor`) against ``data`` (N_STEPS, p), each whitened by ``noise_sd``."""
+    from scipy.optimize import least_squares
+
+    def residual(x):
+        return ((sensor.readings(np.exp(x)[None, :])[:, :, 0] - data) / noise_sd).ravel()
+
+    return least_squares(residual, x0, **options)
+
+
 def pseudo_true(sensor, clean: np.ndarray, truth: dict) -> dict:
     """The coarse model's least-squares fit of (mua, mus) to the noise-free readings
     ``clean`` (N_STEPS, p), from the truth: {"mua", "mus", "rms"} (cm^-1, deg C)."""
-    from scipy.optimize import least_squares
-
     names = tuple(sensor.setup.parameter_names)
-
-    def residual(x):
-        return (sensor.readings(np.exp(x)[None, :])[:, :, 0] - clean).ravel() / 0.1
-
-    x0 = np.log([truth[n] for n in names])
-    fit = least_squares(residual, x0, diff_step=1e-3, xtol=1e-8, ftol=1e-10)
+    fit = _fit(sensor, clean, np.log([truth[n] for n in names]), 0.1, diff_step=1e-3,
+               xtol=1e-8, ftol=1e-10)
     out = dict(zip(names, np.exp(fit.x), strict=True))
     out["rms"] = float(0.1 * np.sqrt(np.mean(fit.fun ** 2)))
     return out
