@@ -285,11 +285,7 @@ def main(argv=None):
     args = ap.parse_args(argv)
     ident = load_script(validation_dir(), "identifiability")
     cfg = load_identify(CONFIG)
-    if args.grid is not None:
-        cfg.grid = tuple(args.grid)
-    for key, value in (("n_photons", args.emulator_photons), ("seed", args.emulator_seed)):
-        if value is not None:
-            cfg.emulator_kw = {**cfg.emulator_kw, key: value}
+    cfg = model_config(cfg, args.grid, args.emulator_photons, args.emulator_seed)
     cmd = "python validation/layered.py " + shlex.join(argv if argv is not None else
                                                        __import__("sys").argv[1:])
     lines = ["# Identification under a known epidermis (two layers)", "",
@@ -408,6 +404,18 @@ def main(argv=None):
     print(f"wrote {args.out}")
 
 
+def model_config(cfg, grid=None, photons: int | None = None, seed: int | None = None):
+    """A copy of the config with the filter's FEM divisions, its emulator's photons and its
+    emulator's seed replaced where given (None: the config's)."""
+    cfg = copy.copy(cfg)
+    if grid is not None:
+        cfg.grid = tuple(grid)
+    for key, value in (("n_photons", photons), ("seed", seed)):
+        if value is not None:
+            cfg.emulator_kw = {**cfg.emulator_kw, key: value}
+    return cfg
+
+
 def _changes(args, cfg) -> list[str]:
     """What the command line changed of the config's model and of the fine truth."""
     out = []
@@ -454,9 +462,15 @@ def pseudo_true(sensor, clean: np.ndarray, truth: dict) -> dict:
     return out
 
 
-def _pseudo_row(label, truth, fit, crb) -> str:
+def pseudo_floor(fit: dict, truth: dict, crb: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The pseudo-true fit's log error (mua, mus) and the floor sqrt(bias^2 + CRB^2) / CRB
+    that it puts under any estimator's RMS error with this model."""
     bias = np.array([np.log(fit[n] / truth[n]) for n in ("mua", "mus")])
-    floor = np.sqrt(bias ** 2 + crb ** 2) / crb
+    return bias, np.sqrt(bias ** 2 + crb ** 2) / crb
+
+
+def _pseudo_row(label, truth, fit, crb) -> str:
+    bias, floor = pseudo_floor(fit, truth, crb)
     return (f"| {label}: ({truth['mua']:g}, {truth['mus']:g}) | ({fit['mua']:.4g}, "
             f"{fit['mus']:.4g}) | {100 * bias[0]:+.2f}% | {100 * bias[1]:+.2f}% | "
             f"{fit['rms']:.3f} | {floor[0]:.2f} | {floor[1]:.2f} |")

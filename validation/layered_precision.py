@@ -24,7 +24,6 @@ within reach. The cases vary one source of model error at a time (the report's s
 from __future__ import annotations
 
 import argparse
-import copy
 import time
 from pathlib import Path
 
@@ -70,10 +69,7 @@ def main(argv=None):
                                                                fine_seed)
         key = (grid, photons, seed)
         if key not in sensors:
-            cfg = copy.copy(base)
-            cfg.grid = grid
-            cfg.emulator_kw = {**base.emulator_kw, "n_photons": photons,
-                               **({} if seed is None else {"seed": seed})}
+            cfg = layered.model_config(base, grid, photons, seed)
             emulator = cfg.emulator(cache_dir=args.cache_dir, progress=False)
             sensor = ident.ConfigSensor(layered.sensor_setup(cfg, emulator, "sensor"),
                                         layered.DT, layered.N_STEPS)
@@ -81,8 +77,7 @@ def main(argv=None):
             sensors[key] = (sensor, crb, cfg.emulator_kw.get("seed"))
         sensor, crb, used_seed = sensors[key]
         fit = layered.pseudo_true(sensor, fines[fine_photons, fine_seed], truth)
-        bias = np.log([fit["mua"] / truth["mua"], fit["mus"] / truth["mus"]])
-        floor = np.sqrt(bias ** 2 + crb ** 2) / crb
+        bias, floor = layered.pseudo_floor(fit, truth, crb)
         rows[part].append(
             f"| {layered._grid(grid)} | {photons:,} | {used_seed if used_seed is not None else 'config'}"
             f" | {fine_photons:,} | {fine_seed} | {100 * crb[0]:.2f}%, {100 * crb[1]:.2f}% | "
