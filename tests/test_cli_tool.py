@@ -380,6 +380,37 @@ def test_identify_with_the_smoother_reports_it(tmp_path, cache):
         assert not (tmp_path / "b").exists()
 
 
+def test_identify_with_restarts_from_the_smoother(tmp_path, cache):
+    """``[filter] smoother_restarts``: the filter restarts from the smoother after the
+    pulse (summary.json lists the restart), also with --follow; bad values exit 2 with
+    nothing written."""
+    cfg, out, s = _identify_tiny(tmp_path, cache, "random_walk_std = 0.0\n"
+                                 "smoother_restarts = \"laser_off\"\n"
+                                 "smoother_restart_iterations = 2\n")
+    (r,) = s["smoother_restarts"]
+    assert r["time_s"] == pytest.approx(1.0) and r["readings"] == 10
+    from enkf.app.config import load_identify
+
+    kw = load_identify(cfg).setup_kw
+    assert (kw["smoother_restarts"], kw["smoother_restart_iterations"],
+            kw["smoother_restart_discrepancy"]) == ("laser_off", 2, 0.01)
+    assert run("identify", cfg, "--follow", EX / "tiny_data.csv", "--out", tmp_path / "f",
+               "--quiet", "--cache-dir", cache) == 0
+    for bad in ("random_walk_std = 0.0\nsmoother_restarts = \"often\"\n",
+                "random_walk_std = 0.0\nsmoother_restarts = [1.0, -2.0]\n",
+                "random_walk_std = 0.0\nsmoother_restarts = 3\n",
+                "smoother_restarts = \"laser_off\"\n",  # the default walk: not constant
+                "random_walk_std = 0.0\nsmoother_restart_iterations = 2\n",
+                "random_walk_std = 0.0\nsmoother_restarts = [1.0]\n"
+                "smoother_restart_gaussian = 1\n",
+                "random_walk_std = 0.0\nsmoother_restarts = [1.0]\n"
+                "smoother_restart_iterations = 0\n"):
+        cfg.write_text(TINY.replace("[filter]\n", "[filter]\n" + bad, 1))
+        assert run("identify", cfg, "--data", EX / "tiny_data.csv", "--out", tmp_path / "b",
+                   "--quiet", "--cache-dir", cache) == 2, bad
+        assert not (tmp_path / "b").exists()
+
+
 def test_identify_with_importance_sampling_after_the_smoother(tmp_path, cache):
     """``[filter] smoother_importance``: the smoother's ensemble and the modes found from
     256 points of the prior (the default mode search) seed adaptive importance sampling;

@@ -251,6 +251,12 @@ def main(argv=None):
                     help="deg C per step (default: the config's)")
     ap.add_argument("--n-members", type=int, default=None)
     ap.add_argument("--mda", type=int, default=None)
+    ap.add_argument("--restarts", default=None, metavar="WHEN",
+                    help="the filter restarts from the smoother (smoother_restarts): "
+                         "'laser_off' or comma-separated times in s")
+    ap.add_argument("--restart-discrepancy", type=float, default=0.0,
+                    help="the restarts' smoother's model discrepancy (relative sd; a config's "
+                         "default for point sensors: 0.01)")
     ap.add_argument("--smoother", type=int, default=0, metavar="N_ITER",
                     help="also the ES-MDA smoother with N_ITER updates on the twins (section 3)")
     ap.add_argument("--importance", type=int, default=0, metavar="M",
@@ -302,9 +308,17 @@ def main(argv=None):
     kinds = [k for k in args.kinds.split(",") if k]  # --kinds "": the emulator section only
     truths = {k: TRUTHS[k] for k in args.truths.split(",")}
     seeds = range(args.first_seed, args.first_seed + args.seeds)
+    restarts = None if args.restarts is None else (
+        args.restarts if args.restarts == "laser_off"
+        else tuple(float(v) for v in args.restarts.split(",")))
     overrides = {k: v for k, v in (("model_noise_std", args.model_noise_std),
-                                   ("n_members", args.n_members), ("mda", args.mda))
+                                   ("n_members", args.n_members), ("mda", args.mda),
+                                   ("smoother_restarts", restarts))
                  if v is not None}
+    if restarts is not None:
+        overrides["smoother_restart_discrepancy"] = args.restart_discrepancy
+    tag = "" if restarts is None else f", restarts ({args.restarts}" + (
+        f", discrepancy {args.restart_discrepancy:g})" if args.restart_discrepancy else ")")
     crb_rows, filt_rows, pseudo_rows = [], [], []
     fines = {}  # one fine truth per truth, for sections 4 and 5
 
@@ -332,7 +346,7 @@ def main(argv=None):
             if not (args.no_filter or args.no_twin):
                 res = run_seeds(cfg, emulator, kind, truth, twin_data(sensor, truth), seeds,
                                 {"model_error": "white", **overrides})
-                filt_rows.append(_filter_row(kind, "twin", label, truth, res, crb))
+                filt_rows.append(_filter_row(kind, "twin" + tag, label, truth, res, crb))
                 print(filt_rows[-1], flush=True)
             if args.least_squares and not args.no_twin:
                 res = least_squares_seeds(cfg, emulator, kind, truth, twin_data(sensor, truth),
@@ -354,7 +368,8 @@ def main(argv=None):
                         cfg.setup_kw.get("model_error", "white"), "white")):
                     res = run_seeds(cfg, emulator, kind, truth, fine, seeds,
                                     {"model_error": me, **overrides})
-                    filt_rows.append(_filter_row(kind, f"fine, {me}", label, truth, res, crb))
+                    filt_rows.append(_filter_row(kind, f"fine, {me}{tag}", label, truth, res,
+                                                 crb))
                     print(filt_rows[-1], flush=True)
                 if args.smoother and args.fine_smoother:
                     res = smooth_seeds(cfg, emulator, kind, truth, fine, seeds, args.smoother,

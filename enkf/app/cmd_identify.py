@@ -65,7 +65,7 @@ def _check_smoother_size(cfg, data, data_path) -> None:
 
     from ..tissue.smooth import check_discrepancy_size
 
-    if cfg.smoother_iterations:
+    if cfg.smoother_iterations or cfg.setup_kw.get("smoother_restarts"):
         check_discrepancy_size(np.isfinite(data).sum(),
                                (cfg.smoother_options or {}).get("discrepancy", 0.0),
                                f"{data_path}: filter.smoother_")

@@ -87,7 +87,8 @@ _FILTER_KEYS = {
     "localization_radius", "heat_mass", "transforms", "emulator", "bounds", "prior",
     "model_error", "adaptive_inflation", "coagulation", "medium", "sensor_offset_std",
     "smoother_iterations", "smoother_knots", "smoother_discrepancy",
-    "smoother_discrepancy_time", "smoother_importance", "smoother_modes",
+    "smoother_discrepancy_time", "smoother_importance", "smoother_modes", "smoother_restarts",
+    "smoother_restart_iterations", "smoother_restart_gaussian",
 }
 _MODEL_ERROR_KEYS = {"kind", "rel_std", "time_scale", "length_xy", "length_z"}
 _ADAPTIVE_KEYS = {"enabled", "bounds", "time_scale"}
@@ -214,6 +215,7 @@ _LIMITS = {"sensors.noise_var": 1e4, "sensors.camera.noise_var": 1e4,
            "filter.random_walk_std": 10.0, "filter.random_walk_when_off": 10.0,
            "filter.inflation": 100.0, "filter.localization_radius": 1e3, "filter.mda": 100,
            "filter.smoother_iterations": 100, "filter.smoother_knots": 50,
+           "filter.smoother_restart_iterations": 100,
            "filter.smoother_discrepancy": 10.0, "filter.smoother_discrepancy_time": 1e6,
            "filter.smoother_importance": 10**6, "filter.smoother_modes": 10**6,
            "filter.seed": 2**63 - 1, "filter.emulator.n_photons": 10**11,
@@ -229,7 +231,7 @@ def _smoother_iterations(flt: dict, setup_kw: dict) -> int:
     if "smoother_iterations" not in flt:
         for k in ("smoother_knots", "smoother_discrepancy", "smoother_discrepancy_time",
                   "smoother_importance", "smoother_modes"):
-            if k in flt:
+            if k in flt and not ("smoother_restarts" in flt and "discrepancy" in k):
                 raise ConfigError(f"filter.{k} needs filter.smoother_iterations >= 1")
         return 0
     n = int(_num("filter.smoother_iterations", flt["smoother_iterations"], integer=True, lo=0))
@@ -282,6 +284,42 @@ def _smoother_options(flt: dict, camera: bool = False) -> dict:
                               f"least {MIN_MODE_POINTS} points")
         out["mode_search"] = p
     return out
+
+
+def _restart_settings(flt: dict, setup_kw: dict, options: dict) -> None:
+    """``[filter] smoother_restarts`` (times in s, or "laser_off"),
+    ``smoother_restart_iterations`` and ``smoother_restart_gaussian``; the restarts'
+    discrepancy is the smoother's (``smoother_discrepancy``, ``smoother_discrepancy_time``
+    and their defaults)."""
+    if "smoother_restarts" not in flt:
+        for k in ("smoother_restart_iterations", "smoother_restart_gaussian"):
+            if k in flt:
+                raise ConfigError(f"filter.{k} needs filter.smoother_restarts")
+        return
+    r = flt["smoother_restarts"]
+    if isinstance(r, str):
+        if r != "laser_off":
+            raise ConfigError(f"filter.smoother_restarts must be a list of times (s) or "
+                              f"\"laser_off\", got {shorten(repr(r))}")
+        setup_kw["smoother_restarts"] = r
+    elif isinstance(r, list):
+        setup_kw["smoother_restarts"] = tuple(
+            _num(f"filter.smoother_restarts[{i}]", v, positive=True) for i, v in enumerate(r))
+    else:
+        raise ConfigError(f"filter.smoother_restarts must be a list of times (s) or "
+                          f"\"laser_off\", got {shorten(repr(r))}")
+    if "smoother_restart_iterations" in flt:
+        setup_kw["smoother_restart_iterations"] = int(_num(
+            "filter.smoother_restart_iterations", flt["smoother_restart_iterations"],
+            integer=True, lo=1))
+    if "smoother_restart_gaussian" in flt:
+        v = flt["smoother_restart_gaussian"]
+        if not isinstance(v, bool):
+            raise ConfigError(f"filter.smoother_restart_gaussian must be true or false, got "
+                              f"{shorten(repr(v))}")
+        setup_kw["smoother_restart_gaussian"] = v
+    setup_kw["smoother_restart_discrepancy"] = options["discrepancy"]
+    setup_kw["smoother_restart_discrepancy_time"] = options["discrepancy_time"]
 
 
 #: the fewest importance samples a config may ask for (a few hundred per proposal)
@@ -522,11 +560,12 @@ def identify_config_from_dict(cfg: dict) -> IdentifyConfig:
     bounds = bounds_settings(flt.get("bounds", {}), setup_kw, m, where)
     data = _data_spec(cfg.get("data", {}), len(positions) + (
         setup_kw["image"].n_pixels if "image" in setup_kw else 0))
+    smoother_options = _smoother_options(flt, camera="image" in setup_kw)
+    _restart_settings(flt, setup_kw, smoother_options)
     try:
         out = IdentifyConfig(model, setup_kw, grid, emulator_kw, exact, cfg, bounds, data, rate,
                              medium, method, on_demand, _smoother_iterations(flt, setup_kw),
-                             _smoother_options(flt, camera="image" in setup_kw), second,
-                             media_nodes)
+                             smoother_options, second, media_nodes)
         out.setup(absorption=lambda mua, mus: None)  # validates the filter settings
         n_nodes = int(np.prod([n + 1 for n in grid]))
         table = 0 if exact else emulator_kw.get("n_mua", 12) * emulator_kw.get("n_mus", 12)

@@ -163,6 +163,8 @@ def write_identify_outputs(out: Path, setup, est, times, data, *, absorption=Non
                    "step_latency_max_s": float(np.max(est.step_latency_s))
                    if len(est.step_latency_s) else 0.0},
     }
+    if getattr(est, "restarts", ()):  # the restarts from the smoother (smoother_restarts)
+        summary["smoother_restarts"] = list(est.restarts)
     if getattr(est, "effective_mean", None) is not None:
         summary["effective_optics"] = {
             n: {"estimate_final": float(est.effective_mean[k, i]),

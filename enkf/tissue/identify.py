@@ -5,7 +5,7 @@ from __future__ import annotations
 import time
 import warnings
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 import scipy.sparse as sp
@@ -49,6 +49,8 @@ class TissueEstimates:
     the same data compare them.
     ``sensor_offset_mean``/``sensor_offset_std``: (M+1, n_sensors) deg C, the point
     sensors' estimated offsets with ``sensor_offset_std > 0``; else None.
+    With restarts (``setup.smoother_restarts``) the row of a restart's reading holds the
+    restarted ensemble; ``step_latency_s`` does not count the restarts (``restarts``).
     """
 
     times: np.ndarray
@@ -75,6 +77,9 @@ class TissueEstimates:
     #: (``setup.sensor_offset_std > 0``), else None
     sensor_offset_mean: np.ndarray | None = None
     sensor_offset_std: np.ndarray | None = None
+    #: the restarts from the smoother (``setup.smoother_restarts``), one dict each:
+    #: ``time_s`` (the reading after which), ``readings`` (how many it read), ``wall_s``
+    restarts: tuple = ()
 
     def log_evidence(self) -> float:
         """Sum of :attr:`innovation_loglik` over the analysed readings (NaN if not recorded)."""
@@ -247,6 +252,82 @@ def assemble(setup: TissueFilterSetup, param_bounds=None, warm_dt: float | None 
                    config, health, n, observation_offset, obs_error)
 
 
+def restart_points(setup: TissueFilterSetup, times) -> list[int]:
+    """The reading counts ``k`` (1..M) after which the filter restarts from the smoother
+    (:attr:`TissueFilterSetup.smoother_restarts`, :meth:`~TissueFilterSetup.restart_after`)."""
+    if not setup.smoother_restarts:
+        return []
+    t = np.asarray(times, float)
+    return [k + 1 for k in range(t.size)
+            if setup.restart_after(float(t[k - 1]) if k else 0.0, float(t[k]))]
+
+
+def restart_ensemble(setup: TissueFilterSetup, pieces: FilterPieces, times, data
+                     ) -> tuple[np.ndarray, np.ndarray, float]:
+    """The ensemble a restart gives after the readings ``data`` at ``times`` (all of them
+    so far): the parameters of the ES-MDA smoother over them
+    (:func:`enkf.tissue.smooth.smooth_constant`, ``setup.smoother_restart_iterations``
+    updates from the prior; with ``setup.smoother_restart_gaussian`` a log-normal ensemble
+    of their moments, :func:`gaussian_ensemble`) and each member's temperatures re-run from
+    ``T_initial`` with its own. Returns ``(X (N, n_nodes) deg C, theta (N, n_par),
+    wall_s)``."""
+    from .smooth import smooth_constant
+
+    tic = time.perf_counter()
+    sm = smooth_constant(setup, times, data, n_iter=setup.smoother_restart_iterations,
+                         discrepancy=setup.smoother_restart_discrepancy,
+                         discrepancy_time=setup.smoother_restart_discrepancy_time)
+    theta = np.ascontiguousarray(sm.theta)
+    if setup.smoother_restart_gaussian:
+        theta = gaussian_ensemble(theta, np.random.default_rng([setup.seed, len(times), 7]))
+    X = np.full((theta.shape[0], pieces.model.mesh.p.shape[1]), float(setup.T_initial))
+    edges = np.r_[0.0, np.asarray(times, float)]
+    for k in range(edges.size - 1):
+        X = pieces.model(X, theta, float(edges[k]), float(edges[k + 1]))
+    return X, theta, time.perf_counter() - tic
+
+
+def gaussian_ensemble(theta: np.ndarray, rng: np.random.Generator) -> np.ndarray:
+    """(N, n) positive members whose logs have exactly the mean and covariance of
+    ``log theta``'s and are otherwise a normal draw: the members' skew and outliers, which
+    the deterministic (ETKF) updates carry on unchanged, are dropped."""
+    U = np.log(theta)
+    N, d = U.shape
+    if N <= d:
+        raise ValueError(f"gaussian_ensemble needs more members than parameters, got {N} "
+                         f"members for {d}")
+    Z = rng.standard_normal((N, d))
+    Z -= Z.mean(axis=0)
+    Z = Z @ np.linalg.inv(np.linalg.cholesky(np.cov(Z.T).reshape(d, d))).T  # cov exactly I
+    L = np.linalg.cholesky(np.cov(U.T).reshape(d, d))
+    return np.exp(U.mean(axis=0) + Z @ L.T)
+
+
+def _restarted(last: FilterResult, X: np.ndarray, theta: np.ndarray) -> FilterResult:
+    """A one-row result at ``last``'s final time holding the restarted ensemble."""
+    nt = last.tracked_mean.shape[1]
+    empty = np.zeros(0)
+    return FilterResult(last.times[-1:].copy(), theta.mean(axis=0)[None],
+                        theta.std(axis=0, ddof=1)[None], np.full((1, nt), np.nan),
+                        np.full((1, nt), np.nan), np.zeros(0, bool), empty, empty, X, theta,
+                        empty, empty)
+
+
+def _join(parts: list[FilterResult]) -> FilterResult:
+    """One result from the segments of a run with restarts: each segment's first row (the
+    restarted ensemble) replaces the last row of the one before."""
+    if len(parts) == 1:
+        return parts[0]
+    rows = ("times", "param_mean", "param_std", "tracked_mean", "tracked_std")
+    steps = ("analysed", "step_latency_s", "analysis_latency_s", "inflation",
+             "innovation_loglik")
+    out = {k: np.concatenate([getattr(r, k)[:-1] for r in parts[:-1]]
+                             + [getattr(parts[-1], k)]) for k in rows}
+    out.update({k: np.concatenate([getattr(r, k) for r in parts]) for k in steps})
+    return FilterResult(**out, state_ensemble=parts[-1].state_ensemble,
+                        param_ensemble=parts[-1].param_ensemble)
+
+
 def identify(setup: TissueFilterSetup, times: np.ndarray, data: np.ndarray, *,
              callback: Callable[[StepReport], None] | None = None,
              param_bounds: np.ndarray | None = None) -> TissueEstimates:
@@ -266,7 +347,6 @@ def identify(setup: TissueFilterSetup, times: np.ndarray, data: np.ndarray, *,
     ``diverged`` set to the message.
     """
     pieces = assemble(setup, param_bounds, float(times[0]) if len(times) else None)
-    problem = pieces.problem(times, data)
     P_track, n = pieces.P_track, pieces.n
     n_off = setup.n_sensor_offsets
     M = len(times)
@@ -279,7 +359,7 @@ def identify(setup: TissueFilterSetup, times: np.ndarray, data: np.ndarray, *,
     eff_std = np.full((M + 1, 2), np.nan) if coag else None
     frac = np.full(M + 1, np.nan) if coag else None
 
-    def record(rep: StepReport):
+    def record(rep: StepReport, outside: bool = True):
         Y = rows_times(P_track, rep.state_ensemble)
         tr_mean[rep.step] = Y.mean(axis=0)
         tr_std[rep.step] = Y.std(axis=0, ddof=1)
@@ -290,20 +370,51 @@ def identify(setup: TissueFilterSetup, times: np.ndarray, data: np.ndarray, *,
             F, eff = pieces.model.effective(rep.param_ensemble[:, :n], rep.time)
             eff_mean[rep.step], eff_std[rep.step] = eff.mean(axis=0), eff.std(axis=0, ddof=1)
             frac[rep.step] = F.mean()
-        if callback is not None:
+        if callback is not None and outside:
             callback(rep)
 
     t0 = time.perf_counter()
     diverged = None
-    try:
-        # the filter's dense products are small (50 x 5000): threaded BLAS only spins, and
-        # on a busy machine it is 20-30 times slower (measured); numba kernels keep the cores
-        keep_freed_memory()  # ensemble-sized temporaries: reuse, not fresh page faults
-        with blas_threads(1):
-            res = run_filter(problem, pieces.config, health=pieces.health, callback=record)
-    except FilterDivergence as err:
-        res = err.result
-        diverged = str(err)
+    # the restarts from the smoother (setup.smoother_restarts) cut the readings into
+    # segments: the filter runs each from the ensemble the one before left (the first from
+    # the prior), replaced after a segment's last reading by the smoother's
+    cuts = restart_points(setup, times)
+    edges = [0, *[c for c in cuts if c < M], M]
+    parts, restarts = [], []
+    # the filter's dense products are small (50 x 5000): threaded BLAS only spins, and
+    # on a busy machine it is 20-30 times slower (measured); numba kernels keep the cores
+    keep_freed_memory()  # ensemble-sized temporaries: reuse, not fresh page faults
+    for j, (a, b) in enumerate(zip(edges[:-1], edges[1:], strict=True)):
+        if not j:
+            problem = pieces.problem(times[:b], data[:b])
+        else:
+            X, theta, w = restart_ensemble(setup, pieces, times[:a], data[:a])
+            restarts.append({"time_s": float(times[a - 1]), "readings": a, "wall_s": w})
+            problem = pieces.problem(times[a:b], data[a:b], t0=float(times[a - 1]),
+                                     prior=lambda rng, N, X=X, th=theta: (X.copy(), th.copy()))
+        config = pieces.config if not j else replace(
+            pieces.config, seed=int(np.random.SeedSequence([setup.seed, j]).generate_state(1)[0]))
+
+        def seg_record(rep, a=a):  # this segment's steps in the run's numbering; the
+            # restarted ensemble (its step 0) replaces the last step's, unseen outside
+            record(replace(rep, step=rep.step + a), outside=rep.step > 0 or a == 0)
+
+        try:
+            with blas_threads(1):
+                res = run_filter(problem, config, health=pieces.health, callback=seg_record)
+        except FilterDivergence as err:
+            parts.append(err.result)
+            diverged = str(err)
+            break
+        parts.append(res)
+    if diverged is None and M in cuts:  # a restart after the last reading: the final ensemble
+        X, theta, w = restart_ensemble(setup, pieces, times, data)
+        restarts.append({"time_s": float(times[-1]), "readings": M, "wall_s": w})
+        parts.append(_restarted(parts[-1], X, theta))
+        r = parts[-1]
+        record(StepReport(M, float(times[-1]), False, 0.0, r.param_mean[0], r.param_std[0],
+                          r.tracked_mean[0], r.tracked_std[0], X, theta), outside=False)
+    res = _join(parts)
     wall = time.perf_counter() - t0
     clamped = pieces.model.clamp_report()
     if clamped:
@@ -323,4 +434,5 @@ def identify(setup: TissueFilterSetup, times: np.ndarray, data: np.ndarray, *,
         coagulated_fraction=None if frac is None else frac[:k],
         innovation_loglik=res.innovation_loglik,
         sensor_offset_mean=res.param_mean[:, -n_off:] if n_off else None,
-        sensor_offset_std=res.param_std[:, -n_off:] if n_off else None)
+        sensor_offset_std=res.param_std[:, -n_off:] if n_off else None,
+        restarts=tuple(restarts))

@@ -11,7 +11,7 @@ from fem.threads import blas_threads, keep_freed_memory
 
 from ..adaptive import InflationEstimator
 from ..loop import run_filter
-from .identify import assemble
+from .identify import assemble, restart_ensemble
 from .setup import TissueFilterSetup
 
 __all__ = ["OnlineEstimate", "OnlineIdentifier"]
@@ -53,6 +53,10 @@ class OnlineIdentifier:
         self._X, self._theta = self._pieces.prior(rng, setup.n_members)
         self.time = 0.0
         self.history: list[OnlineEstimate] = []
+        self._readings: list = []  #: (t, y) of every reading, with smoother restarts
+        #: s: the readings after which the filter restarted from the smoother
+        #: (``setup.smoother_restarts``; the estimate of that reading is the restart's)
+        self.restart_times: list[float] = []
         self.names = setup.parameter_names
         self.n_obs = self._pieces.P_obs.shape[0]
         # the time-correlated model error and the inflation estimate run across readings
@@ -82,10 +86,19 @@ class OnlineIdentifier:
             res = run_filter(problem, config, health=self._pieces.health,
                              inflation_state=self._inflation)
         self._X, self._theta = res.state_ensemble, res.param_ensemble
+        p_mean, p_std = res.param_mean[-1], res.param_std[-1]
+        if self.setup.smoother_restarts:  # keep the readings for the smoother's restarts
+            self._readings.append((t, y.copy()))
+            if self.setup.restart_after(self.time, t):
+                self._X, self._theta, _ = restart_ensemble(
+                    self.setup, self._pieces, np.array([r[0] for r in self._readings]),
+                    np.array([r[1] for r in self._readings]))
+                p_mean, p_std = self._theta.mean(axis=0), self._theta.std(axis=0, ddof=1)
+                self.restart_times.append(t)
         Y = (self._pieces.P_track @ self._X.T).T
         n = self._pieces.n
         n_off = self.setup.n_sensor_offsets
-        est = OnlineEstimate(t, res.param_mean[-1, :n], res.param_std[-1, :n], Y.mean(axis=0),
+        est = OnlineEstimate(t, p_mean[:n], p_std[:n], Y.mean(axis=0),
                              Y.std(axis=0, ddof=1), bool(res.analysed[-1]),
                              time.perf_counter() - tic,
                              res.param_mean[-1, -n_off:] if n_off else None,

@@ -141,6 +141,26 @@ class TissueFilterSetup:
     #: 20 x 20 x 10 surface temperature is then within 0.1% of the fine truth instead of
     #: 1.1% cold (validation/reports/coarse_model_error.md). "lumped" is the P1 lumped mass.
     heat_mass: str = "averaged"
+    #: restarts of the filter from the smoother, for constant optics: after the reading at
+    #: or just after each of these times (s), or after the first reading at or after the end
+    #: of each laser pulse (``"laser_off"``), the parameter ensemble is replaced by the ES-MDA smoother's over
+    #: every reading so far (:func:`enkf.tissue.smooth.smooth_constant`, from the prior) and
+    #: the members' temperatures are re-run to that time with their new optics; then the
+    #: filter goes on. The sequential updates lose information on a curved mua-mus ridge;
+    #: the restart brings it back (docs/enkf.md, "Restarts"). Needs
+    #: ``parameter_model = "random_walk"`` with ``random_walk_std = 0`` and no sensor
+    #: offsets. () (default): none
+    smoother_restarts: tuple | str = ()
+    smoother_restart_iterations: int = 8  #: ES-MDA updates of each restart
+    #: the restarts' model discrepancy (relative sd of the rise; smooth_constant's
+    #: ``discrepancy``) and its correlation time (s): 0 for identical twins
+    smoother_restart_discrepancy: float = 0.0
+    smoother_restart_discrepancy_time: float = 2.0
+    #: True (default): the restarted members are a log-normal draw with the smoother's
+    #: ensemble's log mean and covariance (enkf.tissue.identify.gaussian_ensemble): the
+    #: ETKF's updates keep an ensemble's shape, and the smoother's skew made the quantile
+    #: bands miss (75-80% on the layered twins, 90-95% with it). False: its members as they are
+    smoother_restart_gaussian: bool = True
 
     def __post_init__(self):
         est = tuple(self.estimate)
@@ -201,10 +221,57 @@ class TissueFilterSetup:
         if self.model_error not in ("structured", "white"):
             raise ValueError(f"model_error must be 'structured' or 'white', got "
                              f"{self.model_error!r}")
+        self._check_restarts()
         for name in ("model_noise_std", "trend_prior_std", "model_error_rel_std", "sensor_offset_std",
                      "model_error_time_scale", "model_error_length_xy", "model_error_length_z"):
             if not (np.isfinite(getattr(self, name)) and getattr(self, name) >= 0):
                 raise ValueError(f"{name} must be >= 0, got {getattr(self, name)!r}")
+
+    def _check_restarts(self) -> None:
+        r = self.smoother_restarts
+        if isinstance(r, str):
+            if r != "laser_off":
+                raise ValueError(f"smoother_restarts must be times (s) or 'laser_off', got {r!r}")
+        else:
+            try:
+                t = np.asarray(r, float).reshape(-1)
+            except (TypeError, ValueError):
+                raise ValueError(f"smoother_restarts must be times (s) or 'laser_off', got "
+                                 f"{r!r}") from None
+            if not (np.all(np.isfinite(t)) and np.all(t > 0) and np.all(np.diff(t) > 0)):
+                raise ValueError(f"smoother_restarts must be increasing times > 0 (s), got {r!r}")
+            self.smoother_restarts = tuple(float(v) for v in t)
+            if not t.size:
+                return
+        n = self.smoother_restart_iterations
+        if not (isinstance(n, (int, np.integer)) and n >= 1):
+            raise ValueError(f"smoother_restart_iterations must be an integer >= 1, got {n!r}")
+        for name in ("smoother_restart_discrepancy", "smoother_restart_discrepancy_time"):
+            v = getattr(self, name)
+            if not (np.isfinite(v) and (v > 0 if name.endswith("time") else v >= 0)):
+                raise ValueError(f"{name} must be {'> 0 (s)' if name.endswith('time') else '>= 0'}"
+                                 f", got {v!r}")
+        walk = np.asarray(self.random_walk_std, float)
+        if self.parameter_model != "random_walk" or np.any(walk != 0):
+            raise ValueError(f"smoother_restarts needs constant optics (parameter_model = "
+                             f"'random_walk', random_walk_std = 0), got parameter_model = "
+                             f"{self.parameter_model!r}, random_walk_std = "
+                             f"{self.random_walk_std!r}")
+        if self.sensor_offset_std:
+            raise ValueError("smoother_restarts does not estimate sensor offsets: set "
+                             "sensor_offset_std = 0")
+
+    def restart_after(self, t_prev: float, t: float) -> bool:
+        """Whether the filter restarts from the smoother after the reading at ``t`` (s), the
+        reading before it at ``t_prev`` (:attr:`smoother_restarts`): ``t`` is the first
+        reading at or after a restart time, or the laser is on just after ``t_prev`` and
+        off just after ``t`` (the first reading at or after the end of a pulse)."""
+        r = self.smoother_restarts
+        if isinstance(r, str):
+            def on(x):
+                return self.power(x + 1e-9 * max(1.0, abs(x))) > 0
+            return on(t_prev) and not on(t)
+        return any(t_prev < tr <= t for tr in r)
 
     @property
     def n_sensor_offsets(self) -> int:

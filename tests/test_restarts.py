@@ -1,0 +1,123 @@
+"""Restarts of the filter from the smoother (``TissueFilterSetup.smoother_restarts``): where
+they happen, that the restarted ensemble is the smoother's, that the filter before a
+restart is the plain filter, the online identifier, and the checks."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from enkf.tissue import TissueForwardModel, identify
+from enkf.tissue.identify import assemble, restart_ensemble, restart_points
+from enkf.tissue.online import OnlineIdentifier
+from enkf.tissue.smooth import smooth_constant
+
+
+def _setup(tissue, **kw):
+    return tissue.setup(random_walk_std=0.0, **kw)
+
+
+def test_restart_points(tissue):
+    """The tiny setup's laser heats for 1 s: "laser_off" restarts after the first reading
+    at or after its end (1.0 s, the 10th); times restart after the first reading at or after each; none
+    without the setting."""
+    times = 0.1 * np.arange(1, 21)
+    assert restart_points(_setup(tissue, smoother_restarts="laser_off"), times) == [10]
+    assert restart_points(_setup(tissue, smoother_restarts=(0.55, 1.5, 2.0)), times) == [
+        6, 15, 20]
+    assert restart_points(_setup(tissue, smoother_restarts=(5.0,)), times) == []
+    assert restart_points(_setup(tissue), times) == []
+    # readings every 0.3 s: the first after the pulse's end is the one at 1.2 s
+    assert restart_points(_setup(tissue, smoother_restarts="laser_off"),
+                          0.3 * np.arange(1, 7)) == [4]
+
+
+def _log_moments(theta):
+    U = np.log(theta)
+    return U.mean(axis=0), np.cov(U.T)
+
+
+def test_the_restarted_ensemble_is_the_smoothers(tissue):
+    """Up to a restart the run is the plain filter's, step for step; the row of the
+    restart's reading holds the smoother's ensemble over the readings so far: its members
+    (``smoother_restart_gaussian = False``), or a log-normal draw with their log mean and
+    covariance exactly; the members' temperatures are re-run with their optics; a restart
+    after the last reading makes the final estimate the smoother's over the whole window."""
+    s0 = _setup(tissue)
+    times, data = tissue.twin_data(s0, 1.3, 80.0)
+    plain = identify(s0, times, data)
+    s = _setup(tissue, smoother_restarts="laser_off", smoother_restart_iterations=3,
+               smoother_restart_gaussian=False)
+    est = identify(s, times, data)
+    np.testing.assert_array_equal(est.param_mean[:10], plain.param_mean[:10])
+    np.testing.assert_array_equal(est.tracked_mean[:10], plain.tracked_mean[:10])
+    sm = smooth_constant(s, times[:10], data[:10], n_iter=3)
+    np.testing.assert_allclose(est.param_mean[10], sm.mean, rtol=1e-12)
+    np.testing.assert_allclose(est.param_std[10], sm.std, rtol=1e-12)
+    g = _setup(tissue, smoother_restarts="laser_off", smoother_restart_iterations=3)
+    X, theta, _ = restart_ensemble(g, assemble(g, warm_dt=0.1), times[:10], data[:10])
+    for a, b in zip(_log_moments(theta), _log_moments(sm.theta), strict=True):
+        np.testing.assert_allclose(a, b, rtol=1e-10, atol=1e-14)
+    assert not np.allclose(np.sort(theta, axis=0), np.sort(sm.theta, axis=0))
+    np.testing.assert_allclose(identify(g, times, data).param_mean[10], theta.mean(axis=0),
+                               rtol=1e-12)
+    # the temperatures: each member's own run at its optics (the twin's generator at a
+    # member's optics gives its surface temperature before the noise)
+    model = TissueForwardModel(g)
+    T = np.zeros((2, model.mesh.p.shape[1]))
+    for t0, t1 in zip(np.r_[0.0, times[:9]], times[:10], strict=True):
+        T = model(T, np.ascontiguousarray(theta[:2]), t0, t1)
+    np.testing.assert_allclose(X[:2], T, rtol=1e-12)
+    (r,) = est.restarts
+    assert r["time_s"] == pytest.approx(1.0) and r["readings"] == 10 and r["wall_s"] > 0
+    assert est.param_mean.shape == plain.param_mean.shape == (21, 2)
+    assert est.analysed.shape == (20,) and est.step_latency_s.shape == (20,)
+    assert np.all(np.isfinite(est.tracked_mean)) and np.all(np.isfinite(est.param_q_low))
+    # the run goes on from the restart: the steps after it differ from the plain filter's
+    assert not np.allclose(est.param_mean[11:], plain.param_mean[11:])
+    # after the last reading too
+    end = identify(_setup(tissue, smoother_restarts=(2.0,), smoother_restart_iterations=3,
+                          smoother_restart_gaussian=False),
+                   times, data)
+    sm = smooth_constant(s, times, data, n_iter=3)
+    np.testing.assert_allclose(end.param_mean[-1], sm.mean, rtol=1e-12)
+    np.testing.assert_array_equal(end.param_mean[:-1], plain.param_mean[:-1])
+    lo, hi = end.param_band(0)
+    assert lo[-1] < sm.mean[0] < hi[-1]
+
+
+def test_the_online_identifier_restarts_too(tissue):
+    """One reading at a time: after the pulse's last reading the estimate is the
+    smoother's over the readings so far."""
+    s = _setup(tissue, smoother_restarts="laser_off", smoother_restart_iterations=2,
+               smoother_restart_gaussian=False)
+    times, data = tissue.twin_data(s, 1.3, 80.0)
+    online = OnlineIdentifier(s)
+    out = [online.update(t, y) for t, y in zip(times, data, strict=True)]
+    assert online.restart_times == [pytest.approx(1.0)]
+    sm = smooth_constant(s, times[:10], data[:10], n_iter=2)
+    np.testing.assert_allclose(out[9].param_mean, sm.mean, rtol=1e-12)
+    assert all(np.all(np.isfinite(o.param_mean)) for o in out)
+
+
+@pytest.mark.parametrize("kw, match", [
+    (dict(smoother_restarts="sometimes"), "smoother_restarts must be times .s. or 'laser_off'"),
+    (dict(smoother_restarts=(1.0, 0.5)), "smoother_restarts must be increasing times > 0"),
+    (dict(smoother_restarts=(-1.0,)), "smoother_restarts must be increasing times > 0"),
+    (dict(smoother_restarts=(np.nan,)), "smoother_restarts must be increasing times > 0"),
+    (dict(smoother_restarts="laser_off", smoother_restart_iterations=0),
+     "smoother_restart_iterations must be an integer >= 1"),
+    (dict(smoother_restarts="laser_off", smoother_restart_discrepancy=-0.1),
+     "smoother_restart_discrepancy must be >= 0"),
+    (dict(smoother_restarts="laser_off", smoother_restart_discrepancy_time=0.0),
+     "smoother_restart_discrepancy_time must be > 0"),
+    (dict(smoother_restarts="laser_off", random_walk_std=0.002),
+     "smoother_restarts needs constant optics"),
+    (dict(smoother_restarts="laser_off", parameter_model="trend"),
+     "smoother_restarts needs constant optics"),
+    (dict(smoother_restarts="laser_off", sensor_offset_std=0.5),
+     "smoother_restarts does not estimate sensor offsets"),
+])
+def test_bad_restarts_are_refused(tissue, kw, match):
+    with pytest.raises(ValueError, match=match):
+        tissue.setup(**{"random_walk_std": 0.0, **kw})
