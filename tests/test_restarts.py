@@ -10,7 +10,7 @@ import pytest
 from enkf.tissue import TissueForwardModel, identify
 from enkf.tissue.identify import assemble, restart_ensemble, restart_points
 from enkf.tissue.online import OnlineIdentifier
-from enkf.tissue.smooth import smooth_constant
+from enkf.tissue.smooth import smooth_constant, smooth_drifting
 
 
 def _setup(tissue, **kw):
@@ -121,3 +121,18 @@ def test_the_online_identifier_restarts_too(tissue):
 def test_bad_restarts_are_refused(tissue, kw, match):
     with pytest.raises(ValueError, match=match):
         tissue.setup(**{"random_walk_std": 0.0, **kw})
+
+
+def test_drifting_restarts_take_the_smoothers_optics_at_the_reading(tissue):
+    """``smoother_restart_knots >= 2``: optics drifting while heated; the restart's row
+    holds smooth_drifting's values at the window's end, and the walk goes on after it."""
+    s = tissue.setup(random_walk_std=0.03, smoother_restarts="laser_off",
+                     smoother_restart_knots=2, smoother_restart_iterations=2,
+                     smoother_restart_gaussian=False)
+    times, data = tissue.twin_data(s, 1.3, 80.0)
+    est = identify(s, times, data)
+    sm = smooth_drifting(s, times[:10], data[:10], knots=2, n_iter=2)
+    np.testing.assert_allclose(est.param_mean[10], sm.mean, rtol=1e-12)
+    assert len(est.restarts) == 1 and np.all(np.isfinite(est.param_mean))
+    with pytest.raises(ValueError, match="smoother_restart_knots must be an integer >= 1"):
+        tissue.setup(smoother_restarts="laser_off", smoother_restart_knots=0)

@@ -271,12 +271,16 @@ def restart_ensemble(setup: TissueFilterSetup, pieces: FilterPieces, times, data
     of their moments, :func:`gaussian_ensemble`) and each member's temperatures re-run from
     ``T_initial`` with its own. Returns ``(X (N, n_nodes) deg C, theta (N, n_par),
     wall_s)``."""
-    from .smooth import smooth_constant
+    from .smooth import smooth_constant, smooth_drifting
 
     tic = time.perf_counter()
-    sm = smooth_constant(setup, times, data, n_iter=setup.smoother_restart_iterations,
-                         discrepancy=setup.smoother_restart_discrepancy,
-                         discrepancy_time=setup.smoother_restart_discrepancy_time)
+    kw = dict(n_iter=setup.smoother_restart_iterations,
+              discrepancy=setup.smoother_restart_discrepancy,
+              discrepancy_time=setup.smoother_restart_discrepancy_time)
+    if setup.smoother_restart_knots > 1:  # drifting: the optics at the window's end
+        sm = smooth_drifting(setup, times, data, knots=setup.smoother_restart_knots, **kw)
+    else:
+        sm = smooth_constant(setup, times, data, **kw)
     theta = np.ascontiguousarray(sm.theta)
     if setup.smoother_restart_gaussian:
         theta = gaussian_ensemble(theta, np.random.default_rng([setup.seed, len(times), 7]))

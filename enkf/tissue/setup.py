@@ -152,6 +152,11 @@ class TissueFilterSetup:
     #: offsets. () (default): none
     smoother_restarts: tuple | str = ()
     smoother_restart_iterations: int = 8  #: ES-MDA updates of each restart
+    #: 1 (default): constant optics (smooth_constant; needs random_walk_std = 0). 2 or more:
+    #: optics drifting while heated, piecewise linear in heated time through that many
+    #: values (smooth_drifting); the restart takes their value at its reading, and the
+    #: filter's walk goes on from there
+    smoother_restart_knots: int = 1
     #: the restarts' model discrepancy (relative sd of the rise; smooth_constant's
     #: ``discrepancy``) and its correlation time (s): 0 for identical twins
     smoother_restart_discrepancy: float = 0.0
@@ -243,18 +248,21 @@ class TissueFilterSetup:
             self.smoother_restarts = tuple(float(v) for v in t)
             if not t.size:
                 return
-        n = self.smoother_restart_iterations
-        if not (isinstance(n, (int, np.integer)) and n >= 1):
-            raise ValueError(f"smoother_restart_iterations must be an integer >= 1, got {n!r}")
+        for name in ("smoother_restart_iterations", "smoother_restart_knots"):
+            n = getattr(self, name)
+            if not (isinstance(n, (int, np.integer)) and n >= 1):
+                raise ValueError(f"{name} must be an integer >= 1, got {n!r}")
         for name in ("smoother_restart_discrepancy", "smoother_restart_discrepancy_time"):
             v = getattr(self, name)
             if not (np.isfinite(v) and (v > 0 if name.endswith("time") else v >= 0)):
                 raise ValueError(f"{name} must be {'> 0 (s)' if name.endswith('time') else '>= 0'}"
                                  f", got {v!r}")
         walk = np.asarray(self.random_walk_std, float)
-        if self.parameter_model != "random_walk" or np.any(walk != 0):
+        if self.parameter_model != "random_walk" or (
+                self.smoother_restart_knots == 1 and np.any(walk != 0)):
             raise ValueError(f"smoother_restarts needs constant optics (parameter_model = "
-                             f"'random_walk', random_walk_std = 0), got parameter_model = "
+                             f"'random_walk', random_walk_std = 0) or drifting ones "
+                             f"(smoother_restart_knots >= 2), got parameter_model = "
                              f"{self.parameter_model!r}, random_walk_std = "
                              f"{self.random_walk_std!r}")
         if self.sensor_offset_std:
