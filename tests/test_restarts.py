@@ -27,6 +27,9 @@ def test_restart_points(tissue):
         6, 15, 20]
     assert restart_points(_setup(tissue, smoother_restarts=(5.0,)), times) == []
     assert restart_points(_setup(tissue), times) == []
+    # a delay after the pulse's end
+    assert restart_points(_setup(tissue, smoother_restarts="laser_off",
+                                 smoother_restart_delay=0.25), times) == [13]
     # readings every 0.3 s: the first after the pulse's end is the one at 1.2 s
     assert restart_points(_setup(tissue, smoother_restarts="laser_off"),
                           0.3 * np.arange(1, 7)) == [4]
@@ -111,6 +114,10 @@ def test_the_online_identifier_restarts_too(tissue):
      "smoother_restart_discrepancy must be >= 0"),
     (dict(smoother_restarts="laser_off", smoother_restart_discrepancy_time=0.0),
      "smoother_restart_discrepancy_time must be > 0"),
+    (dict(smoother_restarts=(1.0,), smoother_restart_delay=1.0),
+     "smoother_restart_delay = 1.0 is for smoother_restarts = 'laser_off'"),
+    (dict(smoother_restarts="laser_off", smoother_restart_delay=-1.0),
+     "smoother_restart_delay must be >= 0"),
     (dict(smoother_restarts="laser_off", random_walk_std=0.002),
      "smoother_restarts needs constant optics"),
     (dict(smoother_restarts="laser_off", parameter_model="trend"),
@@ -133,6 +140,26 @@ def test_drifting_restarts_take_the_smoothers_optics_at_the_reading(tissue):
     est = identify(s, times, data)
     sm = smooth_drifting(s, times[:10], data[:10], knots=2, n_iter=2)
     np.testing.assert_allclose(est.param_mean[10], sm.mean, rtol=1e-12)
+    # the members' temperatures: re-run along their own paths (optics linear in heated
+    # time between the knots), not at their final optics
+    X, theta, _ = restart_ensemble(s, assemble(s, warm_dt=0.1), times[:10], data[:10])
+    np.testing.assert_allclose(theta, sm.theta, rtol=1e-12)
+    model = TissueForwardModel(s)
+    T, T_end = (np.zeros((2, model.mesh.p.shape[1])) for _ in range(2))
+    for t0, t1 in zip(np.r_[0.0, times[:9]], times[:10], strict=True):
+        w = 0.5 * (t0 + t1) / 1.0  # heated time over the 1 s pulse: the knots at 0 and 1 s
+        T = model(T, np.ascontiguousarray((1 - w) * sm.knots[:2, 0] + w * sm.knots[:2, 1]),
+                  t0, t1)
+        T_end = model(T_end, np.ascontiguousarray(sm.theta[:2]), t0, t1)
+    np.testing.assert_allclose(X[:2], T, rtol=1e-10)
+    assert not np.allclose(X[:2], T_end, rtol=1e-3)
+    # a log-normal ensemble of the knots' moments: its end values differ from the members'
+    g = tissue.setup(random_walk_std=0.03, smoother_restarts="laser_off",
+                     smoother_restart_knots=2, smoother_restart_iterations=2)
+    Xg, theta_g, _ = restart_ensemble(g, assemble(g, warm_dt=0.1), times[:10], data[:10])
+    assert np.all(np.isfinite(Xg)) and np.all(theta_g > 0)
+    np.testing.assert_allclose(np.log(theta_g).mean(axis=0), np.log(sm.theta).mean(axis=0),
+                               rtol=1e-10)
     assert len(est.restarts) == 1 and np.all(np.isfinite(est.param_mean))
     with pytest.raises(ValueError, match="smoother_restart_knots must be an integer >= 1"):
         tissue.setup(smoother_restarts="laser_off", smoother_restart_knots=0)

@@ -16,7 +16,8 @@ error, no adaptive inflation: the config's defaults), ``white`` (the 0.002 deg C
 noise: the filter of the issue), ``adaptive`` (structured, adaptive inflation on),
 ``adapt-only`` (white noise, adaptive inflation on), ``restarts`` (structured, and the
 filter restarts from the smoother after the pulse: ``smoother_restarts = "laser_off"``,
-discrepancy 0.01; constant optics without a walk, drifting ones with 3 knots).
+discrepancy 0.01; constant optics without a walk, at the pulse's end; drifting ones with
+3 knots, 2.5 s after it).
 
     python validation/model_error_coverage.py --seeds 20 [--variant default white]
 """
@@ -49,7 +50,8 @@ VARIANTS = {
     "restarts": {"smoother_restarts": "laser_off", "smoother_restart_discrepancy": 0.01},
 }
 #: what the restarts need in each case
-RESTART_CASE = {"constant": {"random_walk_std": 0.0}, "time-varying": {"smoother_restart_knots": 3}}
+RESTART_CASE = {"constant": {"random_walk_std": 0.0},
+                "time-varying": {"smoother_restart_knots": 3, "smoother_restart_delay": 2.5}}
 #: the walk for drifting optics that examples/own_data.toml documents
 DRIFT = {"random_walk_std": [0.03, 0.10], "random_walk_when_off": 0.0}
 

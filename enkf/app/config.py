@@ -89,6 +89,7 @@ _FILTER_KEYS = {
     "smoother_iterations", "smoother_knots", "smoother_discrepancy",
     "smoother_discrepancy_time", "smoother_importance", "smoother_modes", "smoother_restarts",
     "smoother_restart_iterations", "smoother_restart_gaussian", "smoother_restart_knots",
+    "smoother_restart_delay",
 }
 _MODEL_ERROR_KEYS = {"kind", "rel_std", "time_scale", "length_xy", "length_z"}
 _ADAPTIVE_KEYS = {"enabled", "bounds", "time_scale"}
@@ -216,6 +217,7 @@ _LIMITS = {"sensors.noise_var": 1e4, "sensors.camera.noise_var": 1e4,
            "filter.inflation": 100.0, "filter.localization_radius": 1e3, "filter.mda": 100,
            "filter.smoother_iterations": 100, "filter.smoother_knots": 50,
            "filter.smoother_restart_iterations": 100, "filter.smoother_restart_knots": 50,
+           "filter.smoother_restart_delay": 1e6,
            "filter.smoother_discrepancy": 10.0, "filter.smoother_discrepancy_time": 1e6,
            "filter.smoother_importance": 10**6, "filter.smoother_modes": 10**6,
            "filter.seed": 2**63 - 1, "filter.emulator.n_photons": 10**11,
@@ -288,13 +290,13 @@ def _smoother_options(flt: dict, camera: bool = False) -> dict:
 
 def _restart_settings(flt: dict, setup_kw: dict, options: dict) -> None:
     """``[filter] smoother_restarts`` (times in s, or "laser_off"),
-    ``smoother_restart_iterations``, ``smoother_restart_knots`` and
-    ``smoother_restart_gaussian``; the restarts'
+    ``smoother_restart_iterations``, ``smoother_restart_knots``, ``smoother_restart_delay``
+    and ``smoother_restart_gaussian``; the restarts'
     discrepancy is the smoother's (``smoother_discrepancy``, ``smoother_discrepancy_time``
     and their defaults)."""
     if "smoother_restarts" not in flt:
         for k in ("smoother_restart_iterations", "smoother_restart_gaussian",
-                  "smoother_restart_knots"):
+                  "smoother_restart_knots", "smoother_restart_delay"):
             if k in flt:
                 raise ConfigError(f"filter.{k} needs filter.smoother_restarts")
         return
@@ -313,6 +315,9 @@ def _restart_settings(flt: dict, setup_kw: dict, options: dict) -> None:
     for k in ("smoother_restart_iterations", "smoother_restart_knots"):
         if k in flt:
             setup_kw[k] = int(_num(f"filter.{k}", flt[k], integer=True, lo=1))
+    if "smoother_restart_delay" in flt:
+        setup_kw["smoother_restart_delay"] = float(_num("filter.smoother_restart_delay",
+                                                        flt["smoother_restart_delay"], lo=0))
     if "smoother_restart_gaussian" in flt:
         v = flt["smoother_restart_gaussian"]
         if not isinstance(v, bool):

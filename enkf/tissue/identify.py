@@ -266,28 +266,47 @@ def restart_ensemble(setup: TissueFilterSetup, pieces: FilterPieces, times, data
                      ) -> tuple[np.ndarray, np.ndarray, float]:
     """The ensemble a restart gives after the readings ``data`` at ``times`` (all of them
     so far): the parameters of the ES-MDA smoother over them
-    (:func:`enkf.tissue.smooth.smooth_constant`, ``setup.smoother_restart_iterations``
-    updates from the prior; with ``setup.smoother_restart_gaussian`` a log-normal ensemble
-    of their moments, :func:`gaussian_ensemble`) and each member's temperatures re-run from
-    ``T_initial`` with its own. Returns ``(X (N, n_nodes) deg C, theta (N, n_par),
-    wall_s)``."""
-    from .smooth import smooth_constant, smooth_drifting
+    (:func:`enkf.tissue.smooth.smooth_constant`, or with ``smoother_restart_knots >= 2``
+    :func:`~enkf.tissue.smooth.smooth_drifting`'s at the last reading;
+    ``setup.smoother_restart_iterations`` updates from the prior; with
+    ``setup.smoother_restart_gaussian`` a log-normal ensemble of their moments,
+    :func:`gaussian_ensemble`) and each member's temperatures re-run from ``T_initial``
+    with its own optics (drifting: along its own path through its knots). Returns
+    ``(X (N, n_nodes) deg C, theta (N, n_par), wall_s)``."""
+    from .smooth import _knot_values, heated_time, smooth_constant, smooth_drifting
 
     tic = time.perf_counter()
     kw = dict(n_iter=setup.smoother_restart_iterations,
               discrepancy=setup.smoother_restart_discrepancy,
               discrepancy_time=setup.smoother_restart_discrepancy_time)
-    if setup.smoother_restart_knots > 1:  # drifting: the optics at the window's end
-        sm = smooth_drifting(setup, times, data, knots=setup.smoother_restart_knots, **kw)
-    else:
-        sm = smooth_constant(setup, times, data, **kw)
-    theta = np.ascontiguousarray(sm.theta)
-    if setup.smoother_restart_gaussian:
-        theta = gaussian_ensemble(theta, np.random.default_rng([setup.seed, len(times), 7]))
-    X = np.full((theta.shape[0], pieces.model.mesh.p.shape[1]), float(setup.T_initial))
     edges = np.r_[0.0, np.asarray(times, float)]
+    rng = np.random.default_rng([setup.seed, len(times), 7])
+    if setup.smoother_restart_knots > 1:  # drifting: each member's path, then its end
+        sm = smooth_drifting(setup, times, data, knots=setup.smoother_restart_knots, **kw)
+        V = sm.knots  # (N, K, n_par)
+        if setup.smoother_restart_gaussian:
+            # the free values: every knot of a drifting parameter, the first of a constant
+            drift = np.any(V != V[:, :1], axis=(0, 1))
+            cols = [(k, i) for i in range(V.shape[2])
+                    for k in (range(V.shape[1]) if drift[i] else (0,))]
+            W = gaussian_ensemble(np.stack([V[:, k, i] for k, i in cols], axis=1), rng)
+            V = V.copy()
+            for j, (k, i) in enumerate(cols):
+                if drift[i]:
+                    V[:, k, i] = W[:, j]
+                else:  # one value over every knot
+                    V[:, :, i] = W[:, j, None]
+        heated = heated_time(setup.power, edges)
+        path = _knot_values(V, sm.knot_times, 0.5 * (heated[:-1] + heated[1:]))
+        theta = np.ascontiguousarray(V[:, -1])
+    else:
+        theta = np.ascontiguousarray(smooth_constant(setup, times, data, **kw).theta)
+        if setup.smoother_restart_gaussian:
+            theta = gaussian_ensemble(theta, rng)
+        path = np.broadcast_to(theta, (edges.size - 1, *theta.shape))
+    X = np.full((theta.shape[0], pieces.model.mesh.p.shape[1]), float(setup.T_initial))
     for k in range(edges.size - 1):
-        X = pieces.model(X, theta, float(edges[k]), float(edges[k + 1]))
+        X = pieces.model(X, np.ascontiguousarray(path[k]), float(edges[k]), float(edges[k + 1]))
     return X, theta, time.perf_counter() - tic
 
 

@@ -152,6 +152,11 @@ class TissueFilterSetup:
     #: offsets. () (default): none
     smoother_restarts: tuple | str = ()
     smoother_restart_iterations: int = 8  #: ES-MDA updates of each restart
+    #: s, with ``"laser_off"``: restart after the first reading at or after this long past
+    #: the end of each pulse. Drifting optics (``smoother_restart_knots >= 2``) need some
+    #: cooling readings to tell their final values (the end of a window is its least
+    #: determined part): 2.5 s after a 5 s pulse in docs/enkf.md, "Restarts"
+    smoother_restart_delay: float = 0.0
     #: 1 (default): constant optics (smooth_constant; needs random_walk_std = 0). 2 or more:
     #: optics drifting while heated, piecewise linear in heated time through that many
     #: values (smooth_drifting); the restart takes their value at its reading, and the
@@ -252,7 +257,11 @@ class TissueFilterSetup:
             n = getattr(self, name)
             if not (isinstance(n, (int, np.integer)) and n >= 1):
                 raise ValueError(f"{name} must be an integer >= 1, got {n!r}")
-        for name in ("smoother_restart_discrepancy", "smoother_restart_discrepancy_time"):
+        if self.smoother_restart_delay and not isinstance(r, str):
+            raise ValueError(f"smoother_restart_delay = {self.smoother_restart_delay!r} is for "
+                             "smoother_restarts = 'laser_off'")
+        for name in ("smoother_restart_discrepancy", "smoother_restart_discrepancy_time",
+                     "smoother_restart_delay"):
             v = getattr(self, name)
             if not (np.isfinite(v) and (v > 0 if name.endswith("time") else v >= 0)):
                 raise ValueError(f"{name} must be {'> 0 (s)' if name.endswith('time') else '>= 0'}"
@@ -272,11 +281,15 @@ class TissueFilterSetup:
     def restart_after(self, t_prev: float, t: float) -> bool:
         """Whether the filter restarts from the smoother after the reading at ``t`` (s), the
         reading before it at ``t_prev`` (:attr:`smoother_restarts`): ``t`` is the first
-        reading at or after a restart time, or the laser is on just after ``t_prev`` and
-        off just after ``t`` (the first reading at or after the end of a pulse)."""
+        reading at or after a restart time, or the laser is on just after ``t_prev - d`` and
+        off just after ``t - d`` (the first reading at or after the end of a pulse plus
+        ``d = smoother_restart_delay``)."""
         r = self.smoother_restarts
         if isinstance(r, str):
-            def on(x):
+            d = self.smoother_restart_delay
+
+            def on(x):  # the laser a delay ago
+                x -= d
                 return self.power(x + 1e-9 * max(1.0, abs(x))) > 0
             return on(t_prev) and not on(t)
         return any(t_prev < tr <= t for tr in r)
