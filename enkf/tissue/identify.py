@@ -262,7 +262,8 @@ def restart_points(setup: TissueFilterSetup, times) -> list[int]:
             if setup.restart_after(float(t[k - 1]) if k else 0.0, float(t[k]))]
 
 
-def restart_ensemble(setup: TissueFilterSetup, pieces: FilterPieces, times, data
+def restart_ensemble(setup: TissueFilterSetup, pieces: FilterPieces, times, data,
+                     state: np.ndarray | None = None, path: np.ndarray | None = None
                      ) -> tuple[np.ndarray, np.ndarray, float]:
     """The ensemble a restart gives after the readings ``data`` at ``times`` (all of them
     so far): the parameters of the ES-MDA smoother over them
@@ -271,8 +272,17 @@ def restart_ensemble(setup: TissueFilterSetup, pieces: FilterPieces, times, data
     ``setup.smoother_restart_iterations`` updates from the prior; with
     ``setup.smoother_restart_gaussian`` a log-normal ensemble of their moments,
     :func:`gaussian_ensemble`) and each member's temperatures re-run from ``T_initial``
-    with its own optics (drifting: along its own path through its knots). Returns
-    ``(X (N, n_nodes) deg C, theta (N, n_par), wall_s)``."""
+    with its own optics (drifting: along its own path through its knots).
+
+    ``state`` (N, n_nodes) deg C, the filter's members at the last reading, and ``path``
+    (M, N, n_par) the parameters their forecast of each step used: the part of each
+    member's temperatures its parameters do not explain (its model error and the
+    analyses' corrections, ``state - run(path)``: the heat equation is linear in the
+    temperature) is added to the member of the same index. Without them the restarted
+    members hold no model error, and against data from another model their bands beneath
+    the surface were too narrow.
+
+    Returns ``(X (N, n_nodes) deg C, theta (N, n_par), wall_s)``."""
     from .smooth import _knot_values, heated_time, smooth_constant, smooth_drifting
 
     tic = time.perf_counter()
@@ -297,16 +307,23 @@ def restart_ensemble(setup: TissueFilterSetup, pieces: FilterPieces, times, data
                 else:  # one value over every knot
                     V[:, :, i] = W[:, j, None]
         heated = heated_time(setup.power, edges)
-        path = _knot_values(V, sm.knot_times, 0.5 * (heated[:-1] + heated[1:]))
+        new_path = _knot_values(V, sm.knot_times, 0.5 * (heated[:-1] + heated[1:]))
         theta = np.ascontiguousarray(V[:, -1])
     else:
         theta = np.ascontiguousarray(smooth_constant(setup, times, data, **kw).theta)
         if setup.smoother_restart_gaussian:
             theta = gaussian_ensemble(theta, rng)
-        path = np.broadcast_to(theta, (edges.size - 1, *theta.shape))
-    X = np.full((theta.shape[0], pieces.model.mesh.p.shape[1]), float(setup.T_initial))
-    for k in range(edges.size - 1):
-        X = pieces.model(X, np.ascontiguousarray(path[k]), float(edges[k]), float(edges[k + 1]))
+        new_path = np.broadcast_to(theta, (edges.size - 1, *theta.shape))
+    def run(path):
+        X = np.full((path.shape[1], pieces.model.mesh.p.shape[1]), float(setup.T_initial))
+        for k in range(edges.size - 1):
+            X = pieces.model(X, np.ascontiguousarray(path[k]), float(edges[k]),
+                             float(edges[k + 1]))
+        return X
+
+    X = run(new_path)
+    if state is not None:
+        X += np.asarray(state, float) - run(np.asarray(path, float))
     return X, theta, time.perf_counter() - tic
 
 
@@ -382,7 +399,13 @@ def identify(setup: TissueFilterSetup, times: np.ndarray, data: np.ndarray, *,
     eff_std = np.full((M + 1, 2), np.nan) if coag else None
     frac = np.full(M + 1, np.nan) if coag else None
 
+    cuts = restart_points(setup, times)
+    # with restarts: the parameters each step's forecast used (the analysis before it)
+    used = np.full((M + 1, setup.n_members, n), np.nan) if cuts else None
+
     def record(rep: StepReport, outside: bool = True):
+        if used is not None:
+            used[rep.step] = rep.param_ensemble[:, :n]
         Y = rows_times(P_track, rep.state_ensemble)
         tr_mean[rep.step] = Y.mean(axis=0)
         tr_std[rep.step] = Y.std(axis=0, ddof=1)
@@ -401,7 +424,6 @@ def identify(setup: TissueFilterSetup, times: np.ndarray, data: np.ndarray, *,
     # the restarts from the smoother (setup.smoother_restarts) cut the readings into
     # segments: the filter runs each from the ensemble the one before left (the first from
     # the prior), replaced after a segment's last reading by the smoother's
-    cuts = restart_points(setup, times)
     edges = [0, *[c for c in cuts if c < M], M]
     parts, restarts = [], []
     # the filter's dense products are small (50 x 5000): threaded BLAS only spins, and
@@ -411,7 +433,8 @@ def identify(setup: TissueFilterSetup, times: np.ndarray, data: np.ndarray, *,
         if not j:
             problem = pieces.problem(times[:b], data[:b])
         else:
-            X, theta, w = restart_ensemble(setup, pieces, times[:a], data[:a])
+            X, theta, w = restart_ensemble(setup, pieces, times[:a], data[:a],
+                                           parts[-1].state_ensemble, used[:a])
             restarts.append({"time_s": float(times[a - 1]), "readings": a, "wall_s": w})
             problem = pieces.problem(times[a:b], data[a:b], t0=float(times[a - 1]),
                                      prior=lambda rng, N, X=X, th=theta: (X.copy(), th.copy()))
@@ -431,7 +454,8 @@ def identify(setup: TissueFilterSetup, times: np.ndarray, data: np.ndarray, *,
             break
         parts.append(res)
     if diverged is None and M in cuts:  # a restart after the last reading: the final ensemble
-        X, theta, w = restart_ensemble(setup, pieces, times, data)
+        X, theta, w = restart_ensemble(setup, pieces, times, data, parts[-1].state_ensemble,
+                                       used[:M])
         restarts.append({"time_s": float(times[-1]), "readings": M, "wall_s": w})
         parts.append(_restarted(parts[-1], X, theta))
         r = parts[-1]
