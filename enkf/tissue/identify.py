@@ -275,12 +275,17 @@ def restart_ensemble(setup: TissueFilterSetup, pieces: FilterPieces, times, data
     with its own optics (drifting: along its own path through its knots).
 
     ``state`` (N, n_nodes) deg C, the filter's members at the last reading, and ``path``
-    (M, N, n_par) the parameters their forecast of each step used: the part of each
-    member's temperatures its parameters do not explain (its model error and the
-    analyses' corrections, ``state - run(path)``: the heat equation is linear in the
-    temperature) is added to the member of the same index. Without them the restarted
-    members hold no model error, and against data from another model their bands beneath
-    the surface were too narrow.
+    (M + 1, N, n_par) their parameters after each analysis, the prior's first (row ``k``
+    is what the forecast of step ``k + 1`` used; the last, their parameters now): the
+    spread of the filter's members that their parameters do not explain is kept. Each
+    member's residual ``state - run(path)`` (its model error and the analyses'
+    corrections: the heat equation is linear in the temperature) less the ensemble's mean
+    residual and less its regression on the members' log parameters now (the corrections
+    that compensated their parameters' errors, which the new parameters do not have) is
+    added to the restarted member of the same index. Without it the restarted members
+    hold no model error, and against data from another model their bands beneath the
+    surface were too narrow; with the whole residual the old parameters' compensation
+    moved the twins' estimates to 2-3 times the bound.
 
     Returns ``(X (N, n_nodes) deg C, theta (N, n_par), wall_s)``."""
     from .smooth import _knot_values, heated_time, smooth_constant, smooth_drifting
@@ -323,7 +328,13 @@ def restart_ensemble(setup: TissueFilterSetup, pieces: FilterPieces, times, data
 
     X = run(new_path)
     if state is not None:
-        X += np.asarray(state, float) - run(np.asarray(path, float))
+        path = np.asarray(path, float)
+        R = np.asarray(state, float) - run(path[:-1])
+        R -= R.mean(axis=0)
+        L = np.log(path[-1])
+        L -= L.mean(axis=0)
+        R -= L @ np.linalg.lstsq(L, R, rcond=None)[0]  # what the parameters explain
+        X += R
     return X, theta, time.perf_counter() - tic
 
 
@@ -434,7 +445,7 @@ def identify(setup: TissueFilterSetup, times: np.ndarray, data: np.ndarray, *,
             problem = pieces.problem(times[:b], data[:b])
         else:
             X, theta, w = restart_ensemble(setup, pieces, times[:a], data[:a],
-                                           parts[-1].state_ensemble, used[:a])
+                                           parts[-1].state_ensemble, used[:a + 1])
             restarts.append({"time_s": float(times[a - 1]), "readings": a, "wall_s": w})
             problem = pieces.problem(times[a:b], data[a:b], t0=float(times[a - 1]),
                                      prior=lambda rng, N, X=X, th=theta: (X.copy(), th.copy()))
@@ -455,7 +466,7 @@ def identify(setup: TissueFilterSetup, times: np.ndarray, data: np.ndarray, *,
         parts.append(res)
     if diverged is None and M in cuts:  # a restart after the last reading: the final ensemble
         X, theta, w = restart_ensemble(setup, pieces, times, data, parts[-1].state_ensemble,
-                                       used[:M])
+                                       used)
         restarts.append({"time_s": float(times[-1]), "readings": M, "wall_s": w})
         parts.append(_restarted(parts[-1], X, theta))
         r = parts[-1]

@@ -94,7 +94,8 @@ class OnlineIdentifier:
                 self._X, self._theta, _ = restart_ensemble(
                     self.setup, self._pieces, np.array([r[0] for r in self._readings]),
                     np.array([r[1] for r in self._readings]), self._X,
-                    np.array([r[2] for r in self._readings]))
+                    np.array([r[2] for r in self._readings]
+                             + [self._theta[:, :self._pieces.n]]))
                 p_mean, p_std = self._theta.mean(axis=0), self._theta.std(axis=0, ddof=1)
                 self.restart_times.append(t)
         Y = (self._pieces.P_track @ self._X.T).T
