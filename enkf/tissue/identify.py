@@ -262,8 +262,7 @@ def restart_points(setup: TissueFilterSetup, times) -> list[int]:
             if setup.restart_after(float(t[k - 1]) if k else 0.0, float(t[k]))]
 
 
-def restart_ensemble(setup: TissueFilterSetup, pieces: FilterPieces, times, data,
-                     state: np.ndarray | None = None, path: np.ndarray | None = None
+def restart_ensemble(setup: TissueFilterSetup, pieces: FilterPieces, times, data
                      ) -> tuple[np.ndarray, np.ndarray, float]:
     """The ensemble a restart gives after the readings ``data`` at ``times`` (all of them
     so far): the parameters of the ES-MDA smoother over them
@@ -274,18 +273,13 @@ def restart_ensemble(setup: TissueFilterSetup, pieces: FilterPieces, times, data
     :func:`gaussian_ensemble`) and each member's temperatures re-run from ``T_initial``
     with its own optics (drifting: along its own path through its knots).
 
-    ``state`` (N, n_nodes) deg C, the filter's members at the last reading, and ``path``
-    (M + 1, N, n_par) their parameters after each analysis, the prior's first (row ``k``
-    is what the forecast of step ``k + 1`` used; the last, their parameters now): the
-    spread of the filter's members that their parameters do not explain is kept. Each
-    member's residual ``state - run(path)`` (its model error and the analyses'
-    corrections: the heat equation is linear in the temperature) less the ensemble's mean
-    residual and less its regression on the members' log parameters now (the corrections
-    that compensated their parameters' errors, which the new parameters do not have) is
-    added to the restarted member of the same index. Without it the restarted members
-    hold no model error, and against data from another model their bands beneath the
-    surface were too narrow; with the whole residual the old parameters' compensation
-    moved the twins' estimates to 2-3 times the bound.
+    The re-run carries the filter's model error (:meth:`FilterPieces.model_noise`: a
+    draw of the structured error, or the white floor), so that the restarted members
+    hold the spread of the temperatures that the filter's forecasts would have: without
+    it, against data from another model their bands beneath the surface were too narrow.
+    (Keeping instead each filter member's residual, its temperatures less a run of its
+    own parameters, carried the analyses' compensation of the old parameters' errors:
+    the twins' estimates went to 2-3 times the bound.)
 
     Returns ``(X (N, n_nodes) deg C, theta (N, n_par), wall_s)``."""
     from .smooth import _knot_values, heated_time, smooth_constant, smooth_drifting
@@ -312,29 +306,23 @@ def restart_ensemble(setup: TissueFilterSetup, pieces: FilterPieces, times, data
                 else:  # one value over every knot
                     V[:, :, i] = W[:, j, None]
         heated = heated_time(setup.power, edges)
-        new_path = _knot_values(V, sm.knot_times, 0.5 * (heated[:-1] + heated[1:]))
+        path = _knot_values(V, sm.knot_times, 0.5 * (heated[:-1] + heated[1:]))
         theta = np.ascontiguousarray(V[:, -1])
     else:
         theta = np.ascontiguousarray(smooth_constant(setup, times, data, **kw).theta)
         if setup.smoother_restart_gaussian:
             theta = gaussian_ensemble(theta, rng)
-        new_path = np.broadcast_to(theta, (edges.size - 1, *theta.shape))
-    def run(path):
-        X = np.full((path.shape[1], pieces.model.mesh.p.shape[1]), float(setup.T_initial))
-        for k in range(edges.size - 1):
-            X = pieces.model(X, np.ascontiguousarray(path[k]), float(edges[k]),
-                             float(edges[k + 1]))
-        return X
-
-    X = run(new_path)
-    if state is not None:
-        path = np.asarray(path, float)
-        R = np.asarray(state, float) - run(path[:-1])
-        R -= R.mean(axis=0)
-        L = np.log(path[-1])
-        L -= L.mean(axis=0)
-        R -= L @ np.linalg.lstsq(L, R, rcond=None)[0]  # what the parameters explain
-        X += R
+        path = np.broadcast_to(theta, (edges.size - 1, *theta.shape))
+    noise = pieces.model_noise()
+    X = np.full((theta.shape[0], pieces.model.mesh.p.shape[1]), float(setup.T_initial))
+    for k in range(edges.size - 1):
+        th = np.ascontiguousarray(path[k])
+        X1 = pieces.model(X, th, float(edges[k]), float(edges[k + 1]))
+        if callable(noise):
+            X1 = X1 + noise(rng, X, X1, th, float(edges[k]), float(edges[k + 1]))
+        elif noise > 0:
+            X1 = X1 + np.sqrt(noise) * standard_normal(rng, X1.shape)
+        X = X1
     return X, theta, time.perf_counter() - tic
 
 
@@ -410,13 +398,7 @@ def identify(setup: TissueFilterSetup, times: np.ndarray, data: np.ndarray, *,
     eff_std = np.full((M + 1, 2), np.nan) if coag else None
     frac = np.full(M + 1, np.nan) if coag else None
 
-    cuts = restart_points(setup, times)
-    # with restarts: the parameters each step's forecast used (the analysis before it)
-    used = np.full((M + 1, setup.n_members, n), np.nan) if cuts else None
-
     def record(rep: StepReport, outside: bool = True):
-        if used is not None:
-            used[rep.step] = rep.param_ensemble[:, :n]
         Y = rows_times(P_track, rep.state_ensemble)
         tr_mean[rep.step] = Y.mean(axis=0)
         tr_std[rep.step] = Y.std(axis=0, ddof=1)
@@ -435,6 +417,7 @@ def identify(setup: TissueFilterSetup, times: np.ndarray, data: np.ndarray, *,
     # the restarts from the smoother (setup.smoother_restarts) cut the readings into
     # segments: the filter runs each from the ensemble the one before left (the first from
     # the prior), replaced after a segment's last reading by the smoother's
+    cuts = restart_points(setup, times)
     edges = [0, *[c for c in cuts if c < M], M]
     parts, restarts = [], []
     # the filter's dense products are small (50 x 5000): threaded BLAS only spins, and
@@ -444,8 +427,7 @@ def identify(setup: TissueFilterSetup, times: np.ndarray, data: np.ndarray, *,
         if not j:
             problem = pieces.problem(times[:b], data[:b])
         else:
-            X, theta, w = restart_ensemble(setup, pieces, times[:a], data[:a],
-                                           parts[-1].state_ensemble, used[:a + 1])
+            X, theta, w = restart_ensemble(setup, pieces, times[:a], data[:a])
             restarts.append({"time_s": float(times[a - 1]), "readings": a, "wall_s": w})
             problem = pieces.problem(times[a:b], data[a:b], t0=float(times[a - 1]),
                                      prior=lambda rng, N, X=X, th=theta: (X.copy(), th.copy()))
@@ -465,8 +447,7 @@ def identify(setup: TissueFilterSetup, times: np.ndarray, data: np.ndarray, *,
             break
         parts.append(res)
     if diverged is None and M in cuts:  # a restart after the last reading: the final ensemble
-        X, theta, w = restart_ensemble(setup, pieces, times, data, parts[-1].state_ensemble,
-                                       used)
+        X, theta, w = restart_ensemble(setup, pieces, times, data)
         restarts.append({"time_s": float(times[-1]), "readings": M, "wall_s": w})
         parts.append(_restarted(parts[-1], X, theta))
         r = parts[-1]

@@ -87,15 +87,12 @@ class OnlineIdentifier:
                              inflation_state=self._inflation)
         self._X, self._theta = res.state_ensemble, res.param_ensemble
         p_mean, p_std = res.param_mean[-1], res.param_std[-1]
-        if self.setup.smoother_restarts:  # keep the readings for the smoother's restarts,
-            # and the parameters each forecast used
-            self._readings.append((t, y.copy(), theta[:, :self._pieces.n].copy()))
+        if self.setup.smoother_restarts:  # keep the readings for the smoother's restarts
+            self._readings.append((t, y.copy()))
             if self.setup.restart_after(self.time, t):
                 self._X, self._theta, _ = restart_ensemble(
                     self.setup, self._pieces, np.array([r[0] for r in self._readings]),
-                    np.array([r[1] for r in self._readings]), self._X,
-                    np.array([r[2] for r in self._readings]
-                             + [self._theta[:, :self._pieces.n]]))
+                    np.array([r[1] for r in self._readings]))
                 p_mean, p_std = self._theta.mean(axis=0), self._theta.std(axis=0, ddof=1)
                 self.restart_times.append(t)
         Y = (self._pieces.P_track @ self._X.T).T
