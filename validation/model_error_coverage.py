@@ -143,7 +143,7 @@ def report(rows: list, path: Path, command: str) -> None:
             f"| {key[0]} | {key[1]} | {key[2]} | {n} | {cov(ch)} | {cov(cc)} | {es(eh, sh)} | "
             f"{es(ec, sc)} | {tg} | mua {pct[0]:.2f}, mus {pct[1]:.2f}; mua {pcf[0]}/{n}, "
             f"mus {pcf[1]}/{n} | {np.median(infl):.2f}, {imax:.2f} |")
-    lines += ["", "Per-run numbers: `validation/reports/model_error_coverage.json`."]
+    lines += ["", f"Per-run numbers: `validation/reports/{path.with_suffix('.json').name}`."]
     path.write_text("\n".join(lines) + "\n")
     path.with_suffix(".json").write_text(json.dumps(rows, indent=1))
 
