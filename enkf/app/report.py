@@ -73,9 +73,13 @@ def plot_identification(path, est, times, data, power, names_obs=None) -> None:
     axes_p = np.atleast_1d(bottom.subplots(1, n_par, squeeze=False)[0])
     method = {"etkf": "ETKF", "enkf": "EnKF"}.get(getattr(est, "method", None) or "", "filter")
     on = np.array([power(x) > 0 for x in t])
-    for ax in list(axes_t) + list(axes_p):  # laser on: shaded
+    restarts = [r["time_s"] for r in getattr(est, "restarts", ())]
+    for ax in list(axes_t) + list(axes_p):  # laser on: shaded; restarts: dashed
         for a, b in _runs(t, on):
             ax.axvspan(a, b, color="0.88", lw=0)
+        for k, tr in enumerate(restarts):
+            ax.axvline(tr, color="b", ls="--", lw=0.9,
+                       label="restart from the smoother" if k == 0 and ax is axes_p[0] else None)
     for j in range(n_tr):
         ax = axes_t[j]
         m, s = est.tracked_mean[:, j], est.tracked_std[:, j]
