@@ -380,6 +380,10 @@ def identify(setup: TissueFilterSetup, times: np.ndarray, data: np.ndarray, *,
     param_bounds : (n_par, 2), physical range of each parameter's ensemble mean;
         leaving it stops the run (default: :meth:`TissueFilterSetup.default_param_bounds`)
 
+    With ``setup.smoother_restarts`` the filter restarts from the smoother after the
+    readings :func:`restart_points` names (:func:`restart_ensemble`; ``docs/enkf.md``,
+    "Restarts").
+
     Returns
     -------
     TissueEstimates; if the filter diverges, the estimates up to that point with
