@@ -17,6 +17,8 @@ import argparse
 import functools
 import json
 import sys
+from concurrent.futures import ProcessPoolExecutor
+from contextlib import nullcontext
 from pathlib import Path
 
 import numpy as np
@@ -89,21 +91,24 @@ def main(argv=None) -> None:
     ap.add_argument("--modes", type=int, default=0, metavar="P",
                     help="with --importance: P prior points screened for other modes "
                          "(enkf.modes), which seed the sampler beside the ensemble")
+    ap.add_argument("--jobs", type=int, default=1,
+                    help="seeds run side by side in this many processes (the same numbers)")
     ap.add_argument("--out", default=None, help="default: reports/all_params_calibration.md, "
                     "with --smoother all_params_smoother.md")
     args = ap.parse_args(argv)
     if args.out is None:
         args.out = str(ROOT / "validation" / "reports" / (
             "all_params_smoother.md" if args.smoother else "all_params_calibration.md"))
-    rows = []
-    for seed in range(args.seeds):
-        if args.smoother:
-            rows.append(smoother_row(seed, args))
-        else:
-            rows.append(filter_row(seed, args))
-        print(seed, rows[-1]["stopped"] or "", {k: round(v, 3) for k, v in
-                                               rows[-1]["logerr"].items()},
-              rows[-1]["covered"], flush=True)
+    row = smoother_row if args.smoother else filter_row
+    seeds = range(args.seeds)
+    with ProcessPoolExecutor(args.jobs) if args.jobs > 1 else nullcontext() as pool:
+        done = pool.map(row, seeds, [args] * len(seeds)) if pool else (row(s, args)
+                                                                       for s in seeds)
+        rows = []
+        for seed, r in zip(seeds, done, strict=True):
+            rows.append(r)
+            print(seed, r["stopped"] or "", {k: round(v, 3) for k, v in r["logerr"].items()},
+                  r["covered"], flush=True)
     n = len(rows)
     names = list(rows[0]["logerr"])
     cmd = " ".join(sys.argv[1:] if argv is None else argv)
