@@ -30,6 +30,11 @@ def test_restart_points(tissue):
     # a delay after the pulse's end
     assert restart_points(_setup(tissue, smoother_restarts="laser_off",
                                  smoother_restart_delay=0.25), times) == [13]
+    # no restart before the first finite reading (the smoother needs one)
+    data = np.full((20, 1), np.nan)
+    assert restart_points(_setup(tissue, smoother_restarts=(0.55, 1.5)), times, data) == []
+    data[12] = 1.0
+    assert restart_points(_setup(tissue, smoother_restarts=(0.55, 1.5)), times, data) == [15]
     # readings every 0.3 s: the first after the pulse's end is the one at 1.2 s
     assert restart_points(_setup(tissue, smoother_restarts="laser_off"),
                           0.3 * np.arange(1, 7)) == [4]

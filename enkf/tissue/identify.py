@@ -252,14 +252,18 @@ def assemble(setup: TissueFilterSetup, param_bounds=None, warm_dt: float | None 
                    config, health, n, observation_offset, obs_error)
 
 
-def restart_points(setup: TissueFilterSetup, times) -> list[int]:
+def restart_points(setup: TissueFilterSetup, times, data=None) -> list[int]:
     """The reading counts ``k`` (1..M) after which the filter restarts from the smoother
-    (:attr:`TissueFilterSetup.smoother_restarts`, :meth:`~TissueFilterSetup.restart_after`)."""
+    (:attr:`TissueFilterSetup.smoother_restarts`, :meth:`~TissueFilterSetup.restart_after`);
+    with ``data`` (M, p), not before the first finite reading (the smoother needs one)."""
     if not setup.smoother_restarts:
         return []
     t = np.asarray(times, float)
-    return [k + 1 for k in range(t.size)
-            if setup.restart_after(float(t[k - 1]) if k else 0.0, float(t[k]))]
+    finite = np.ones(t.size, bool) if data is None else \
+        np.isfinite(np.asarray(data, float)).reshape(t.size, -1).any(axis=1)
+    seen = np.cumsum(finite) > 0  # a finite reading at or before reading k
+    return [k + 1 for k in range(t.size) if seen[k]
+            and setup.restart_after(float(t[k - 1]) if k else 0.0, float(t[k]))]
 
 
 def restart_ensemble(setup: TissueFilterSetup, pieces: FilterPieces, times, data
@@ -421,7 +425,7 @@ def identify(setup: TissueFilterSetup, times: np.ndarray, data: np.ndarray, *,
     # the restarts from the smoother (setup.smoother_restarts) cut the readings into
     # segments: the filter runs each from the ensemble the one before left (the first from
     # the prior), replaced after a segment's last reading by the smoother's
-    cuts = restart_points(setup, times)
+    cuts = restart_points(setup, times, data)
     edges = [0, *[c for c in cuts if c < M], M]
     parts, restarts = [], []
     # the filter's dense products are small (50 x 5000): threaded BLAS only spins, and

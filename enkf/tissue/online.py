@@ -89,7 +89,8 @@ class OnlineIdentifier:
         p_mean, p_std = res.param_mean[-1], res.param_std[-1]
         if self.setup.smoother_restarts:  # keep the readings for the smoother's restarts
             self._readings.append((t, y.copy()))
-            if self.setup.restart_after(self.time, t):
+            if self.setup.restart_after(self.time, t) and any(
+                    np.isfinite(r[1]).any() for r in self._readings):
                 self._X, self._theta, _ = restart_ensemble(
                     self.setup, self._pieces, np.array([r[0] for r in self._readings]),
                     np.array([r[1] for r in self._readings]))
