@@ -187,3 +187,37 @@ def test_the_restarted_members_carry_the_model_error(tissue):
             T = model(T, np.ascontiguousarray(theta), t0, t1)
         spread[kind] = np.abs(X - T).max()
     assert spread["white"] < 1e-9 < 1e-3 < spread["structured"], spread
+
+
+def test_restart_settings_that_cannot_run_are_refused(tissue):
+    """Drifting restarts need a walk, and the log-normal draw more members than the
+    restart's free values (the parameters, and every knot of the drifting ones); the
+    drifting parameters are those that walk."""
+    with pytest.raises(ValueError, match="smoother_restart_knots = 3 is for drifting optics"):
+        _setup(tissue, smoother_restarts="laser_off", smoother_restart_knots=3)
+    with pytest.raises(ValueError, match=r"more members than the restart's free values \(6"):
+        tissue.setup(random_walk_std=0.03, smoother_restarts="laser_off",
+                     smoother_restart_knots=3, n_members=6)
+    s = tissue.setup(random_walk_std=[0.03, 0.0], smoother_restarts="laser_off",
+                     smoother_restart_knots=3, n_members=6)  # 2 + 2 free values
+    assert s.restart_drifting == ("mua",)
+    with pytest.raises(ValueError, match="smoother_restart_gaussian must be True or False"):
+        _setup(tissue, smoother_restarts="laser_off", smoother_restart_gaussian="false")
+    with pytest.raises(ValueError, match="smoother_restart_iterations must be an integer"):
+        _setup(tissue, smoother_restarts="laser_off", smoother_restart_iterations=True)
+
+
+def test_an_online_restart_the_smoother_refuses_is_skipped(tissue, monkeypatch):
+    """A live stream too long for the discrepancy's dense covariance: the restart is
+    skipped with a warning and the filter goes on."""
+    import enkf.tissue.smooth as sm
+
+    monkeypatch.setattr(sm, "MAX_DISCREPANCY_READINGS", 5)
+    s = _setup(tissue, smoother_restarts="laser_off", smoother_restart_iterations=2,
+               smoother_restart_discrepancy=0.01)
+    times, data = tissue.twin_data(s, 1.3, 80.0)
+    online = OnlineIdentifier(s)
+    with pytest.warns(RuntimeWarning, match="restart after the reading at t = 1 s is skipped"):
+        out = [online.update(t, y) for t, y in zip(times, data, strict=True)]
+    assert online.restart_times == [] and len(out) == 20
+    assert all(np.all(np.isfinite(o.param_mean)) for o in out)

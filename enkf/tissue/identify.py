@@ -255,13 +255,18 @@ def assemble(setup: TissueFilterSetup, param_bounds=None, warm_dt: float | None 
 def restart_points(setup: TissueFilterSetup, times, data=None) -> list[int]:
     """The reading counts ``k`` (1..M) after which the filter restarts from the smoother
     (:attr:`TissueFilterSetup.smoother_restarts`, :meth:`~TissueFilterSetup.restart_after`);
-    with ``data`` (M, p), not before the first finite reading (the smoother needs one)."""
+    with ``data`` (M, p), not before the first finite reading (the smoother needs one),
+    and for drifting optics not before the laser has heated."""
     if not setup.smoother_restarts:
         return []
+    from .smooth import heated_time
+
     t = np.asarray(times, float)
     finite = np.ones(t.size, bool) if data is None else \
         np.isfinite(np.asarray(data, float)).reshape(t.size, -1).any(axis=1)
     seen = np.cumsum(finite) > 0  # a finite reading at or before reading k
+    if setup.smoother_restart_knots > 1:  # drifting: and a heated step (the knots' clock)
+        seen &= heated_time(setup.power, np.r_[0.0, t])[1:] > 0
     return [k + 1 for k in range(t.size) if seen[k]
             and setup.restart_after(float(t[k - 1]) if k else 0.0, float(t[k]))]
 
@@ -295,7 +300,8 @@ def restart_ensemble(setup: TissueFilterSetup, pieces: FilterPieces, times, data
     edges = np.r_[0.0, np.asarray(times, float)]
     rng = np.random.default_rng([setup.seed, len(times), 7])
     if setup.smoother_restart_knots > 1:  # drifting: each member's path, then its end
-        sm = smooth_drifting(setup, times, data, knots=setup.smoother_restart_knots, **kw)
+        sm = smooth_drifting(setup, times, data, knots=setup.smoother_restart_knots,
+                             drifting=setup.restart_drifting, **kw)
         V = sm.knots  # (N, K, n_par)
         if setup.smoother_restart_gaussian:
             # the free values: every knot of a drifting parameter, the first of a constant

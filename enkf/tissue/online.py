@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import time
+import warnings
 from dataclasses import dataclass, replace
 
 import numpy as np
@@ -11,7 +12,7 @@ from fem.threads import blas_threads, keep_freed_memory
 
 from ..adaptive import InflationEstimator
 from ..loop import run_filter
-from .identify import assemble, restart_ensemble
+from .identify import assemble, restart_ensemble, restart_points
 from .setup import TissueFilterSetup
 
 __all__ = ["OnlineEstimate", "OnlineIdentifier"]
@@ -64,6 +65,24 @@ class OnlineIdentifier:
         ai = self._pieces.config.adaptive_inflation
         self._inflation = InflationEstimator(ai) if ai is not None else None
 
+    def _restart(self, t: float) -> bool:
+        """Restart from the smoother over the readings so far (``setup.smoother_restarts``)
+        where :func:`~enkf.tissue.identify.restart_points` allows it after this reading;
+        a restart the smoother refuses (e.g. too many readings for the discrepancy's dense
+        covariance) is skipped with a warning, and the filter goes on."""
+        times = np.array([r[0] for r in self._readings])
+        data = np.array([r[1] for r in self._readings])
+        if restart_points(self.setup, times, data)[-1:] != [times.size]:
+            return False
+        try:
+            self._X, self._theta, _ = restart_ensemble(self.setup, self._pieces, times, data)
+        except ValueError as err:
+            warnings.warn(f"the restart after the reading at t = {t:g} s is skipped: {err}",
+                          RuntimeWarning, stacklevel=3)
+            return False
+        self.restart_times.append(t)
+        return True
+
     def update(self, t: float, y) -> OnlineEstimate:
         """Assimilate the reading ``y`` ((p,) deg C, NaN = missing) taken at ``t`` (s)."""
         t = float(t)
@@ -89,13 +108,8 @@ class OnlineIdentifier:
         p_mean, p_std = res.param_mean[-1], res.param_std[-1]
         if self.setup.smoother_restarts:  # keep the readings for the smoother's restarts
             self._readings.append((t, y.copy()))
-            if self.setup.restart_after(self.time, t) and any(
-                    np.isfinite(r[1]).any() for r in self._readings):
-                self._X, self._theta, _ = restart_ensemble(
-                    self.setup, self._pieces, np.array([r[0] for r in self._readings]),
-                    np.array([r[1] for r in self._readings]))
+            if self.setup.restart_after(self.time, t) and self._restart(t):
                 p_mean, p_std = self._theta.mean(axis=0), self._theta.std(axis=0, ddof=1)
-                self.restart_times.append(t)
         Y = (self._pieces.P_track @ self._X.T).T
         n = self._pieces.n
         n_off = self.setup.n_sensor_offsets

@@ -255,8 +255,11 @@ class TissueFilterSetup:
                 return
         for name in ("smoother_restart_iterations", "smoother_restart_knots"):
             n = getattr(self, name)
-            if not (isinstance(n, (int, np.integer)) and n >= 1):
+            if not (isinstance(n, (int, np.integer)) and not isinstance(n, bool) and n >= 1):
                 raise ValueError(f"{name} must be an integer >= 1, got {n!r}")
+        if not isinstance(self.smoother_restart_gaussian, (bool, np.bool_)):
+            raise ValueError(f"smoother_restart_gaussian must be True or False, got "
+                             f"{self.smoother_restart_gaussian!r}")
         if self.smoother_restart_delay and not isinstance(r, str):
             raise ValueError(f"smoother_restart_delay = {self.smoother_restart_delay!r} is for "
                              "smoother_restarts = 'laser_off'")
@@ -277,6 +280,24 @@ class TissueFilterSetup:
         if self.sensor_offset_std:
             raise ValueError("smoother_restarts does not estimate sensor offsets: set "
                              "sensor_offset_std = 0")
+        drifting = self.restart_drifting
+        if self.smoother_restart_knots > 1 and not drifting:
+            raise ValueError(f"smoother_restart_knots = {self.smoother_restart_knots} is for "
+                             "drifting optics: no parameter walks (random_walk_std = "
+                             f"{self.random_walk_std!r})")
+        free = len(self.parameter_names) + (self.smoother_restart_knots - 1) * len(drifting)
+        if self.smoother_restart_gaussian and self.n_members <= free:
+            raise ValueError(f"smoother_restart_gaussian needs more members than the restart's "
+                             f"free values ({free}: the parameters, and every knot of the "
+                             f"drifting ones), got n_members = {self.n_members}")
+
+    @property
+    def restart_drifting(self) -> tuple:
+        """The parameters a drifting restart (``smoother_restart_knots >= 2``) lets drift:
+        those whose random walk is not 0."""
+        walk = np.broadcast_to(np.asarray(self.random_walk_std, float),
+                               (len(self.parameter_names),))
+        return tuple(n for n, w in zip(self.parameter_names, walk, strict=True) if w > 0)
 
     def restart_after(self, t_prev: float, t: float) -> bool:
         """Whether the filter restarts from the smoother after the reading at ``t`` (s), the
