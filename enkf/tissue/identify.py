@@ -457,7 +457,9 @@ def identify(setup: TissueFilterSetup, times: np.ndarray, data: np.ndarray, *,
                 res = run_filter(problem, config, health=pieces.health, callback=seg_record)
         except FilterDivergence as err:
             parts.append(err.result)
-            diverged = str(err)
+            # a later segment counts its steps from its restart
+            diverged = str(err) + (f" (steps counted from the restart after the reading at "
+                                   f"{times[a - 1]:g} s, reading {a})" if j else "")
             break
         parts.append(res)
     if diverged is None and M in cuts:  # a restart after the last reading: the final ensemble
