@@ -301,10 +301,7 @@ def _restart_settings(flt: dict, setup_kw: dict, options: dict) -> None:
                 raise ConfigError(f"filter.{k} needs filter.smoother_restarts")
         return
     r = flt["smoother_restarts"]
-    if isinstance(r, str):
-        if r != "laser_off":
-            raise ConfigError(f"filter.smoother_restarts must be a list of times (s) or "
-                              f"\"laser_off\", got {shorten(repr(r))}")
+    if isinstance(r, str):  # TissueFilterSetup names the one allowed
         setup_kw["smoother_restarts"] = r
     elif isinstance(r, list):
         setup_kw["smoother_restarts"] = tuple(
@@ -318,12 +315,8 @@ def _restart_settings(flt: dict, setup_kw: dict, options: dict) -> None:
     if "smoother_restart_delay" in flt:
         setup_kw["smoother_restart_delay"] = float(_num("filter.smoother_restart_delay",
                                                         flt["smoother_restart_delay"], lo=0))
-    if "smoother_restart_gaussian" in flt:
-        v = flt["smoother_restart_gaussian"]
-        if not isinstance(v, bool):
-            raise ConfigError(f"filter.smoother_restart_gaussian must be true or false, got "
-                              f"{shorten(repr(v))}")
-        setup_kw["smoother_restart_gaussian"] = v
+    if "smoother_restart_gaussian" in flt:  # TissueFilterSetup checks it is a bool
+        setup_kw["smoother_restart_gaussian"] = flt["smoother_restart_gaussian"]
     setup_kw["smoother_restart_discrepancy"] = options["discrepancy"]
     setup_kw["smoother_restart_discrepancy_time"] = options["discrepancy_time"]
 

@@ -291,7 +291,7 @@ def restart_ensemble(setup: TissueFilterSetup, pieces: FilterPieces, times, data
     the twins' estimates went to 2-3 times the bound.)
 
     Returns ``(X (N, n_nodes) deg C, theta (N, n_par), wall_s)``."""
-    from .smooth import _knot_values, heated_time, smooth_constant, smooth_drifting
+    from .smooth import heated_time, smooth_constant, smooth_drifting
 
     tic = time.perf_counter()
     kw = dict(n_iter=setup.smoother_restart_iterations,
@@ -302,27 +302,13 @@ def restart_ensemble(setup: TissueFilterSetup, pieces: FilterPieces, times, data
     if setup.smoother_restart_knots > 1:  # drifting: each member's path, then its end
         sm = smooth_drifting(setup, times, data, knots=setup.smoother_restart_knots,
                              drifting=setup.restart_drifting, **kw)
-        V = sm.knots  # (N, K, n_par)
-        if setup.smoother_restart_gaussian:
-            # the free values: every knot of a drifting parameter, the first of a constant
-            drift = np.any(V != V[:, :1], axis=(0, 1))
-            cols = [(k, i) for i in range(V.shape[2])
-                    for k in (range(V.shape[1]) if drift[i] else (0,))]
-            W = gaussian_ensemble(np.stack([V[:, k, i] for k, i in cols], axis=1), rng)
-            V = V.copy()
-            for j, (k, i) in enumerate(cols):
-                if drift[i]:
-                    V[:, k, i] = W[:, j]
-                else:  # one value over every knot
-                    V[:, :, i] = W[:, j, None]
-        heated = heated_time(setup.power, edges)
-        path = _knot_values(V, sm.knot_times, 0.5 * (heated[:-1] + heated[1:]))
-        theta = np.ascontiguousarray(V[:, -1])
     else:
-        theta = np.ascontiguousarray(smooth_constant(setup, times, data, **kw).theta)
-        if setup.smoother_restart_gaussian:
-            theta = gaussian_ensemble(theta, rng)
-        path = np.broadcast_to(theta, (edges.size - 1, *theta.shape))
+        sm = smooth_constant(setup, times, data, **kw)
+    if setup.smoother_restart_gaussian:
+        sm = _redrawn(sm, rng)
+    heated = heated_time(setup.power, edges)
+    path = sm.at(0.5 * (heated[:-1] + heated[1:]))  # each step's optics, (M, N, n_par)
+    theta = np.ascontiguousarray(sm.theta)
     noise = pieces.model_noise()
     X = np.full((theta.shape[0], pieces.model.mesh.p.shape[1]), float(setup.T_initial))
     for k in range(edges.size - 1):
@@ -334,6 +320,25 @@ def restart_ensemble(setup: TissueFilterSetup, pieces: FilterPieces, times, data
             X1 = X1 + np.sqrt(noise) * standard_normal(rng, X1.shape)
         X = X1
     return X, theta, time.perf_counter() - tic
+
+
+def _redrawn(sm, rng: np.random.Generator):
+    """The smoother's estimates ``sm`` with its members replaced by a log-normal draw of
+    their moments (:func:`gaussian_ensemble`): of ``theta``, or with knots of their free
+    values (every knot of a drifting parameter, the first of a constant one), ``theta``
+    then their last knot."""
+    if sm.knots is None:
+        return replace(sm, theta=gaussian_ensemble(sm.theta, rng))
+    V = sm.knots.copy()  # (N, K, n_par)
+    drift = np.any(V != V[:, :1], axis=(0, 1))
+    cols = [(k, i) for i in range(V.shape[2]) for k in (range(V.shape[1]) if drift[i] else (0,))]
+    W = gaussian_ensemble(np.stack([V[:, k, i] for k, i in cols], axis=1), rng)
+    for j, (k, i) in enumerate(cols):
+        if drift[i]:
+            V[:, k, i] = W[:, j]
+        else:  # one value over every knot
+            V[:, :, i] = W[:, j, None]
+    return replace(sm, theta=np.ascontiguousarray(V[:, -1]), knots=V)
 
 
 def gaussian_ensemble(theta: np.ndarray, rng: np.random.Generator) -> np.ndarray:

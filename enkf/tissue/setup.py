@@ -141,14 +141,14 @@ class TissueFilterSetup:
     #: 20 x 20 x 10 surface temperature is then within 0.1% of the fine truth instead of
     #: 1.1% cold (validation/reports/coarse_model_error.md). "lumped" is the P1 lumped mass.
     heat_mass: str = "averaged"
-    #: restarts of the filter from the smoother, for constant optics: after the reading at
-    #: or just after each of these times (s), or after the first reading at or after the end
-    #: of each laser pulse (``"laser_off"``), the parameter ensemble is replaced by the ES-MDA smoother's over
-    #: every reading so far (:func:`enkf.tissue.smooth.smooth_constant`, from the prior) and
-    #: the members' temperatures are re-run to that time with their new optics; then the
-    #: filter goes on. The sequential updates lose information on a curved mua-mus ridge;
-    #: the restart brings it back (docs/enkf.md, "Restarts"). Needs
-    #: ``parameter_model = "random_walk"`` with ``random_walk_std = 0`` and no sensor
+    #: restarts of the filter from the smoother: after the first reading at or after each
+    #: of these times (s), or at or after the end of each laser pulse (``"laser_off"``), the
+    #: parameter ensemble is replaced by the ES-MDA smoother's over every reading so far
+    #: (from the prior; enkf.tissue.identify.restart_ensemble) and the members' temperatures
+    #: are re-run to that time with their new optics; then the filter goes on. The
+    #: sequential updates lose information on a curved mua-mus ridge; the restart brings it
+    #: back (docs/enkf.md, "Restarts"). Needs ``parameter_model = "random_walk"``, with
+    #: ``random_walk_std = 0`` unless ``smoother_restart_knots >= 2``, and no sensor
     #: offsets. () (default): none
     smoother_restarts: tuple | str = ()
     smoother_restart_iterations: int = 8  #: ES-MDA updates of each restart
