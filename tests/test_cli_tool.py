@@ -396,6 +396,8 @@ def test_identify_with_restarts_from_the_smoother(tmp_path, cache):
             kw["smoother_restart_discrepancy"]) == ("laser_off", 2, 0.01)
     assert run("identify", cfg, "--follow", EX / "tiny_data.csv", "--out", tmp_path / "f",
                "--quiet", "--cache-dir", cache) == 0
+    (r,) = json.loads((tmp_path / "f" / "run.json").read_text())["smoother_restarts"]
+    assert r == {"time_s": pytest.approx(1.0), "readings": 10}
     for bad in ("random_walk_std = 0.0\nsmoother_restarts = \"often\"\n",
                 "random_walk_std = 0.0\nsmoother_restarts = [1.0, -2.0]\n",
                 "random_walk_std = 0.0\nsmoother_restarts = 3\n",

@@ -328,7 +328,8 @@ def _follow(args, cfg, absorption, seed, t_emu) -> int:
     def run_json(readings, **extra):
         manifest(out / "run.json", command="identify --follow", config=cfg.raw, seed=seed,
                  timings={"emulator": t_emu, "stream": time.perf_counter() - t0},
-                 extra={"follow": str(args.follow), "readings": readings, **extra})
+                 extra={"follow": str(args.follow), "readings": readings,
+                        **_follow_restarts(ident, setup), **extra})
 
     try:
         n = follow_csv(args.follow, ident, on_update, idle_timeout_s=args.idle_timeout,
@@ -350,6 +351,16 @@ def _follow(args, cfg, absorption, seed, t_emu) -> int:
     # the result, even with --quiet (it hides the progress bars only)
     print(f"{n} readings assimilated -> {out}")
     return 0
+
+
+def _follow_restarts(ident, setup) -> dict:
+    """run.json's ``smoother_restarts`` of a --follow run (summary.json's shape, without
+    the wall time): the time of each restart and the readings it used."""
+    if not setup.smoother_restarts:
+        return {}
+    times = [h.time for h in ident.history]
+    return {"smoother_restarts": [{"time_s": t, "readings": times.index(t) + 1}
+                                  for t in ident.restart_times]}
 
 
 def _live_figure(out, ident, setup) -> None:
