@@ -131,6 +131,7 @@ class _Filter:
                             and config.method == "etkf" and config.mda == 1 and not config.rotate
                             and problem.localization is None)
         self._ahead: dict = {}
+        self.seen = None  #: the analysed forecast of the current step (StepReport.forecast)
         self.rec = _Record(np.concatenate([[problem.t0], problem.obs_times]), self.n_par,
                            problem.tracked.size)
 
@@ -304,6 +305,7 @@ class _Filter:
         R = self.obs_cov_for(Y)
         rho = self.adapt(k, Y, y, R)
         self.evidence(k, Y, y, rho, R)
+        self.seen = (Xf, Y, y, R)
         V = v if v is not None else np.zeros((self.N, 0))
         D = dU if dU is not None else np.zeros((self.N, 0))
         cuts = np.cumsum([self.n_state, self.n_par, V.shape[1]])
@@ -327,6 +329,7 @@ class _Filter:
         v, dU = self._ahead.pop(k) if k in self._ahead else self.noises(t_a, t_b)
         y = self.P.obs_data[k - 1]
         observed = not np.all(np.isnan(y))
+        self.seen = None
         if observed and self.config.mda > 1:
             tic_a = time.perf_counter()
             self.X, self.U = self.step_mda(k, t_a, t_b, v, dU, y, tic)
@@ -346,6 +349,7 @@ class _Filter:
                 if rho != 1.0:  # prior inflation: widen the forecast, observe it again
                     Z = self.inflate_by(Z, rho)
                     Y = self.observe(Z[:, :self.n_state], Z[:, self.n_state:], k, tic)
+                self.seen = (Z[:, :self.n_state], Y, y, R)
                 self.X, self.U = self.spread_out(self.analyse(Z, Y, y, R))
         if observed:
             self.rec.analysed[k - 1] = True
@@ -366,7 +370,8 @@ class _Filter:
             self.callback(StepReport(
                 k, float(r.times[k]), bool(r.analysed[k - 1]) if k else False,
                 float(r.latency[k - 1]) if k else 0.0, r.param_mean[k], r.param_std[k],
-                r.tracked_mean[k], r.tracked_std[k], X, theta))
+                r.tracked_mean[k], r.tracked_std[k], X, theta,
+                self.seen if k and r.analysed[k - 1] else None))
 
 
 def run_filter(

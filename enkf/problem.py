@@ -365,6 +365,12 @@ class StepReport:
     tracked_std: np.ndarray  #: (n_tracked,)
     state_ensemble: np.ndarray  #: (N, n_state)
     param_ensemble: np.ndarray  #: (N, n_par) physical units
+    #: of an analysed step, ``(X_f (N, n_state), Y_f (N, p), y (p,), R)``: the forecast
+    #: state and observations as the analysis saw them (after prior inflation; with
+    #: ``mda > 1`` the first forecast), the data, and the observation-error covariance
+    #: ((p, p), or (p,) variances); None otherwise
+    #: (:func:`enkf.discrepancy.discrepancy_posterior` uses it)
+    forecast: tuple | None = None
 
 
 class FilterDivergence(RuntimeError):

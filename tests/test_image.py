@@ -172,3 +172,109 @@ def test_the_image_model_error_widens_the_bands_and_can_be_turned_off(tissue):
         assert est.diverged is None
         sd[rel] = est.param_std[-1]
     assert np.all(sd[0.05] > 1.2 * sd[0.0])
+
+
+def test_discrepancy_posterior_is_the_joint_kalman_update():
+    """The reported quantity z = Gx + delta_z after an analysis with the model error
+    delta_y in R: the mean and variance of the exact Kalman update of the joint Gaussian
+    (x, delta_z) on a linear model, where the ensemble carries x exactly."""
+    from enkf.analysis import etkf
+    from enkf.discrepancy import discrepancy_posterior
+
+    rng = np.random.default_rng(3)
+    n, p, N = 6, 4, 400
+    H, G = rng.standard_normal((p, n)), rng.standard_normal((2, n))
+    L = rng.standard_normal((n, n))
+    P = L @ L.T / n
+    # the model errors of (y, z): one covariance, y's block in R with the noise
+    B = rng.standard_normal((p + 2, p + 2))
+    K = B @ B.T / (p + 2)
+    k_yy, k_zy, k_zz = K[:p, :p], K[p:, :p], K[p:, p:]
+    R = k_yy + 0.3 * np.eye(p)
+    x_mean, y = rng.standard_normal(n), rng.standard_normal(p)
+    E = rng.multivariate_normal(x_mean, P, size=N)
+    A = E - E.mean(axis=0)
+    P_ens = A.T @ A / (N - 1)  # the filter knows only its ensemble: compare with it
+    Ea = etkf(E, E @ H.T, y, R)
+    shift, var = discrepancy_posterior(E @ G.T, E @ H.T, y, R, k_zy, np.diag(k_zz))
+    # the joint update with the ensemble's covariance
+    S = H @ P_ens @ H.T + R
+    C_zy = G @ P_ens @ H.T + k_zy
+    z_mean = G @ E.mean(axis=0) + C_zy @ np.linalg.solve(S, y - H @ E.mean(axis=0))
+    z_cov = G @ P_ens @ G.T + k_zz - C_zy @ np.linalg.solve(S, C_zy.T)
+    Za = Ea @ G.T
+    assert np.allclose(Za.mean(axis=0) + shift, z_mean, rtol=1e-10, atol=1e-10)
+    assert np.allclose(Za.var(axis=0, ddof=1) + var, np.diag(z_cov), rtol=1e-9)
+    # without a model error nothing changes; diagonal R as (p,) and a missing datum
+    s0, v0 = discrepancy_posterior(E @ G.T, E @ H.T, y, R, np.zeros((2, p)), np.zeros(2))
+    assert np.allclose(s0, 0) and np.allclose(v0, 0)
+    y_gap = y.copy()
+    y_gap[1] = np.nan
+    Rd = np.diag(R).copy()
+    s1, v1 = discrepancy_posterior(E @ G.T, E @ H.T, y_gap, Rd, k_zy, np.diag(k_zz))
+    keep = [0, 2, 3]
+    s2, v2 = discrepancy_posterior(E @ G.T, (E @ H.T)[:, keep], y[keep], Rd[keep],
+                                   k_zy[:, keep], np.diag(k_zz))
+    assert np.allclose(s1, s2) and np.allclose(v1, v2)
+    s3, v3 = discrepancy_posterior(E @ G.T, E @ H.T, np.full(p, np.nan), R, k_zy,
+                                   np.diag(k_zz))
+    assert np.all(s3 == 0) and np.allclose(v3, np.diag(k_zz))
+    with pytest.raises(ValueError, match="shapes"):
+        discrepancy_posterior(E @ G.T, E @ H.T, y, R, k_zy[:, :2], np.diag(k_zz))
+
+
+def test_point_error_is_the_pixels_error_at_a_point():
+    """At a pixel's centre the point's error is that pixel's: the same variance and the
+    same covariance with every pixel (ThermalImage.error_covariance)."""
+    cam = ThermalImage(x_range=(-0.1, 0.1), y_range=(-0.05, 0.05), shape=(2, 4),
+                       model_error_rel_std=0.05, model_error_lengths=(0.04, 0.0))
+    T0 = 37.0
+    rise = np.array([0.0, 1.0, 2.0, 4.0, 8.0, 4.0, 2.0, 1.0])
+    R = cam.error_covariance(T0 + rise, T0)
+    xy = cam.pixel_centers()[:, :2]
+    k_zy, k_zz = cam.point_error(xy[[2, 4]], rise[[2, 4]], T0 + rise, T0)
+    assert np.allclose(k_zy, R[[2, 4]]) and np.allclose(k_zz, np.diag(R)[[2, 4]])
+    # between pixels: no share of the independent (length 0) part
+    k_zy, k_zz = cam.point_error([[0.0, 0.0]], [3.0], T0 + rise, T0)
+    assert k_zz[0] == pytest.approx(2 * (0.05 * 3.0) ** 2)
+    d = np.linalg.norm(xy - 0.0, axis=1)
+    assert np.allclose(k_zy[0], 0.05**2 * 3.0 * rise * np.exp(-0.5 * (d / 0.04) ** 2))
+    with pytest.raises(ValueError, match="point_rise"):
+        cam.point_error([[0.0, 0.0]], [1.0, 2.0], T0 + rise, T0)
+
+
+def test_a_surface_point_under_a_camera_carries_the_camera_model_error(tissue):
+    """With the camera's model error the tracked points on the surface are reported with
+    their share of it, wider than the ensemble's own spread; the points below the surface
+    with the ensemble's alone; in identify and in the online identifier."""
+    import dataclasses
+
+    from enkf.tissue import OnlineIdentifier
+    from enkf.tissue.identify import assemble
+
+    cam = dataclasses.replace(CAMERA, model_error_rel_std=0.05)
+    s = tissue.setup(sensor_positions=np.zeros((0, 3)), image=cam,
+                     tracked_positions=np.array([[0.0, 0.0, 0.0], [0.0, 0.0, 0.1]]))
+    P_track = assemble(s).P_track
+    times, frames = twin_image(s, 1.4, 100.0)
+    frames[5] = np.nan  # a lost frame: the error's whole variance
+    bare = []  # the ensemble's own spread at each step of the same run
+    est = identify(s, times, frames, callback=lambda rep: bare.append(
+        (P_track @ rep.state_ensemble.T).T.std(axis=0, ddof=1)))
+    bare = np.array(bare)  # steps 0..M, as the estimates
+    assert bare.shape == est.tracked_std.shape
+    assert np.allclose(est.tracked_std[:, 1], bare[:, 1], rtol=1e-12)
+    rise = est.tracked_mean[:, 0] - s.T_initial
+    heated = rise > 0.5
+    assert heated.sum() > 10
+    assert np.all(est.tracked_std[heated, 0] > 1.05 * bare[heated, 0])
+    # no frame: the ensemble's variance plus the error's, 2 lengths of 0.05 of the rise
+    k = 6  # frames[5] is the reading of step 6
+    assert not est.analysed[k - 1]
+    assert est.tracked_std[k, 0] ** 2 == pytest.approx(
+        bare[k, 0] ** 2 + 2 * (0.05 * rise[k]) ** 2, rel=1e-9)
+    ident = OnlineIdentifier(s)
+    last = [ident.update(t, f) for t, f in zip(times, frames, strict=True)][-1]
+    Y = (P_track @ ident._X.T).T
+    assert last.tracked_std[1] == pytest.approx(Y[:, 1].std(ddof=1), rel=1e-12)
+    assert last.tracked_std[0] > 1.05 * Y[:, 0].std(ddof=1)

@@ -121,6 +121,9 @@ class FilterPieces:
     observation_offset: Callable | None = None
     #: the image's model error in the readings' covariance (ThermalImage.error_covariance)
     obs_error: Callable | None = None
+    #: ``tracked(rep) -> (mean, std)`` of the tracked points, with the camera's model
+    #: error at those on the top face (:func:`tracked_statistics`)
+    tracked: Callable | None = None
 
     def model_noise(self):
         """The model error of a new run: a :class:`StructuredModelError` on the mesh nodes,
@@ -249,7 +252,55 @@ def assemble(setup: TissueFilterSetup, param_bounds=None, warm_dt: float | None 
                          min_param_std=min_std)
     return FilterPieces(model, P_obs, noise_var, P_track, prior, rw, transforms, dynamics,
                    localization, None if setup.random_walk_when_off == 1.0 else walk_scale,
-                   config, health, n, observation_offset, obs_error)
+                   config, health, n, observation_offset, obs_error,
+                   tracked_statistics(setup, model.mesh, P_track))
+
+
+def tracked_statistics(setup: TissueFilterSetup, mesh, P_track) -> Callable:
+    """``stats(rep: StepReport) -> (mean, std)`` (n_tracked,) deg C: the tracked points'
+    temperatures in the ensemble, and, with a camera whose model error is on
+    (``image.model_error_rel_std > 0``), that error at the tracked points on the top face.
+
+    The camera's model error says the model's surface is a few percent of the rise wrong
+    between the pixels too; the ensemble does not carry it (it lives in the readings'
+    covariance), so a point on the surface is reported with its share
+    (:meth:`ThermalImage.point_error`, :func:`enkf.discrepancy.discrepancy_posterior`):
+    after an analysis, the error's estimate from the frame's innovations and what of its
+    variance the frame leaves; without one, its whole variance. Points below the surface
+    keep the ensemble's statistics (the camera's error says nothing there).
+    """
+    image = setup.image
+    pos = setup.tracked_positions
+    top = np.flatnonzero(np.abs(pos[:, 2] - float(mesh.p[2].min())) <= 1e-9)
+    if image is None or image.model_error_rel_std == 0 or not top.size:
+        def stats(rep):
+            Y = rows_times(P_track, rep.state_ensemble)
+            return Y.mean(axis=0), Y.std(axis=0, ddof=1)
+        return stats
+    P_top, xy = P_track[top], pos[top, :2]
+    p_pts = setup.sensor_positions.shape[0]
+    T_ref = float(setup.T_initial)
+    from ..discrepancy import discrepancy_posterior
+
+    def stats(rep):
+        Y = rows_times(P_track, rep.state_ensemble)
+        mean, var = Y.mean(axis=0), Y.var(axis=0, ddof=1)
+        if rep.forecast is None:  # no frame: the error's prior variance
+            k_zz = image.point_error(xy, mean[top] - T_ref,
+                                     np.full(image.n_pixels, T_ref), T_ref)[1]
+            var[top] += k_zz
+        else:
+            X_f, Y_f, y, R = rep.forecast
+            G_f = rows_times(P_top, X_f)
+            k_pix, k_zz = image.point_error(xy, G_f.mean(axis=0) - T_ref,
+                                            Y_f[:, p_pts:].mean(axis=0), T_ref)
+            k_zy = np.zeros((top.size, Y_f.shape[1]))
+            k_zy[:, p_pts:] = k_pix
+            shift, extra = discrepancy_posterior(G_f, Y_f, y, R, k_zy, k_zz)
+            mean[top] += shift
+            var[top] += extra
+        return mean, np.sqrt(np.maximum(var, 0.0))
+    return stats
 
 
 def restart_points(setup: TissueFilterSetup, times, data=None) -> list[int]:
@@ -418,9 +469,7 @@ def identify(setup: TissueFilterSetup, times: np.ndarray, data: np.ndarray, *,
     frac = np.full(M + 1, np.nan) if coag else None
 
     def record(rep: StepReport, outside: bool = True):
-        Y = rows_times(P_track, rep.state_ensemble)
-        tr_mean[rep.step] = Y.mean(axis=0)
-        tr_std[rep.step] = Y.std(axis=0, ddof=1)
+        tr_mean[rep.step], tr_std[rep.step] = pieces.tracked(rep)
         with np.errstate(invalid="ignore"):
             q_lo[rep.step], q_hi[rep.step] = np.quantile(
                 rep.param_ensemble[:, :n], [0.02275, 0.97725], axis=0)

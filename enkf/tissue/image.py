@@ -118,6 +118,30 @@ class ThermalImage:
         a = self.model_error_rel_std * rise
         return np.outer(a, a) * C
 
+    def point_error(self, points_xy: np.ndarray, point_rise: np.ndarray, predicted: np.ndarray,
+                    T_ref: float) -> tuple[np.ndarray, np.ndarray]:
+        r"""The same model error at points of the top face: ``(k_zy (q, n_pixels), k_zz
+        (q,))`` deg C^2, the covariance of each point's error with the pixels' and its
+        variance, :math:`\alpha^2 |z_i - T_0| |\bar y_j - T_0| \sum_\ell
+        \exp(-d_{ij}^2/2\ell^2)` and :math:`\alpha^2 (z_i - T_0)^2 n_\ell`.
+
+        ``points_xy`` (q, 2) cm, ``point_rise`` (q,) deg C: the model's rise at the points
+        (its forecast less ``T_ref``); ``predicted`` (n_pixels,) deg C as in
+        :meth:`error_covariance`. A model that is a few percent wrong at every pixel is as
+        wrong at a point between them: :func:`enkf.discrepancy.discrepancy_posterior`
+        turns these into the points' share of the error given the frame.
+        """
+        pts = np.asarray(points_xy, float).reshape(-1, 2)
+        a_z = self.model_error_rel_std * np.abs(np.asarray(point_rise, float).reshape(-1))
+        a_y = self.model_error_rel_std * np.abs(np.asarray(predicted, float) - float(T_ref))
+        if a_z.shape != (pts.shape[0],) or a_y.shape != (self.n_pixels,):
+            raise ValueError(f"point_rise must have shape ({pts.shape[0]},) and predicted "
+                             f"({self.n_pixels},), got {a_z.shape} and {a_y.shape}")
+        d2 = np.sum((pts[:, None, :] - self.pixel_centers()[None, :, :2]) ** 2, axis=-1)
+        C = sum((d2 == 0).astype(float) if ell == 0 else np.exp(-0.5 * d2 / ell ** 2)
+                for ell in self.model_error_lengths)
+        return a_z[:, None] * a_y[None, :] * C, a_z ** 2 * len(self.model_error_lengths)
+
     @property
     def n_pixels(self) -> int:
         return int(self.shape[0]) * int(self.shape[1])

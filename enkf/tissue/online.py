@@ -101,20 +101,21 @@ class OnlineIdentifier:
         config = replace(self._pieces.config, seed=seed)
         tic = time.perf_counter()
         keep_freed_memory()  # ensemble-sized temporaries: reuse, not fresh page faults
+        last = []  # the step's report: its forecast gives the camera's error at the points
         with blas_threads(1):
             res = run_filter(problem, config, health=self._pieces.health,
-                             inflation_state=self._inflation)
+                             inflation_state=self._inflation, callback=last.append)
         self._X, self._theta = res.state_ensemble, res.param_ensemble
         p_mean, p_std = res.param_mean[-1], res.param_std[-1]
         if self.setup.smoother_restarts:  # keep the readings for the smoother's restarts
             self._readings.append((t, y.copy()))
             if self.setup.restart_after(self.time, t) and self._restart(t):
                 p_mean, p_std = self._theta.mean(axis=0), self._theta.std(axis=0, ddof=1)
-        Y = (self._pieces.P_track @ self._X.T).T
+                last[-1] = replace(last[-1], state_ensemble=self._X, forecast=None)
+        T_mean, T_std = self._pieces.tracked(last[-1])
         n = self._pieces.n
         n_off = self.setup.n_sensor_offsets
-        est = OnlineEstimate(t, p_mean[:n], p_std[:n], Y.mean(axis=0),
-                             Y.std(axis=0, ddof=1), bool(res.analysed[-1]),
+        est = OnlineEstimate(t, p_mean[:n], p_std[:n], T_mean, T_std, bool(res.analysed[-1]),
                              time.perf_counter() - tic,
                              res.param_mean[-1, -n_off:] if n_off else None,
                              res.param_std[-1, -n_off:] if n_off else None)
