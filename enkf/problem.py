@@ -371,6 +371,10 @@ class StepReport:
     #: ((p, p), or (p,) variances); None otherwise
     #: (:func:`enkf.discrepancy.discrepancy_posterior` uses it)
     forecast: tuple | None = None
+    #: True for the steps an application replays after replacing the ensemble (e.g. the
+    #: tissue filter's restarts from the smoother: each restarted member's re-run from
+    #: step 0, so that what a callback integrates follows the members it now holds)
+    replayed: bool = False
 
 
 class FilterDivergence(RuntimeError):

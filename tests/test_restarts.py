@@ -221,3 +221,39 @@ def test_an_online_restart_the_smoother_refuses_is_skipped(tissue, monkeypatch):
         out = [online.update(t, y) for t, y in zip(times, data, strict=True)]
     assert online.restart_times == [] and len(out) == 20
     assert all(np.all(np.isfinite(o.param_mean)) for o in out)
+
+
+def test_the_callback_sees_the_restarted_members_re_run(tissue):
+    """After a restart the callback gets the restarted members' re-run from step 0
+    (``replayed``), ending at the restarted ensemble, then the filter's steps: a
+    RiskTracker then integrates each member's damage along its own history, which is not
+    what the filter's members before the restart had."""
+    from enkf.tissue.risk import RiskTracker
+
+    s = _setup(tissue, smoother_restarts="laser_off", smoother_restart_iterations=2)
+    times, data = tissue.twin_data(s, 1.3, 80.0)
+    reps = []
+    identify(s, times, data, callback=lambda rep: reps.append(
+        (rep.step, rep.time, rep.replayed, rep.state_ensemble.copy(), rep.param_ensemble.copy())))
+    steps = [(k, r) for k, _, r, _, _ in reps]
+    M = len(times)
+    assert steps == ([(k, False) for k in range(11)] + [(k, True) for k in range(11)]
+                     + [(k, False) for k in range(11, M + 1)])
+    X, theta, _ = restart_ensemble(s, assemble(s, warm_dt=0.1), times[:10], data[:10])
+    replay = [r for r in reps if r[2]]
+    np.testing.assert_allclose(replay[-1][3], X, rtol=1e-12)  # the restarted ensemble
+    np.testing.assert_allclose(replay[-1][4], theta, rtol=1e-12)
+    assert replay[0][1] == 0.0 and replay[-1][1] == pytest.approx(times[9])
+    # a damage law hot enough to count at these temperatures (a few deg C above 0)
+    law = dict(E=1e5, A=1e16)
+    risk = RiskTracker(**law)
+    for k, t, _, Xk, _ in reps:
+        risk.update(t, Xk, step=k)
+    fresh = RiskTracker(**law)  # only the re-run and what follows
+    for k, t, _, Xk, _ in [r for r in reps if r[2] or r[0] > 10]:
+        fresh.update(t, Xk, step=k)
+    np.testing.assert_allclose(risk.omega, fresh.omega, rtol=1e-12)
+    old = RiskTracker(**law)  # the filter's steps alone, as before the replay
+    for k, t, _, Xk, _ in [r for r in reps if not r[2]]:
+        old.update(t, Xk, step=k)
+    assert not np.allclose(old.omega, risk.omega, rtol=1e-3)

@@ -94,8 +94,9 @@ def _identify_one(cfg, absorption, seed, data_path, out_dir, quiet=True) -> dict
 
     def callback(rep):
         if risk is not None:
-            risk(rep)
-        bar.update(rep.step)
+            risk(rep)  # a restart's replay from step 0 recomputes the damage
+        if not rep.replayed:
+            bar.update(rep.step)
 
     t0 = time.perf_counter()
     try:

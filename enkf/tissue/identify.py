@@ -322,8 +322,8 @@ def restart_points(setup: TissueFilterSetup, times, data=None) -> list[int]:
             and setup.restart_after(float(t[k - 1]) if k else 0.0, float(t[k]))]
 
 
-def restart_ensemble(setup: TissueFilterSetup, pieces: FilterPieces, times, data
-                     ) -> tuple[np.ndarray, np.ndarray, float]:
+def restart_ensemble(setup: TissueFilterSetup, pieces: FilterPieces, times, data,
+                     on_step: Callable | None = None) -> tuple[np.ndarray, np.ndarray, float]:
     """The ensemble a restart gives after the readings ``data`` at ``times`` (all of them
     so far): the parameters of the ES-MDA smoother over them
     (:func:`enkf.tissue.smooth.smooth_constant`, or with ``smoother_restart_knots >= 2``
@@ -340,6 +340,9 @@ def restart_ensemble(setup: TissueFilterSetup, pieces: FilterPieces, times, data
     (Keeping instead each filter member's residual, its temperatures less a run of its
     own parameters, carried the analyses' compensation of the old parameters' errors:
     the twins' estimates went to 2-3 times the bound.)
+
+    ``on_step(k, t, X, theta)``, if given, sees the re-run: step 0 at the start, then
+    each step ``k`` at ``times[k - 1]`` with the members' optics of that step.
 
     Returns ``(X (N, n_nodes) deg C, theta (N, n_par), wall_s)``."""
     from .smooth import heated_time, smooth_constant, smooth_drifting
@@ -362,6 +365,8 @@ def restart_ensemble(setup: TissueFilterSetup, pieces: FilterPieces, times, data
     theta = np.ascontiguousarray(sm.theta)
     noise = pieces.model_noise()
     X = np.full((theta.shape[0], pieces.model.mesh.p.shape[1]), float(setup.T_initial))
+    if on_step is not None:
+        on_step(0, float(edges[0]), X, np.ascontiguousarray(path[0]))
     for k in range(edges.size - 1):
         th = np.ascontiguousarray(path[k])
         X1 = pieces.model(X, th, float(edges[k]), float(edges[k + 1]))
@@ -370,6 +375,8 @@ def restart_ensemble(setup: TissueFilterSetup, pieces: FilterPieces, times, data
         elif noise > 0:
             X1 = X1 + np.sqrt(noise) * standard_normal(rng, X1.shape)
         X = X1
+        if on_step is not None:
+            on_step(k + 1, float(edges[k + 1]), X, th)
     return X, theta, time.perf_counter() - tic
 
 
@@ -443,12 +450,17 @@ def identify(setup: TissueFilterSetup, times: np.ndarray, data: np.ndarray, *,
     times : (M,) s, strictly increasing, after 0 (the prior is at t = 0)
     data : (M, p) deg C at ``setup.sensor_positions`` (then the image's pixels);
         NaN = missing (no analysis)
+    callback : called with a :class:`~enkf.problem.StepReport` after each step (the prior
+        is step 0)
     param_bounds : (n_par, 2), physical range of each parameter's ensemble mean;
         leaving it stops the run (default: :meth:`TissueFilterSetup.default_param_bounds`)
 
     With ``setup.smoother_restarts`` the filter restarts from the smoother after the
     readings :func:`restart_points` names (:func:`restart_ensemble`; ``docs/enkf.md``,
-    "Restarts").
+    "Restarts"). After each restart the callback sees the restarted members' re-run again
+    from step 0 (``StepReport.replayed``), then the filter's steps go on: a
+    :class:`~enkf.tissue.risk.RiskTracker` (step 0 starts it afresh) so integrates each
+    member's damage along its own history.
 
     Returns
     -------
@@ -480,6 +492,12 @@ def identify(setup: TissueFilterSetup, times: np.ndarray, data: np.ndarray, *,
         if callback is not None and outside:
             callback(rep)
 
+    def replay(k, t, X, th):  # a restart's re-run, for the callback (StepReport.replayed)
+        rep = StepReport(k, t, False, 0.0, th.mean(axis=0), th.std(axis=0, ddof=1),
+                         np.zeros(0), np.zeros(0), X, th, replayed=True)
+        callback(rep)
+
+    on_step = None if callback is None else replay
     t0 = time.perf_counter()
     diverged = None
     # the restarts from the smoother (setup.smoother_restarts) cut the readings into
@@ -495,7 +513,7 @@ def identify(setup: TissueFilterSetup, times: np.ndarray, data: np.ndarray, *,
         if not j:
             problem = pieces.problem(times[:b], data[:b])
         else:
-            X, theta, w = restart_ensemble(setup, pieces, times[:a], data[:a])
+            X, theta, w = restart_ensemble(setup, pieces, times[:a], data[:a], on_step)
             restarts.append({"time_s": float(times[a - 1]), "readings": a, "wall_s": w})
             problem = pieces.problem(times[a:b], data[a:b], t0=float(times[a - 1]),
                                      prior=lambda rng, N, X=X, th=theta: (X.copy(), th.copy()))
@@ -517,7 +535,7 @@ def identify(setup: TissueFilterSetup, times: np.ndarray, data: np.ndarray, *,
             break
         parts.append(res)
     if diverged is None and M in cuts:  # a restart after the last reading: the final ensemble
-        X, theta, w = restart_ensemble(setup, pieces, times, data)
+        X, theta, w = restart_ensemble(setup, pieces, times, data, on_step)
         restarts.append({"time_s": float(times[-1]), "readings": M, "wall_s": w})
         parts.append(_restarted(parts[-1], X, theta))
         r = parts[-1]
