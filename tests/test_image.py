@@ -134,13 +134,18 @@ def test_identify_from_an_image_with_dead_pixels(kw, tissue):
         tissue.setup(sensor_positions=np.zeros((0, 3)))
 
 
-def test_image_error_covariance_is_relative_to_the_rise_and_correlated_over_the_length():
+def _small_camera():
+    """A 2 x 4 camera with a relative model error of 0.05 at 0.04 cm and per pixel, a
+    rise over T0 = 37 deg C, its error covariance and its pixel centres."""
     cam = ThermalImage(x_range=(-0.1, 0.1), y_range=(-0.05, 0.05), shape=(2, 4),
                        model_error_rel_std=0.05, model_error_lengths=(0.04, 0.0))
     T0 = 37.0
     rise = np.array([0.0, 1.0, 2.0, 4.0, 8.0, 4.0, 2.0, 1.0])
-    R = cam.error_covariance(T0 + rise, T0)
-    xy = cam.pixel_centers()[:, :2]
+    return cam, T0, rise, cam.error_covariance(T0 + rise, T0), cam.pixel_centers()[:, :2]
+
+
+def test_image_error_covariance_is_relative_to_the_rise_and_correlated_over_the_length():
+    cam, T0, rise, R, xy = _small_camera()
     i, j = 2, 3  # neighbours along x in the first row, 0.05 cm apart
     d = np.linalg.norm(xy[i] - xy[j])
     assert d == pytest.approx(0.05)
@@ -226,12 +231,7 @@ def test_discrepancy_posterior_is_the_joint_kalman_update():
 def test_point_error_is_the_pixels_error_at_a_point():
     """At a pixel's centre the point's error is that pixel's: the same variance and the
     same covariance with every pixel (ThermalImage.error_covariance)."""
-    cam = ThermalImage(x_range=(-0.1, 0.1), y_range=(-0.05, 0.05), shape=(2, 4),
-                       model_error_rel_std=0.05, model_error_lengths=(0.04, 0.0))
-    T0 = 37.0
-    rise = np.array([0.0, 1.0, 2.0, 4.0, 8.0, 4.0, 2.0, 1.0])
-    R = cam.error_covariance(T0 + rise, T0)
-    xy = cam.pixel_centers()[:, :2]
+    cam, T0, rise, R, xy = _small_camera()
     k_zy, k_zz = cam.point_error(xy[[2, 4]], rise[[2, 4]], T0 + rise, T0)
     assert np.allclose(k_zy, R[[2, 4]]) and np.allclose(k_zz, np.diag(R)[[2, 4]])
     # between pixels: no share of the independent (length 0) part

@@ -275,6 +275,9 @@ def main(argv=None):
                     help="the filter's FEM divisions (default: the config's 20 20 10)")
     ap.add_argument("--emulator-photons", type=int, default=None,
                     help="the filter's emulator photons at mus = 100 (default: the config's)")
+    ap.add_argument("--emulator-table", type=float, nargs=6, default=None,
+                    metavar=("MUA_LO", "MUA_HI", "N_MUA", "MUS_LO", "MUS_HI", "N_MUS"),
+                    help="the emulator's table (default: the config's)")
     ap.add_argument("--fine-photons", type=int, default=10**6,
                     help="photons of the fine truth's direct Monte Carlo (sections 4-5)")
     ap.add_argument("--emulator-seed", type=int, default=None,
@@ -291,7 +294,8 @@ def main(argv=None):
     args = ap.parse_args(argv)
     ident = load_script(validation_dir(), "identifiability")
     cfg = load_identify(CONFIG)
-    cfg = model_config(cfg, args.grid, args.emulator_photons, args.emulator_seed)
+    cfg = model_config(cfg, args.grid, args.emulator_photons, args.emulator_seed,
+                       args.emulator_table)
     cmd = "python validation/layered.py " + shlex.join(argv if argv is not None else
                                                        __import__("sys").argv[1:])
     lines = ["# Identification under a known epidermis (two layers)", "",
@@ -419,15 +423,19 @@ def main(argv=None):
     print(f"wrote {args.out}")
 
 
-def model_config(cfg, grid=None, photons: int | None = None, seed: int | None = None):
-    """A copy of the config with the filter's FEM divisions, its emulator's photons and its
-    emulator's seed replaced where given (None: the config's)."""
+def model_config(cfg, grid=None, photons: int | None = None, seed: int | None = None,
+                 table=None):
+    """A copy of the config with the filter's FEM divisions, its emulator's photons, seed
+    and table (``(mua_lo, mua_hi, n_mua, mus_lo, mus_hi, n_mus)``) replaced where given
+    (None: the config's)."""
     cfg = copy.copy(cfg)
     if grid is not None:
         cfg.grid = tuple(grid)
-    for key, value in (("n_photons", photons), ("seed", seed)):
-        if value is not None:
-            cfg.emulator_kw = {**cfg.emulator_kw, key: value}
+    kw = {"n_photons": photons, "seed": seed}
+    if table is not None:
+        kw.update(mua_range=(table[0], table[1]), n_mua=int(table[2]),
+                  mus_range=(table[3], table[4]), n_mus=int(table[5]))
+    cfg.emulator_kw = {**cfg.emulator_kw, **{k: v for k, v in kw.items() if v is not None}}
     return cfg
 
 
@@ -440,6 +448,10 @@ def _changes(args, cfg) -> list[str]:
         out.append(f"emulator {args.emulator_photons:,} photons")
     if args.emulator_seed is not None:
         out.append(f"emulator seed {args.emulator_seed}")
+    if args.emulator_table is not None:
+        t = args.emulator_table
+        out.append(f"emulator table mua {t[0]:g}-{t[1]:g} ({t[2]:g} points), mus "
+                   f"{t[3]:g}-{t[4]:g} ({t[5]:g} points)")
     if args.fine_photons != 10**6:
         out.append(f"fine truth {_photons(args.fine_photons)} photons")
     if args.fine_seed != 4242:
