@@ -16,6 +16,7 @@ apart). Writes validation/reports/image_vs_point.md.
 
     python validation/image_vs_point.py [--seeds 0 1 2 3 4] [--scenarios constant time-varying]
         [--truth fine|A|B] [--parameter-model random_walk|trend] [--image-error 0.04]
+        [--window 0.2]
 """
 
 from __future__ import annotations
@@ -54,10 +55,11 @@ ROOT = Path(__file__).resolve().parents[1]
 DEFAULT_OUT = str(ROOT / "validation" / "reports" / "image_vs_point.md")
 
 
-def camera_truth(truth: str, scenario: str, camera):
-    """``times (n,), temps (n, 3), images (n, n_pixels), params {name: (n,)}`` of a truth."""
+def camera_truth(truth: str, scenario: str, camera, frame: tuple = CAMERA):
+    """``times (n,), temps (n, 3), images (n, n_pixels), params {name: (n,)}`` of a truth
+    (``frame``: the camera's ``TruthConfig.camera`` tuple, for the fine truth)."""
     if truth == "fine":
-        return generate_truth(TruthConfig(scenario=scenario, camera=CAMERA))
+        return generate_truth(TruthConfig(scenario=scenario, camera=frame))
     surf = independent_surface(truth, scenario, camera.sample_points()[:, :2])
     opt = np.array([optics(scenario, float(t)) for t in TIMES])
     return SimpleNamespace(times=TIMES, temps=independent_truth(truth, scenario),
@@ -113,19 +115,25 @@ def main(argv=None):
                          "filter is the paper's")
     ap.add_argument("--image-error", type=float, default=None,
                     help="the camera's model_error_rel_std (default: ThermalImage's)")
+    ap.add_argument("--window", type=float, default=None, metavar="HALF",
+                    help="the camera's half-width (cm; default 0.2: x, y in [-0.2, 0.2]), "
+                         "16 x 16 pixels; another one runs a new fine truth")
     ap.add_argument("--out", default=DEFAULT_OUT)
     args = ap.parse_args(argv)
+    frame = CAMERA if args.window is None else (
+        -args.window, args.window, -args.window, args.window, *CAMERA[4:])
     me = {"model_error": args.model_error}
     if args.parameter_model == "trend":
         me.update(parameter_model="trend", random_walk_std=TREND_WALK)
     emu = emulator_for(progress=False)
-    camera = camera_image(CAMERA)
+    camera = camera_image(frame)
     filter_camera = camera if args.image_error is None else dataclasses.replace(
         camera, model_error_rel_std=args.image_error)
     command = (f"python validation/image_vs_point.py --seeds {' '.join(map(str, args.seeds))} "
                f"--scenarios {' '.join(args.scenarios)} --model-error {args.model_error} "
                f"--truth {args.truth} --parameter-model {args.parameter_model}"
                + ("" if args.image_error is None else f" --image-error {args.image_error}")
+               + ("" if args.window is None else f" --window {args.window}")
                + ("" if args.out == DEFAULT_OUT else f" --out {_shown(args.out)}"))
     truth_name = {"fine": "the paper's fine grid (our Monte Carlo and FEM on 100 x 100 x 50)",
                   "A": "independent model A (analog Monte Carlo, finite-difference box)",
@@ -133,7 +141,7 @@ def main(argv=None):
     lines = ["# The whole thermal image against one surface point", "",
              f"Command: `{command}`", "",
              f"Truth: {truth_name[args.truth]}. Camera: {camera.shape[0]} x {camera.shape[1]} "
-             f"pixels over x, y in [{CAMERA[0]}, {CAMERA[1]}] cm (the truth's surface averaged "
+             f"pixels over x, y in [{frame[0]}, {frame[1]}] cm (the truth's surface averaged "
              "over each footprint), noise variance 0.01 per pixel; the filter's pixel model "
              f"error {filter_camera.model_error_rel_std} of the predicted rise at each of the "
              f"correlation lengths {list(filter_camera.model_error_lengths)} cm. Filter: "
@@ -149,7 +157,7 @@ def main(argv=None):
               "with its +-2 sd band; the band holds the truth where it holds zero).", ""]
     shown = {}
     for sc in args.scenarios:
-        truth = camera_truth(args.truth, sc, camera)
+        truth = camera_truth(args.truth, sc, camera, frame)
         rows = {"point": [], "image": []}
         for seed in args.seeds:
             point = filter_setup(sc, emu, seed=seed, model_error=args.model_error)
