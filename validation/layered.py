@@ -278,6 +278,9 @@ def main(argv=None):
     ap.add_argument("--emulator-table", type=float, nargs=6, default=None,
                     metavar=("MUA_LO", "MUA_HI", "N_MUA", "MUS_LO", "MUS_HI", "N_MUS"),
                     help="the emulator's table (default: the config's)")
+    ap.add_argument("--heat-operator", choices=["kronecker", "p1"], default=None,
+                    help="the filter's heat operator (default: the config's, kronecker with "
+                         "the averaged mass; p1: the fine truth's, with the lumped mass)")
     ap.add_argument("--fine-photons", type=int, default=10**6,
                     help="photons of the fine truth's direct Monte Carlo (sections 4-5)")
     ap.add_argument("--emulator-seed", type=int, default=None,
@@ -296,6 +299,9 @@ def main(argv=None):
     cfg = load_identify(CONFIG)
     cfg = model_config(cfg, args.grid, args.emulator_photons, args.emulator_seed,
                        args.emulator_table)
+    if args.heat_operator is not None:
+        cfg.setup_kw = {**cfg.setup_kw, "heat_operator": args.heat_operator,
+                        "heat_mass": "lumped" if args.heat_operator == "p1" else "averaged"}
     cmd = "python validation/layered.py " + shlex.join(argv if argv is not None else
                                                        __import__("sys").argv[1:])
     lines = ["# Identification under a known epidermis (two layers)", "",
@@ -448,6 +454,8 @@ def _changes(args, cfg) -> list[str]:
         out.append(f"emulator {args.emulator_photons:,} photons")
     if args.emulator_seed is not None:
         out.append(f"emulator seed {args.emulator_seed}")
+    if args.heat_operator is not None:
+        out.append(f"filter heat operator {args.heat_operator}")
     if args.emulator_table is not None:
         t = args.emulator_table
         out.append(f"emulator table mua {t[0]:g}-{t[1]:g} ({t[2]:g} points), mus "
