@@ -16,6 +16,7 @@ from fem.threads import blas_threads, keep_freed_memory
 from ..adaptive import AdaptiveInflation
 from ..analysis import gaspari_cohn
 from ..checks import rows_times
+from ..discrepancy import discrepancy_posterior
 from ..health import HealthCheck
 from ..loop import run_filter
 from ..problem import FilterConfig, FilterDivergence, FilterProblem, FilterResult, StepReport, uniform_prior
@@ -122,7 +123,7 @@ class FilterPieces:
     #: the image's model error in the readings' covariance (ThermalImage.error_covariance)
     obs_error: Callable | None = None
     #: ``tracked(rep) -> (mean, std)`` of the tracked points, with the camera's model
-    #: error at those on the top face (:func:`tracked_statistics`)
+    #: error at those on the top face (:func:`tracked_statistics`; assemble sets it)
     tracked: Callable | None = None
 
     def model_noise(self):
@@ -280,7 +281,6 @@ def tracked_statistics(setup: TissueFilterSetup, mesh, P_track) -> Callable:
     P_top, xy = P_track[top], pos[top, :2]
     p_pts = setup.sensor_positions.shape[0]
     T_ref = float(setup.T_initial)
-    from ..discrepancy import discrepancy_posterior
 
     def stats(rep):
         Y = rows_times(P_track, rep.state_ensemble)
