@@ -257,3 +257,29 @@ def test_the_callback_sees_the_restarted_members_re_run(tissue):
     for k, t, _, Xk, _ in [r for r in reps if not r[2]]:
         old.update(t, Xk, step=k)
     assert not np.allclose(old.omega, risk.omega, rtol=1e-3)
+
+
+def test_a_restarted_ensemble_that_fails_the_health_check_keeps_its_own_row(tissue,
+                                                                             monkeypatch):
+    """A restart whose ensemble fails the health check (here: every member the same
+    optics) stops the run there, and the row of that reading is the restarted ensemble's
+    in full: its optics and its members' temperatures, not the filter's before it."""
+    import sys
+
+    ti = sys.modules["enkf.tissue.identify"]  # the package exports the function identify
+    real = ti.restart_ensemble
+
+    def collapsed(*args, **kw):
+        X, theta, w = real(*args, **kw)
+        return X, np.repeat(theta[:1], theta.shape[0], axis=0), w
+
+    monkeypatch.setattr(ti, "restart_ensemble", collapsed)
+    s = _setup(tissue, smoother_restarts="laser_off", smoother_restart_iterations=2)
+    times, data = tissue.twin_data(s, 1.3, 80.0)
+    est = identify(s, times, data)
+    assert est.diverged is not None and "restart" in est.diverged
+    assert len(est.times) == 11 and np.all(est.param_std[10] < 1e-9 * est.param_mean[10])
+    X, theta, _ = collapsed(s, assemble(s, warm_dt=0.1), times[:10], data[:10])
+    T = (assemble(s).P_track @ X.T).T
+    np.testing.assert_allclose(est.tracked_mean[10], T.mean(axis=0), rtol=1e-12)
+    np.testing.assert_allclose(est.param_mean[10], theta[0], rtol=1e-12)

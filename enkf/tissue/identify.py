@@ -529,6 +529,11 @@ def identify(setup: TissueFilterSetup, times: np.ndarray, data: np.ndarray, *,
                 res = run_filter(problem, config, health=pieces.health, callback=seg_record)
         except FilterDivergence as err:
             parts.append(err.result)
+            if j and err.step == 0:  # the restarted ensemble failed: its row is all its own
+                r = err.result
+                record(StepReport(a, float(times[a - 1]), False, 0.0, r.param_mean[0],
+                                  r.param_std[0], r.tracked_mean[0], r.tracked_std[0],
+                                  r.state_ensemble, r.param_ensemble), outside=False)
             # a later segment counts its steps from its restart
             diverged = str(err) + (f" (steps counted from the restart after the reading at "
                                    f"{times[a - 1]:g} s, reading {a})" if j else "")
