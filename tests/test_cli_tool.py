@@ -242,6 +242,15 @@ def test_run_table_and_damage_field(tmp_path, cache, capsys):
     assert pd["damage_Omega_mean"].max() > 0 and np.all(pd["damage_Omega_mean"] >= 0)
     assert np.all((pd["p_damage"] >= 0) & (pd["p_damage"] <= 1))
     assert (out / "fields" / "risk.pvd").exists() and (out / "figures" / "risk_depth_map.png").exists()
+    # with a restart from the smoother the damage is re-run for the restarted members
+    cfg.write_text(cfg.read_text().replace("[filter]\n", "[filter]\nrandom_walk_std = 0.0\n"
+                                           "smoother_restarts = \"laser_off\"\n"
+                                           "smoother_restart_iterations = 2\n", 1))
+    assert run("identify", cfg, "--data", data, "--out", tmp_path / "dmg2", "--quiet",
+               "--cache-dir", cache) == 0
+    assert json.loads((tmp_path / "dmg2" / "summary.json").read_text())["smoother_restarts"]
+    pd2 = meshio.read(tmp_path / "dmg2" / "fields" / "final.vtu").point_data
+    assert pd2["damage_Omega_mean"].max() > 0 and np.all(pd2["damage_Omega_mean"] >= 0)
     bad = tmp_path / "run.toml"
     bad.write_text(TINY + "\n[run]\nschedular = \"tcp://x:1\"\n")
     assert run("heat", bad, "--out", tmp_path / "h") == 2
