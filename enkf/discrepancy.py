@@ -77,7 +77,9 @@ def discrepancy_posterior(G_f: np.ndarray, Y_f: np.ndarray, y: np.ndarray, R: np
     seen = ~np.isnan(y)
     if not seen.any():
         return np.zeros(q), k_zz.copy()
-    A_y = Y_f[:, seen] - Y_f[:, seen].mean(axis=0)
+    Y = Y_f[:, seen]
+    y_mean = Y.mean(axis=0)
+    A_y = Y - y_mean
     A_g = G_f - G_f.mean(axis=0)
     S = A_y.T @ A_y / (N - 1)
     if R.ndim == 1:
@@ -85,7 +87,7 @@ def discrepancy_posterior(G_f: np.ndarray, Y_f: np.ndarray, y: np.ndarray, R: np
     else:
         S += R[np.ix_(seen, seen)]
     k = k_zy[:, seen]
-    rhs = np.column_stack([y[seen] - Y_f[:, seen].mean(axis=0), k.T])
+    rhs = np.column_stack([y[seen] - y_mean, k.T])
     sol = sla.cho_solve(sla.cho_factor(S, lower=True), rhs)  # S^-1 [d, k_yz]
     shift = k @ sol[:, 0]
     B = sol[:, 1:]  # (p, q)

@@ -279,6 +279,7 @@ def tracked_statistics(setup: TissueFilterSetup, mesh, P_track) -> Callable:
             return Y.mean(axis=0), Y.std(axis=0, ddof=1)
         return stats
     P_top, xy = P_track[top], pos[top, :2]
+    C_top = image.point_correlation(xy)  # fixed: the points and the pixels do not move
     p_pts = setup.sensor_positions.shape[0]
     T_ref = float(setup.T_initial)
 
@@ -286,14 +287,14 @@ def tracked_statistics(setup: TissueFilterSetup, mesh, P_track) -> Callable:
         Y = rows_times(P_track, rep.state_ensemble)
         mean, var = Y.mean(axis=0), Y.var(axis=0, ddof=1)
         if rep.forecast is None:  # no frame: the error's prior variance
-            k_zz = image.point_error(xy, mean[top] - T_ref,
-                                     np.full(image.n_pixels, T_ref), T_ref)[1]
+            k_zz = image.point_error(xy, mean[top] - T_ref, np.full(image.n_pixels, T_ref),
+                                     T_ref, C_top)[1]
             var[top] += k_zz
         else:
             X_f, Y_f, y, R = rep.forecast
             G_f = rows_times(P_top, X_f)
             k_pix, k_zz = image.point_error(xy, G_f.mean(axis=0) - T_ref,
-                                            Y_f[:, p_pts:].mean(axis=0), T_ref)
+                                            Y_f[:, p_pts:].mean(axis=0), T_ref, C_top)
             k_zy = np.zeros((top.size, Y_f.shape[1]))
             k_zy[:, p_pts:] = k_pix
             shift, extra = discrepancy_posterior(G_f, Y_f, y, R, k_zy, k_zz)

@@ -88,9 +88,14 @@ class ThermalImage:
     def error_correlation(self) -> np.ndarray:
         """(n_pixels, n_pixels): the sum over ``model_error_lengths`` of the correlations
         ``exp(-d^2 / (2 length^2))`` between pixel centres (the identity for length 0)."""
-        xy = self.pixel_centers()[:, :2]
-        d2 = np.sum((xy[:, None, :] - xy[None, :, :]) ** 2, axis=-1)
-        return sum(np.eye(self.n_pixels) if ell == 0 else np.exp(-0.5 * d2 / ell ** 2)
+        return self.point_correlation(self.pixel_centers()[:, :2])
+
+    def point_correlation(self, points_xy: np.ndarray) -> np.ndarray:
+        """(q, n_pixels): the same sum between points of the top face ``points_xy`` (q, 2)
+        cm and the pixel centres (length 0: one where a point is a pixel's centre)."""
+        pts = np.asarray(points_xy, float).reshape(-1, 2)
+        d2 = np.sum((pts[:, None, :] - self.pixel_centers()[None, :, :2]) ** 2, axis=-1)
+        return sum((d2 == 0).astype(float) if ell == 0 else np.exp(-0.5 * d2 / ell ** 2)
                    for ell in self.model_error_lengths)
 
     def error_covariance(self, predicted: np.ndarray, T_ref: float,
@@ -119,7 +124,8 @@ class ThermalImage:
         return np.outer(a, a) * C
 
     def point_error(self, points_xy: np.ndarray, point_rise: np.ndarray, predicted: np.ndarray,
-                    T_ref: float) -> tuple[np.ndarray, np.ndarray]:
+                    T_ref: float, correlation: np.ndarray | None = None
+                    ) -> tuple[np.ndarray, np.ndarray]:
         r"""The same model error at points of the top face: ``(k_zy (q, n_pixels), k_zz
         (q,))`` deg C^2, the covariance of each point's error with the pixels' and its
         variance, :math:`\alpha^2 |z_i - T_0| |\bar y_j - T_0| \sum_\ell
@@ -129,17 +135,16 @@ class ThermalImage:
         (its forecast less ``T_ref``); ``predicted`` (n_pixels,) deg C as in
         :meth:`error_covariance`. A model that is a few percent wrong at every pixel is as
         wrong at a point between them: :func:`enkf.discrepancy.discrepancy_posterior`
-        turns these into the points' share of the error given the frame.
+        turns these into the points' share of the error given the frame. ``correlation``:
+        :meth:`point_correlation` of the points, if already computed.
         """
-        pts = np.asarray(points_xy, float).reshape(-1, 2)
+        q = np.asarray(points_xy, float).reshape(-1, 2).shape[0]
         a_z = self.model_error_rel_std * np.abs(np.asarray(point_rise, float).reshape(-1))
         a_y = self.model_error_rel_std * np.abs(np.asarray(predicted, float) - float(T_ref))
-        if a_z.shape != (pts.shape[0],) or a_y.shape != (self.n_pixels,):
-            raise ValueError(f"point_rise must have shape ({pts.shape[0]},) and predicted "
+        if a_z.shape != (q,) or a_y.shape != (self.n_pixels,):
+            raise ValueError(f"point_rise must have shape ({q},) and predicted "
                              f"({self.n_pixels},), got {a_z.shape} and {a_y.shape}")
-        d2 = np.sum((pts[:, None, :] - self.pixel_centers()[None, :, :2]) ** 2, axis=-1)
-        C = sum((d2 == 0).astype(float) if ell == 0 else np.exp(-0.5 * d2 / ell ** 2)
-                for ell in self.model_error_lengths)
+        C = self.point_correlation(points_xy) if correlation is None else correlation
         return a_z[:, None] * a_y[None, :] * C, a_z ** 2 * len(self.model_error_lengths)
 
     @property
