@@ -52,7 +52,9 @@ def es_mda(simulate: Callable[[np.ndarray], np.ndarray], U: np.ndarray, y: np.nd
            R: np.ndarray, rng: np.random.Generator, *, n_iter: int = 4,
            alphas: np.ndarray | None = None, method: str = DEFAULT_METHOD,
            center: bool = True,
-           callback: Callable[[int, np.ndarray], None] | None = None) -> np.ndarray:
+           callback: Callable[[int, np.ndarray], None] | None = None,
+           whiten: Callable[[np.ndarray], Callable[[np.ndarray], np.ndarray]] | None = None
+           ) -> np.ndarray:
     """The parameter ensemble after ES-MDA (module doc).
 
     Parameters
@@ -69,6 +71,12 @@ def es_mda(simulate: Callable[[np.ndarray], np.ndarray], U: np.ndarray, y: np.nd
     alphas : the factors instead; their inverses must sum to 1
     method : ``"etkf"`` or ``"enkf"`` (module doc); ``center`` for ``"enkf"``
     callback : ``callback(i, U)`` after each update ``i`` (progress)
+    whiten : readings whose error depends on the predictions (a relative error, as a
+        camera's model error): ``whiten(Y)`` with an update's predictions ``Y`` (N, p)
+        returns the map ``w`` that makes readings of unit, independent error at that
+        forecast, ``w(Z)`` for (M, p) arrays; each update then analyses ``w(Y)`` against
+        ``w(y)`` with error ``R``, which must be 1 (the filter's forecast-dependent
+        ``obs_error`` in a smoother)
     """
     U = float_array(U, "U", 2).copy()
     y = float_array(y, "y", 1)
@@ -78,6 +86,8 @@ def es_mda(simulate: Callable[[np.ndarray], np.ndarray], U: np.ndarray, y: np.nd
     if not np.all(np.isfinite(y)):
         raise ValueError("y must be finite (drop missing readings before the smoother)")
     R = np.asarray(R, float)
+    if whiten is not None and not (R.shape == y.shape and np.all(R == 1.0)):
+        raise ValueError("with whiten the readings' error R must be 1 (whitened readings)")
     for i, a in enumerate(alphas):
         Y = np.asarray(simulate(U), float)
         if Y.shape != (U.shape[0], y.size):
@@ -85,7 +95,11 @@ def es_mda(simulate: Callable[[np.ndarray], np.ndarray], U: np.ndarray, y: np.nd
         if not np.all(np.isfinite(Y)):
             raise FloatingPointError(f"ES-MDA update {i + 1}: a member's predictions are not "
                                      "finite")
-        U = analysis(U, Y, y, a * R, method, rng, center=center)
+        yi = y
+        if whiten is not None:
+            w = whiten(Y)
+            Y, yi = w(Y), w(y[None, :])[0]
+        U = analysis(U, Y, yi, a * R, method, rng, center=center)
         if callback is not None:
             callback(i, U)
     return U

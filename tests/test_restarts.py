@@ -283,3 +283,32 @@ def test_a_restarted_ensemble_that_fails_the_health_check_keeps_its_own_row(tiss
     T = (assemble(s).P_track @ X.T).T
     np.testing.assert_allclose(est.tracked_mean[10], T.mean(axis=0), rtol=1e-12)
     np.testing.assert_allclose(est.param_mean[10], theta[0], rtol=1e-12)
+
+
+def test_the_inflation_estimate_runs_across_the_restarts(tissue, monkeypatch):
+    """identify, as the online identifier: the adaptive inflation's running estimate is
+    one object through every segment (not a fresh one after each restart), and the
+    online identifier's structured model error starts afresh with the restarted members,
+    as identify's segments do."""
+    import sys
+
+    ti = sys.modules["enkf.tissue.identify"]
+    real, seen = ti.run_filter, []
+
+    def spy(*args, **kw):
+        seen.append(kw.get("inflation_state"))
+        return real(*args, **kw)
+
+    monkeypatch.setattr(ti, "run_filter", spy)
+    s = _setup(tissue, smoother_restarts="laser_off", smoother_restart_iterations=2,
+               adaptive_inflation=True, model_error="structured")
+    times, data = tissue.twin_data(s, 1.3, 80.0)
+    est = identify(s, times, data)
+    assert est.diverged is None and len(est.restarts) == 1
+    assert len(seen) == 2 and seen[0] is not None and seen[1] is seen[0]
+    online = OnlineIdentifier(s)
+    for t, y in zip(times[:10], data[:10], strict=True):
+        online.update(t, y)
+    assert online.restart_times == [pytest.approx(1.0)] and online._noise._r is None
+    online.update(times[10], data[10])
+    assert online._noise._r is not None

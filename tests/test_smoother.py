@@ -224,3 +224,84 @@ def test_the_forward_model_reads_the_absorption_once_for_constant_optics(tissue)
     model(T, theta * [1.0, 1.01], 0.3, 0.4)
     model(T[:1], theta[:1] * [1.0, 1.01], 0.4, 0.5)
     assert calls == [2, 2, 1]
+
+
+def test_es_mda_with_a_whitening_map_is_es_mda_with_the_covariance():
+    """``whiten``: readings made unit and independent by a map at each update's forecast;
+    with a fixed map L^-1 the update is the dense covariance L L^T's."""
+    rng = np.random.default_rng(3)
+    G = rng.standard_normal((6, 2))
+    A = rng.standard_normal((6, 6))
+    R = A @ A.T + 0.5 * np.eye(6)
+    L = np.linalg.cholesky(R)
+    y = rng.standard_normal(6)
+    U0 = rng.standard_normal((30, 2))
+    seen = []
+
+    def whiten(Y):
+        seen.append(Y.shape)
+        return lambda Z: np.linalg.solve(L, Z.T).T
+
+    for method in ("etkf", "enkf"):
+        dense = es_mda(lambda U: U @ G.T, U0, y, R, np.random.default_rng(1), n_iter=3,
+                       method=method)
+        white = es_mda(lambda U: U @ G.T, U0, y, np.ones(6), np.random.default_rng(1),
+                       n_iter=3, method=method, whiten=whiten)
+        if method == "etkf":  # no perturbations: the same numbers
+            np.testing.assert_allclose(white, dense, rtol=1e-10)
+        else:  # perturbations drawn in the whitened space: the same distribution
+            assert white.shape == dense.shape
+    assert seen == [(30, 6)] * 6
+    with pytest.raises(ValueError, match="with whiten the readings' error R must be 1"):
+        es_mda(lambda U: U @ G.T, U0, y, R, rng, whiten=whiten)
+
+
+def test_the_smoother_reads_a_camera_with_its_model_error(tissue, monkeypatch):
+    """With the camera's model error each update whitens the frames by their covariance,
+    the pixels' noise plus ThermalImage.error_covariance at the members' mean prediction
+    (the filter's forecast mean; not the data, whose noise would bias the weights), a lost
+    pixel left out; the bands are wider than the pixels' noise alone gives."""
+    import dataclasses
+
+    from test_image import CAMERA, twin_image
+
+    import enkf.tissue.smooth as sm
+
+    cam = dataclasses.replace(CAMERA, model_error_rel_std=0.3)
+    s = tissue.setup(sensor_positions=np.zeros((0, 3)), image=cam, n_members=20)
+    times, frames = twin_image(s, 1.4, 100.0)
+    frames[4, 2] = np.nan  # a dead pixel
+    keep = np.isfinite(frames).ravel()
+    means, at = [], []
+    real_es, real_factors = sm.es_mda, sm._camera_factors
+
+    def spy_es(simulate, *a, **kw):
+        def spied(U):
+            Y = simulate(U)
+            means.append(Y.mean(axis=0))
+            return Y
+        return real_es(spied, *a, **kw)
+
+    def spy_factors(setup, noise_var, predicted):
+        at.append(predicted.copy())
+        out = real_factors(setup, noise_var, predicted)
+        R = 0.01 * np.eye(cam.n_pixels) + cam.error_covariance(
+            np.nan_to_num(predicted[4]), 0.0)
+        m = np.isfinite(predicted[4])
+        np.testing.assert_allclose(out[4][1] @ out[4][1].T, R[np.ix_(m, m)], rtol=1e-12)
+        return out
+
+    monkeypatch.setattr(sm, "es_mda", spy_es)
+    monkeypatch.setattr(sm, "_camera_factors", spy_factors)
+    wide = smooth_constant(s, times, frames, n_iter=2)
+    assert len(at) == len(means) == 2
+    for p, m in zip(at, means, strict=True):
+        assert np.array_equal(np.isfinite(p.ravel()), keep)
+        np.testing.assert_allclose(p.ravel()[keep], m, rtol=1e-12)
+    monkeypatch.undo()
+    plain = smooth_constant(tissue.setup(sensor_positions=np.zeros((0, 3)), image=CAMERA,
+                                         n_members=20), times, frames, n_iter=2)
+    # mua: twice as wide; mus, which these 20 frames hardly tell, wider too
+    assert wide.std[0] > 1.5 * plain.std[0] and wide.std[1] > plain.std[1]
+    with pytest.raises(ValueError, match="discrepancy = 0.01 with the camera's model error"):
+        smooth_constant(s, times, frames, discrepancy=0.01)

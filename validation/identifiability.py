@@ -92,6 +92,32 @@ class ConfigSensor:
         self.model = TissueForwardModel(setup)
         self.P, self.noise_var, _ = observation_operator(setup, self.model.mesh)
         self.times = np.round(np.arange(n_steps + 1) * dt, 10)
+        #: (n_steps, p, p) lower Cholesky factors of each reading's error covariance, or
+        #: None: the readings' own noise (``noise_var``), independent (:meth:`with_error`)
+        self.factors = None
+
+    def with_error(self, truth: dict) -> ConfigSensor:
+        """This sensor with its camera's model error (``setup.image.error_covariance`` at
+        the readings of ``truth``, added to the pixels' noise) in :meth:`series`: the bound
+        that the filter's own error model allows, frames independent as the filter reads
+        them."""
+        import copy
+
+        image = self.setup.image
+        if image is None:
+            raise ValueError("with_error needs a camera (setup.image), the setup has none")
+        theta = np.array([[truth[n] if n in truth else self.setup.nominal[n]
+                           for n in self.setup.parameter_names]])
+        Y = self.readings(theta)[:, :, 0]
+        if Y.shape[1] != image.n_pixels:
+            raise ValueError("with_error is built for a camera without point sensors, got "
+                             f"{Y.shape[1] - image.n_pixels} point sensors")
+        C = image.error_correlation()
+        noise = np.diag(np.broadcast_to(np.asarray(self.noise_var, float), (Y.shape[1],)))
+        out = copy.copy(self)
+        out.factors = np.stack([np.linalg.cholesky(
+            noise + image.error_covariance(y, float(self.setup.T_initial), C)) for y in Y])
+        return out
 
     def readings(self, theta: np.ndarray) -> np.ndarray:
         """(n_steps, p, M) observed temperatures for ``theta`` (M, n_par) in the order of
@@ -108,8 +134,15 @@ class ConfigSensor:
         values = {"mua": mua(0.0), "mus": mus(0.0), "VHC": vhc, "TC": tc}
         theta = np.column_stack([values[n] for n in self.setup.parameter_names])
         Y = self.readings(theta)
-        # rows of equal noise: whiten each observation by its own sd (fisher uses 1)
-        Y = Y / np.sqrt(np.asarray(self.noise_var, float))[None, :, None]
+        # fisher uses unit noise: whiten each reading by its own sd, or each frame by the
+        # factor of its error covariance
+        if self.factors is None:
+            Y = Y / np.sqrt(np.asarray(self.noise_var, float))[None, :, None]
+        else:
+            from scipy.linalg import solve_triangular
+
+            Y = np.stack([solve_triangular(L, y, lower=True)
+                          for L, y in zip(self.factors, Y, strict=True)])
         return Y.reshape(-1, Y.shape[-1])
 
 

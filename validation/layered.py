@@ -62,19 +62,25 @@ POINTS = [(1.0, 100.0), (0.7, 150.0), (1.6, 60.0), (0.5, 50.0), (2.0, 200.0), (0
 DT, N_STEPS = 0.1, 150
 
 
-def sensor_setup(cfg, absorption, kind: str, seed: int = 0, **overrides):
-    """The config's filter setup with its point sensor (``"sensor"``) or a 16 x 16 camera
-    over [-0.2, 0.2]^2 cm and no point sensor (``"camera"``); ``overrides``: other
-    :class:`~enkf.tissue.TissueFilterSetup` settings."""
+def camera(model_error_rel_std: float = 0.0):
+    """The 16 x 16 camera over [-0.2, 0.2]^2 cm (pixel noise variance 0.01) with the model
+    error ``model_error_rel_std`` (0: identical twins, the filter's model is the truth's)."""
     from enkf.tissue.image import ThermalImage
 
+    return ThermalImage((-0.2, 0.2), (-0.2, 0.2), (16, 16), noise_var=0.01,
+                        model_error_rel_std=model_error_rel_std)
+
+
+def sensor_setup(cfg, absorption, kind: str, seed: int = 0, camera_error: float = 0.0,
+                 **overrides):
+    """The config's filter setup with its point sensor (``"sensor"``) or :func:`camera`
+    and no point sensor (``"camera"``, its model error ``camera_error``); ``overrides``:
+    other :class:`~enkf.tissue.TissueFilterSetup` settings."""
     cfg = copy.copy(cfg)
     cfg.setup_kw = {**cfg.setup_kw, **overrides}
     if kind == "camera":
         cfg.setup_kw["sensor_positions"] = np.zeros((0, 3))
-        # identical twins: the filter's model is the truth's, so no model error of the pixels
-        cfg.setup_kw["image"] = ThermalImage((-0.2, 0.2), (-0.2, 0.2), (16, 16), noise_var=0.01,
-                                             model_error_rel_std=0.0)
+        cfg.setup_kw["image"] = camera(camera_error)
     return cfg.setup(absorption, seed=seed)
 
 
@@ -141,19 +147,52 @@ def twin_data(sensor, truth: dict) -> np.ndarray:
 
 
 def fine_data(cfg, truth: dict, photons: int = 10**6, seed: int = 4242) -> np.ndarray:
-    """(N_STEPS, 1) the surface sensor from direct Monte Carlo (``photons``, ``seed``) and
-    the heat simulation on the Monte Carlo's voxels, with the dermis at ``truth``."""
+    """(N_STEPS, 1) the surface sensor of :func:`fine_truth`."""
+    return fine_truth(cfg, truth, photons, seed)["sensor"]
+
+
+def fine_truth(cfg, truth: dict, photons: int = 10**6, seed: int = 4242,
+               cache_dir=None) -> dict:
+    """The surface sensor (``"sensor"``, (N_STEPS, 1)) and the frames of :func:`camera`
+    (``"camera"``, (N_STEPS, 256), each pixel the mean of its 4 x 4 probes) from direct
+    Monte Carlo (``photons``, ``seed``) and the heat simulation on the Monte Carlo's voxels,
+    with the dermis at ``truth``; kept in ``cache_dir`` (default: the emulators' cache,
+    ``layered-fine/``) under a key of the config file and these settings."""
+    import hashlib
+    import os
+
+    from mcmatlab_py.emulator import default_cache_dir
+
+    key = hashlib.sha256(repr((CONFIG.read_bytes(), cfg.medium, truth["mua"], truth["mus"],
+                               int(photons), seed, camera(), N_STEPS, DT)).encode()
+                         ).hexdigest()[:20]
+    path = Path(cache_dir or default_cache_dir()) / "layered-fine" / f"fine-{key}.npz"
+    if path.exists():
+        with np.load(path) as f:
+            return {"sensor": f["sensor"], "camera": f["camera"]}
+    out = _run_fine_truth(cfg, truth, photons, seed)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = path.with_suffix(f".{os.getpid()}.tmp.npz")
+    np.savez(tmp, **out)
+    os.replace(tmp, path)
+    return out
+
+
+def _run_fine_truth(cfg, truth: dict, photons: int, seed: int) -> dict:
     model = copy.deepcopy(cfg.model)
     m = model.G.media[cfg.medium]
     m.mua, m.mus = truth["mua"], truth["mus"]
     model.MC.n_photons_requested = int(photons)
     model.MC.seed = seed
-    model.HS.temp_sensor_positions = [tuple(p) for p in cfg.setup_kw["sensor_positions"]]
+    points = np.asarray(cfg.setup_kw["sensor_positions"], float).reshape(-1, 3)
+    probes = camera().sample_points()
+    model.HS.temp_sensor_positions = [tuple(p) for p in np.vstack([points, probes])]
     model.MC.progress = model.HS.progress = False
     model.run_monte_carlo().simulate_heat_distribution()
     t, T = model.HS.sensor_times, model.HS.sensor_temps
     want = np.round(np.arange(1, N_STEPS + 1) * DT, 10)
-    return np.column_stack([np.interp(want, t, T[:, j]) for j in range(T.shape[1])])
+    T = np.column_stack([np.interp(want, t, T[:, j]) for j in range(T.shape[1])])
+    return {"sensor": T[:, :len(points)], "camera": camera().average(T[:, len(points):])}
 
 
 def _over_seeds(cfg, emulator, kind: str, truth: dict, clean: np.ndarray, seeds, overrides,
@@ -243,7 +282,9 @@ def main(argv=None):
     ap.add_argument("--emulator", action="store_true", help="section 1 (build both ways)")
     ap.add_argument("--photons", type=int, default=100_000, help="emulator photons (section 1)")
     ap.add_argument("--ref-photons", type=int, default=1_000_000)
-    ap.add_argument("--fine", action="store_true", help="section 4 (fine truth, point sensor)")
+    ap.add_argument("--fine", action="store_true",
+                    help="section 4 (fine truth: the point sensor, and the camera with its "
+                         "model error --fine-camera-error)")
     ap.add_argument("--truths", default=",".join(TRUTHS), help="comma-separated labels")
     ap.add_argument("--kinds", default="sensor,camera")
     ap.add_argument("--cache-dir", default=None)
@@ -291,6 +332,9 @@ def main(argv=None):
                     choices=["structured", "white"],
                     help="the filter's model error on the fine truth (default: the config's, "
                          "then white)")
+    ap.add_argument("--fine-camera-error", type=float, default=0.04,
+                    help="the camera's model error on the fine truth (model_error_rel_std; "
+                         "default: ThermalImage's, 0.04)")
     ap.add_argument("--fine-smoother", action="store_true",
                     help="with --fine and --smoother: the smoother on the fine truth too")
     ap.add_argument("--out", default=str(HERE / "reports" / "layered.md"))
@@ -335,7 +379,8 @@ def main(argv=None):
     def fine_of(truth):
         key = (truth["mua"], truth["mus"])
         if key not in fines:
-            fines[key] = fine_data(cfg, truth, args.fine_photons, args.fine_seed)
+            fines[key] = fine_truth(cfg, truth, args.fine_photons, args.fine_seed,
+                                    args.cache_dir)
         return fines[key]
 
     for kind in kinds:
@@ -343,13 +388,24 @@ def main(argv=None):
         for label, truth in truths.items():
             cov = ident.config_bound(sensor, truth)
             crb = np.sqrt(np.diag(cov))
-            rho = cov[0, 1] / (crb[0] * crb[1])
-            crb_rows.append(f"| {kind} | {label}: ({truth['mua']:g}, {truth['mus']:g}) | "
-                            f"{100 * crb[0]:.2f}% | {100 * crb[1]:.2f}% | {rho:+.2f} |")
+            crb_rows.append(_crb_row(kind, label, truth, cov))
             print(crb_rows[-1], flush=True)
-            if args.pseudo_true and kind == "sensor":
-                pseudo_rows.append(_pseudo_row(label, truth, pseudo_true(sensor, fine_of(truth),
-                                                                  truth), crb))
+            fine_here = args.fine and label == next(iter(truths))
+            if fine_here and kind == "camera":
+                # the bound that the filter's error model allows on the fine truth: the
+                # camera's model error added to the pixels' noise
+                err_sensor = ident.ConfigSensor(
+                    sensor_setup(cfg, emulator, kind, camera_error=args.fine_camera_error),
+                    DT, N_STEPS).with_error(truth)
+                err_cov = ident.config_bound(err_sensor, truth)
+                err_crb = np.sqrt(np.diag(err_cov))
+                crb_rows.append(_crb_row(f"camera, model error {args.fine_camera_error:g}",
+                                         label, truth, err_cov))
+                print(crb_rows[-1], flush=True)
+            if args.pseudo_true and (kind == "sensor" or fine_here):
+                pseudo_rows.append(_pseudo_row(f"{kind}, {label}", truth,
+                                               pseudo_true(sensor, fine_of(truth)[kind], truth),
+                                               crb))
                 print(pseudo_rows[-1], flush=True)
             if not len(seeds):
                 continue
@@ -372,8 +428,18 @@ def main(argv=None):
                     f" + AMIS ({args.importance})" if args.importance else "")
                 filt_rows.append(_filter_row(kind, name, label, truth, res, crb))
                 print(filt_rows[-1], flush=True)
-            if args.fine and kind == "sensor" and label == next(iter(truths)):
-                fine = fine_of(truth)
+            if fine_here and kind == "camera":
+                for me in dict.fromkeys(args.fine_model_error or (
+                        cfg.setup_kw.get("model_error", "white"),)):
+                    res = run_seeds(cfg, emulator, kind, truth, fine_of(truth)[kind], seeds,
+                                    {"model_error": me, "camera_error": args.fine_camera_error,
+                                     **overrides})
+                    filt_rows.append(_filter_row(
+                        kind, f"fine, {me}, camera error {args.fine_camera_error:g}{tag} "
+                        "(ratio: to its bound)", label, truth, res, err_crb))
+                    print(filt_rows[-1], flush=True)
+            if fine_here and kind == "sensor":
+                fine = fine_of(truth)["sensor"]
                 for me in dict.fromkeys(args.fine_model_error or (
                         cfg.setup_kw.get("model_error", "white"), "white")):
                     res = run_seeds(cfg, emulator, kind, truth, fine, seeds,
@@ -502,6 +568,13 @@ def pseudo_floor(fit: dict, truth: dict, crb: np.ndarray) -> tuple[np.ndarray, n
     that it puts under any estimator's RMS error with this model."""
     bias = np.array([np.log(fit[n] / truth[n]) for n in ("mua", "mus")])
     return bias, np.sqrt(bias ** 2 + crb ** 2) / crb
+
+
+def _crb_row(kind, label, truth, cov) -> str:
+    crb = np.sqrt(np.diag(cov))
+    rho = cov[0, 1] / (crb[0] * crb[1])
+    return (f"| {kind} | {label}: ({truth['mua']:g}, {truth['mus']:g}) | {100 * crb[0]:.2f}% "
+            f"| {100 * crb[1]:.2f}% | {rho:+.2f} |")
 
 
 def _pseudo_row(label, truth, fit, crb) -> str:

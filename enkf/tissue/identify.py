@@ -13,7 +13,7 @@ import scipy.sparse as sp
 import fem
 from fem.threads import blas_threads, keep_freed_memory
 
-from ..adaptive import AdaptiveInflation
+from ..adaptive import AdaptiveInflation, InflationEstimator
 from ..analysis import gaspari_cohn
 from ..checks import rows_times
 from ..discrepancy import discrepancy_posterior
@@ -507,6 +507,10 @@ def identify(setup: TissueFilterSetup, times: np.ndarray, data: np.ndarray, *,
     cuts = restart_points(setup, times, data)
     edges = [0, *[c for c in cuts if c < M], M]
     parts, restarts = [], []
+    # the inflation estimate runs across the restarts, as in OnlineIdentifier; the
+    # model error's time-correlated field starts afresh with each segment's new members
+    ai = pieces.config.adaptive_inflation
+    inflation = InflationEstimator(ai) if ai is not None else None
     # the filter's dense products are small (50 x 5000): threaded BLAS only spins, and
     # on a busy machine it is 20-30 times slower (measured); numba kernels keep the cores
     keep_freed_memory()  # ensemble-sized temporaries: reuse, not fresh page faults
@@ -527,7 +531,8 @@ def identify(setup: TissueFilterSetup, times: np.ndarray, data: np.ndarray, *,
 
         try:
             with blas_threads(1):
-                res = run_filter(problem, config, health=pieces.health, callback=seg_record)
+                res = run_filter(problem, config, health=pieces.health, callback=seg_record,
+                                 inflation_state=inflation)
         except FilterDivergence as err:
             parts.append(err.result)
             if j and err.step == 0:  # the restarted ensemble failed: its row is all its own

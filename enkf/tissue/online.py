@@ -81,6 +81,10 @@ class OnlineIdentifier:
                           RuntimeWarning, stacklevel=3)
             return False
         self.restart_times.append(t)
+        # new members: their model error's time-correlated field starts afresh, as in
+        # identify's segments (the inflation estimate runs on)
+        if hasattr(self._noise, "reset"):
+            self._noise.reset()
         return True
 
     def update(self, t: float, y) -> OnlineEstimate:
