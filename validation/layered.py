@@ -24,12 +24,17 @@ mua and mus the filter estimates; one laser pulse of 0.5 W for 5 s, 150 readings
    photons) of the layered block and the heat simulation on the Monte Carlo's voxels, for
    the point sensor, with the config's model error (``structured``: data from another
    model) and, for comparison, the white floor; ``--fine-smoother``: the smoother on it too.
+   With ``--kinds camera`` the camera's frames of the same run, the filter with the
+   config's model error and the camera's (``--fine-camera-error``, default 0.04), its
+   ratio to the bound that this error allows (section 2: the camera's model error added to
+   the pixels' noise, ``ConfigSensor.with_error``). The fine truths are cached
+   (``--cache-dir``, ``layered-fine/``).
    ``--grid``, ``--emulator-photons`` and ``--fine-photons`` change the filter's FEM, its
    emulator's photons and the fine truth's photons: how much of the fine truth's error is
    the coarse model's (``docs/layered.md``).
 
 5. **What the model can say about the fine truth** (``--pseudo-true``): the filter's coarse
-   model fitted by least squares to the noise-free fine-truth trace (the "pseudo-true"
+   model fitted by least squares to the noise-free fine-truth trace or frames (the "pseudo-true"
    optics an efficient estimator with this model converges to). Its distance from the
    truth is the model error's share of the error, which no filter setting removes: an
    estimator's RMS error is at least ``sqrt(bias^2 + CRB^2)``, so a bias above 0.83 CRB
@@ -407,6 +412,12 @@ def main(argv=None):
                                                pseudo_true(sensor, fine_of(truth)[kind], truth),
                                                crb))
                 print(pseudo_rows[-1], flush=True)
+            if args.pseudo_true and fine_here and kind == "camera":
+                # the fit the camera's error model asks for (its covariance at the truth)
+                pseudo_rows.append(_pseudo_row(
+                    f"camera with model error {args.fine_camera_error:g}, {label}", truth,
+                    pseudo_true(err_sensor, fine_of(truth)[kind], truth), crb))
+                print(pseudo_rows[-1], flush=True)
             if not len(seeds):
                 continue
             if not (args.no_filter or args.no_twin):
@@ -480,7 +491,10 @@ def main(argv=None):
         lines += [
             "## 5. What the filter's model can say about the fine truth (pseudo-true optics)",
             "", "The filter's coarse model (the emulator's layered loads on the "
-            f"{_grid(cfg.grid)} FEM) fitted by least squares to the noise-free surface trace "
+            f"{_grid(cfg.grid)} FEM) fitted by least squares (weighed by the pixels' or the "
+            "sensor's noise alone, or, 'with model error', by the camera's error covariance "
+            "at the truth, frames independent, as the filter reads them) to the noise-free "
+            "surface trace or frames "
             f"of the fine truth (direct Monte Carlo of {_photons(args.fine_photons)} photons "
             "and the heat simulation on the Monte "
             "Carlo's voxels; section 4). An estimator using this model converges to the fit, "
@@ -543,23 +557,32 @@ def _photons(n: int) -> str:
 
 def _fit(sensor, data: np.ndarray, x0: np.ndarray, noise_sd, **options):
     """``scipy.optimize.least_squares`` of the log parameters: the readings of ``sensor``
-    (:class:`ConfigSensor`) against ``data`` (N_STEPS, p), each whitened by ``noise_sd``."""
+    (:class:`ConfigSensor`) against ``data`` (N_STEPS, p), each whitened by ``noise_sd``,
+    or each frame by ``sensor.factors`` where :meth:`ConfigSensor.with_error` set them."""
+    from scipy.linalg import solve_triangular
     from scipy.optimize import least_squares
 
     def residual(x):
-        return ((sensor.readings(np.exp(x)[None, :])[:, :, 0] - data) / noise_sd).ravel()
+        r = sensor.readings(np.exp(x)[None, :])[:, :, 0] - data
+        if sensor.factors is not None:
+            return np.concatenate([solve_triangular(L, rk, lower=True)
+                                   for L, rk in zip(sensor.factors, r, strict=True)])
+        return (r / noise_sd).ravel()
 
     return least_squares(residual, x0, **options)
 
 
 def pseudo_true(sensor, clean: np.ndarray, truth: dict) -> dict:
     """The coarse model's least-squares fit of (mua, mus) to the noise-free readings
-    ``clean`` (N_STEPS, p), from the truth: {"mua", "mus", "rms"} (cm^-1, deg C)."""
+    ``clean`` (N_STEPS, p), from the truth: {"mua", "mus", "rms"} (cm^-1, deg C; rms: of
+    the readings' residual). The readings weigh as their noise alone, or as the camera's
+    model error says where ``sensor`` has it (:meth:`ConfigSensor.with_error`)."""
     names = tuple(sensor.setup.parameter_names)
     fit = _fit(sensor, clean, np.log([truth[n] for n in names]), 0.1, diff_step=1e-3,
                xtol=1e-8, ftol=1e-10)
     out = dict(zip(names, np.exp(fit.x), strict=True))
-    out["rms"] = float(0.1 * np.sqrt(np.mean(fit.fun ** 2)))
+    r = sensor.readings(np.exp(fit.x)[None, :])[:, :, 0] - clean
+    out["rms"] = float(np.sqrt(np.mean(r ** 2)))
     return out
 
 
