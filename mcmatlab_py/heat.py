@@ -337,6 +337,29 @@ class HeatSimulation(StrictAttributes):
             return 0.0
         return float(self.P(t)) if callable(self.P) else float(self.P)
 
+    def mean_laser_power(self, t0: float, t1: float) -> float:
+        """W averaged over ``[t0, t1)`` (s): :meth:`laser_power` integrated over the pulses'
+        on-times in the interval, over its length. A step that a pulse starts or ends in
+        gets the energy the laser delivers in it, not the power at its middle (which was
+        up to half a step of power off at each edge). Within one pulse or one pause, the
+        power at the middle, ``laser_power(t0 + (t1 - t0) / 2)``; a callable ``P`` is taken
+        at the middle of each on-time."""
+        t0, t1 = float(t0), float(t1)
+        if not t1 > t0:
+            return self.laser_power(t0)
+        period = self.duration_on + self.duration_off
+        first = max(0, math.floor(t0 / period))
+        last = min(self.n_pulses - 1, math.floor(t1 / period))
+        windows = [(max(t0, i * period), min(t1, i * period + self.duration_on))
+                   for i in range(first, last + 1)]
+        windows = [(a, b) for a, b in windows if b > a]
+        if not windows:
+            return 0.0
+        if windows == [(t0, t1)]:
+            return self.laser_power(t0 + 0.5 * (t1 - t0))
+        energy = sum((b - a) * self.peak_power(a + 0.5 * (b - a)) for a, b in windows)
+        return energy / (t1 - t0)
+
     def peak_power(self, t: float) -> float:
         """W of the laser when on at ``t`` (s): what FR-dependent media see (MCmatlab's MC.P)."""
         return float(self.P(t)) if callable(self.P) else float(self.P)

@@ -248,7 +248,7 @@ def run_heat(model) -> None:  # noqa: C901  (one loop with its callbacks)
                 st, scales = stepper_for(dt, vhc, tc), {}
         else:
             st, scales = stepper_for(dt, coupling.vhc_e, coupling.tc_e), {}
-        power = HS.laser_power(t_mid)
+        power = HS.mean_laser_power(t0, t1)  # the step's energy, pulse edges inside it too
         load = power * absorption_load(t_mid) if power != 0 else None  # W
         if scales:
             return st.step(T[None, :], None if load is None else load[None, :], **scales)[0]

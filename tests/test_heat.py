@@ -33,6 +33,39 @@ def test_contract_and_energy_balance():
     assert HS.sensor_temps[10, 0] > HS.sensor_temps[10, 1] > HS.sensor_temps[10, 2] > 0
 
 
+def test_steps_that_a_pulse_edge_cuts_get_the_energy_delivered_in_them():
+    """HS.dt = 0.1 s against pulses of 0.25 s every 0.6 s: the steps that hold a pulse's
+    end get its mean power over the step, so the heat content is still P x absorbed
+    fraction x time on (at the step's middle power, 0.4 s of the 0.5 s on)."""
+    import fem
+
+    model = small_paper_model().run_monte_carlo()
+    HS = model.HS
+    HS.duration_on, HS.duration_off, HS.n_pulses, HS.dt = 0.25, 0.35, 2, 0.1
+    model.simulate_heat_distribution()
+    heat = fem.lumped_mass(HS.mesh, 3.76) @ (HS.T_nodes - HS.T_initial)
+    deposited = HS.P * model.MC.absorbed_fraction * 2 * 0.25
+    assert heat == pytest.approx(deposited, rel=1e-8)
+
+
+def test_mean_laser_power_is_the_energy_over_the_step():
+    model = small_paper_model()
+    HS = model.HS
+    HS.P, HS.duration_on, HS.duration_off, HS.n_pulses = 2.0, 0.25, 0.25, 2
+    assert HS.mean_laser_power(0.1, 0.2) == HS.laser_power(0.15) == 2.0  # within a pulse
+    assert HS.mean_laser_power(0.3, 0.4) == 0.0  # within a pause
+    assert HS.mean_laser_power(1.0, 1.5) == 0.0  # after the train
+    assert HS.mean_laser_power(0.2, 0.3) == pytest.approx(1.0, rel=1e-12)  # an end inside
+    assert HS.mean_laser_power(0.45, 0.55) == pytest.approx(1.0, rel=1e-12)  # a start
+    assert HS.mean_laser_power(0.0, 1.0) == pytest.approx(1.0, rel=1e-12)  # both pulses
+    edges = np.linspace(0.0, 1.3, 14)  # steps of 0.1 s: the energy of the whole train
+    energy = sum((b - a) * HS.mean_laser_power(a, b)
+                 for a, b in zip(edges[:-1], edges[1:], strict=True))
+    assert energy == pytest.approx(2.0 * 2 * 0.25, rel=1e-12)
+    HS.P = lambda t: 4.0 * t  # a callable power: at the middle of the step's on-time
+    assert HS.mean_laser_power(0.2, 0.3) == pytest.approx(0.05 * 4.0 * 0.225 / 0.1)
+
+
 def test_one_dimensional_surface_heating():
     """Plane wave on a strong absorber, cyclic sides: T_surface = 2 q sqrt(alpha t / pi) / k."""
     vhc, tc = 3.76, 0.0037

@@ -312,3 +312,44 @@ def test_the_inflation_estimate_runs_across_the_restarts(tissue, monkeypatch):
     assert online.restart_times == [pytest.approx(1.0)] and online._noise._r is None
     online.update(times[10], data[10])
     assert online._noise._r is not None
+
+
+def test_laser_off_sees_a_pulse_between_two_readings(tissue):
+    """``laser_off``: a pulse that starts and ends between two readings, or a pause shorter
+    than their interval, ends a pulse too (the laser looked at between the readings, not
+    only at them)."""
+    from mcmatlab_py.heat import HeatSimulation
+
+    HS = HeatSimulation(P=1.0, duration_on=0.03, duration_off=1.0, n_pulses=1)
+    s = _setup(tissue, smoother_restarts="laser_off", power=HS.laser_power)
+    assert s.restart_after(0.0, 0.1)  # on at 0 and off at 0.1: the plain case
+    late = HeatSimulation(P=1.0, duration_on=0.03, duration_off=1.0, n_pulses=1)
+    s = _setup(tissue, smoother_restarts="laser_off", power=lambda t: late.laser_power(t - 1.03))
+    assert not s.restart_after(0.9, 1.0)
+    assert s.restart_after(1.0, 1.1)  # a 30 ms pulse from 1.03 s, between two readings
+    assert not s.restart_after(1.1, 1.2)
+    train = HeatSimulation(P=1.0, duration_on=0.08, duration_off=0.01, n_pulses=3)
+    s = _setup(tissue, smoother_restarts="laser_off", power=train.laser_power)
+    assert s.restart_after(0.05, 0.1)  # on at both readings, a 10 ms pause between them
+
+
+def test_the_forecast_gives_a_step_the_energy_of_a_pulse_edge_inside_it(tissue):
+    """With a HeatSimulation's laser_power the filter's heat steps get the schedule's mean
+    power (the pulse ends 0.05 s into the step: half the power), a plain callable its
+    value at the step's middle."""
+    from mcmatlab_py.heat import HeatSimulation
+
+    HS = HeatSimulation(P=0.5, duration_on=0.25, duration_off=1.0, n_pulses=1)
+    model = TissueForwardModel(_setup(tissue, power=HS.laser_power))
+    seen = []
+    real = model.step
+
+    def spy(E, theta, a, b, power):
+        seen.append(power)
+        return real(E, theta, a, b, power)
+
+    model.step = spy
+    X = np.zeros((1, model.mesh.p.shape[1]))
+    model(X, np.array([[1.0, 100.0]]), 0.2, 0.3)
+    assert seen == [pytest.approx(0.25, rel=1e-12)]
+    assert _setup(tissue, power=lambda t: 0.5 if t < 0.25 else 0.0).mean_power(0.2, 0.3) == 0.0

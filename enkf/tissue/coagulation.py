@@ -274,7 +274,7 @@ class CoagulationForwardModel:
         for a, b in self.base.substeps(t0, t1):
             F = coagulated_fraction(omega, w)
             X1 = self.base.step(E_state, self.base_theta(theta, self.optics(theta, F)), a, b,
-                                self.setup.power(0.5 * (a + b)))
+                                self.setup.mean_power(a, b))
             fem.advance_damage(omega, E_state, X1, b - a, c.E, c.A, rule="trapezoid")
             E_state = X1
         self._pending = (float(t1), omega)

@@ -169,10 +169,11 @@ class TissueForwardModel:
         return self.stepper(t1 - t0).step(E_state, load, **kw)
 
     def __call__(self, E_state: np.ndarray, theta: np.ndarray, t0: float, t1: float):
-        """The filter's forecast from ``t0`` to ``t1``: :meth:`step` at the laser power of the
-        interval's middle, in equal sub-steps no longer than ``setup.max_dt``."""
+        """The filter's forecast from ``t0`` to ``t1``: :meth:`step` at each sub-step's laser
+        power (:meth:`TissueFilterSetup.mean_power`), in equal sub-steps no longer than
+        ``setup.max_dt``."""
         for a, b in self.substeps(t0, t1):
-            E_state = self.step(E_state, theta, a, b, self.setup.power(0.5 * (a + b)))
+            E_state = self.step(E_state, theta, a, b, self.setup.mean_power(a, b))
         return E_state
 
     def substeps(self, t0: float, t1: float) -> list[tuple[float, float]]:

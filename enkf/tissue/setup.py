@@ -23,6 +23,12 @@ from .parameters import (
 __all__ = ["TissueFilterSetup"]
 
 
+#: instants between two readings at which ``smoother_restarts = "laser_off"`` looks for
+#: the end of a pulse (:meth:`TissueFilterSetup.restart_after`): pulses and pauses longer
+#: than 1/64 of the readings' interval are seen
+RESTART_PROBES = 64
+
+
 @dataclass
 class TissueFilterSetup:
     """Everything the filter's forward model and the filter need.
@@ -37,7 +43,8 @@ class TissueFilterSetup:
         ``absorption(mua (N,), mus (N,)) -> NA (N, nx, ny, nz)`` in W/cm^3/W.
     power : callable
         ``power(t) -> W``, the laser power at time ``t`` (s), e.g.
-        :meth:`mcmatlab_py.heat.HeatSimulation.laser_power`.
+        :meth:`mcmatlab_py.heat.HeatSimulation.laser_power` (whose schedule then also
+        gives each heat step its energy: :meth:`mean_power`).
     nominal : dict
         Nominal values of mua, mus (cm^-1), VHC (J cm^-3 K^-1), TC (W cm^-1 K^-1):
         VHC and TC are used as known values when not estimated, and the priors are
@@ -299,20 +306,31 @@ class TissueFilterSetup:
                                (len(self.parameter_names),))
         return tuple(n for n, w in zip(self.parameter_names, walk, strict=True) if w > 0)
 
+    def mean_power(self, t0: float, t1: float) -> float:
+        """W over the heat step ``[t0, t1)`` (s): the schedule's average where ``power`` is a
+        :meth:`~mcmatlab_py.heat.HeatSimulation.laser_power` (its ``mean_laser_power``: a
+        pulse that starts or ends inside the step gives it the energy delivered), else
+        ``power`` at the step's middle."""
+        owner = getattr(self.power, "__self__", None)
+        mean = getattr(owner, "mean_laser_power", None)
+        if mean is not None and getattr(self.power, "__name__", "") == "laser_power":
+            return float(mean(t0, t1))
+        return self.power(0.5 * (t0 + t1))
+
     def restart_after(self, t_prev: float, t: float) -> bool:
         """Whether the filter restarts from the smoother after the reading at ``t`` (s), the
         reading before it at ``t_prev`` (:attr:`smoother_restarts`): ``t`` is the first
-        reading at or after a restart time, or the laser is on just after ``t_prev - d`` and
-        off just after ``t - d`` (the first reading at or after the end of a pulse plus
-        ``d = smoother_restart_delay``)."""
+        reading at or after a restart time, or a pulse ended in ``(t_prev - d, t - d]``
+        (the first reading at or after the end of a pulse plus ``d =
+        smoother_restart_delay``). The laser is looked at just after both ends and at
+        :data:`RESTART_PROBES` instants between them, so that a pulse that starts and ends
+        between two readings, or a pause shorter than their interval, counts too."""
         r = self.smoother_restarts
         if isinstance(r, str):
             d = self.smoother_restart_delay
-
-            def on(x):  # the laser a delay ago
-                x -= d
-                return self.power(x + 1e-9 * max(1.0, abs(x))) > 0
-            return on(t_prev) and not on(t)
+            x = np.linspace(t_prev - d, t - d, RESTART_PROBES + 2)
+            on = [self.power(v + 1e-9 * max(1.0, abs(v))) > 0 for v in x]
+            return any(a and not b for a, b in zip(on[:-1], on[1:], strict=True))
         return any(t_prev < tr <= t for tr in r)
 
     @property
