@@ -273,7 +273,7 @@ def test_the_smoother_reads_a_camera_with_its_model_error(tissue, monkeypatch):
     frames[4, 2] = np.nan  # a dead pixel
     keep = np.isfinite(frames).ravel()
     means, at = [], []
-    real_es, real_factors = sm.es_mda, sm._camera_factors
+    real_es, real_factors = sm.es_mda, sm.frame_factors
 
     def spy_es(simulate, *a, **kw):
         def spied(U):
@@ -282,9 +282,9 @@ def test_the_smoother_reads_a_camera_with_its_model_error(tissue, monkeypatch):
             return Y
         return real_es(spied, *a, **kw)
 
-    def spy_factors(setup, noise_var, predicted):
+    def spy_factors(obs_error, noise_var, predicted):
         at.append(predicted.copy())
-        out = real_factors(setup, noise_var, predicted)
+        out = real_factors(obs_error, noise_var, predicted)
         R = 0.01 * np.eye(cam.n_pixels) + cam.error_covariance(
             np.nan_to_num(predicted[4]), 0.0)
         m = np.isfinite(predicted[4])
@@ -292,7 +292,7 @@ def test_the_smoother_reads_a_camera_with_its_model_error(tissue, monkeypatch):
         return out
 
     monkeypatch.setattr(sm, "es_mda", spy_es)
-    monkeypatch.setattr(sm, "_camera_factors", spy_factors)
+    monkeypatch.setattr(sm, "frame_factors", spy_factors)
     wide = smooth_constant(s, times, frames, n_iter=2)
     assert len(at) == len(means) == 2
     for p, m in zip(at, means, strict=True):

@@ -92,7 +92,7 @@ class ConfigSensor:
         self.model = TissueForwardModel(setup)
         self.P, self.noise_var, _ = observation_operator(setup, self.model.mesh)
         self.times = np.round(np.arange(n_steps + 1) * dt, 10)
-        #: (n_steps, p, p) lower Cholesky factors of each reading's error covariance, or
+        #: each reading's error by frame (:func:`enkf.tissue.smooth.frame_factors`), or
         #: None: the readings' own noise (``noise_var``), independent (:meth:`with_error`)
         self.factors = None
 
@@ -102,6 +102,8 @@ class ConfigSensor:
         that the filter's own error model allows, frames independent as the filter reads
         them."""
         import copy
+
+        from enkf.tissue.smooth import frame_factors
 
         image = self.setup.image
         if image is None:
@@ -113,11 +115,22 @@ class ConfigSensor:
             raise ValueError("with_error is built for a camera without point sensors, got "
                              f"{Y.shape[1] - image.n_pixels} point sensors")
         C = image.error_correlation()
-        noise = np.diag(np.broadcast_to(np.asarray(self.noise_var, float), (Y.shape[1],)))
+        noise = np.broadcast_to(np.asarray(self.noise_var, float), (Y.shape[1],))
         out = copy.copy(self)
-        out.factors = np.stack([np.linalg.cholesky(
-            noise + image.error_covariance(y, float(self.setup.T_initial), C)) for y in Y])
+        out.factors = frame_factors(
+            lambda y: image.error_covariance(y, float(self.setup.T_initial), C), noise, Y)
         return out
+
+    def whiten(self, R: np.ndarray) -> np.ndarray:
+        """(n_steps, p, M) readings (or residuals) whitened: each by its noise's sd, or each
+        frame by its error's factor (:meth:`with_error`)."""
+        if self.factors is None:
+            return R / np.sqrt(np.asarray(self.noise_var, float))[None, :, None]
+        from enkf.tissue.smooth import whiten_frames
+
+        n, p, M = R.shape
+        Z = whiten_frames(self.factors, R.transpose(2, 0, 1).reshape(M, n * p))
+        return Z.reshape(M, n, p).transpose(1, 2, 0)
 
     def readings(self, theta: np.ndarray) -> np.ndarray:
         """(n_steps, p, M) observed temperatures for ``theta`` (M, n_par) in the order of
@@ -134,15 +147,7 @@ class ConfigSensor:
         values = {"mua": mua(0.0), "mus": mus(0.0), "VHC": vhc, "TC": tc}
         theta = np.column_stack([values[n] for n in self.setup.parameter_names])
         Y = self.readings(theta)
-        # fisher uses unit noise: whiten each reading by its own sd, or each frame by the
-        # factor of its error covariance
-        if self.factors is None:
-            Y = Y / np.sqrt(np.asarray(self.noise_var, float))[None, :, None]
-        else:
-            from scipy.linalg import solve_triangular
-
-            Y = np.stack([solve_triangular(L, y, lower=True)
-                          for L, y in zip(self.factors, Y, strict=True)])
+        Y = self.whiten(Y)  # fisher uses unit noise
         return Y.reshape(-1, Y.shape[-1])
 
 

@@ -559,14 +559,12 @@ def _fit(sensor, data: np.ndarray, x0: np.ndarray, noise_sd, **options):
     """``scipy.optimize.least_squares`` of the log parameters: the readings of ``sensor``
     (:class:`ConfigSensor`) against ``data`` (N_STEPS, p), each whitened by ``noise_sd``,
     or each frame by ``sensor.factors`` where :meth:`ConfigSensor.with_error` set them."""
-    from scipy.linalg import solve_triangular
     from scipy.optimize import least_squares
 
     def residual(x):
         r = sensor.readings(np.exp(x)[None, :])[:, :, 0] - data
         if sensor.factors is not None:
-            return np.concatenate([solve_triangular(L, rk, lower=True)
-                                   for L, rk in zip(sensor.factors, r, strict=True)])
+            return sensor.whiten(r[:, :, None]).ravel()
         return (r / noise_sd).ravel()
 
     return least_squares(residual, x0, **options)

@@ -287,25 +287,23 @@ def _smooth(setup, times, data, n_iter, seed, n_knots, drift_log_std, discrepanc
 
     noise = np.tile(np.asarray(pieces.noise_var, float), times.size)
     R = noise[keep]
-    whiten, frames = None, {}
-    camera_error = setup.image is not None and setup.image.model_error_rel_std > 0
-    if camera_error:
+    whiten = None
+    if pieces.obs_error is not None:  # the camera's model error, as the filter reads it
         if discrepancy > 0:
             raise ValueError(f"discrepancy = {discrepancy:g} with the camera's model error "
                              f"(image.model_error_rel_std = {setup.image.model_error_rel_std:g}): "
                              "the camera's error stands for the model's; set discrepancy = 0")
         noise_var = np.asarray(pieces.noise_var, float)
-        shape = data.shape
 
         def whiten(Y: np.ndarray):
             """Each frame whitened by its error's factor at the members' mean prediction
             (the filter's forecast mean; the data's own rise would weigh the pixels that
             the noise pulled down most, a bias of 5-6% in mua and mus on the layered fine
             truth): unit noise, independent readings."""
-            mean = np.full(shape, np.nan).ravel()
+            mean = np.full(data.shape, np.nan).ravel()
             mean[keep] = Y.mean(axis=0)
-            frames["now"] = _camera_factors(setup, noise_var, mean.reshape(shape))
-            return lambda Z: _whiten(frames["now"], Z)
+            factors = frame_factors(pieces.obs_error, noise_var, mean.reshape(data.shape))
+            return lambda Z: whiten_frames(factors, Z)
 
         R = np.ones_like(R)
     elif discrepancy > 0:
@@ -368,35 +366,28 @@ def _smooth(setup, times, data, n_iter, seed, n_knots, drift_log_std, discrepanc
                              n_modes=n_modes)
 
 
-def _camera_factors(setup, noise_var: np.ndarray, predicted: np.ndarray):
-    """The readings' error by frame with the camera's model error: a list over frames of
-    ``(n_kept, L)``, ``L`` the lower Cholesky factor of the covariance of the frame's
-    finite entries of ``predicted`` (n_frames, p) deg C, the noise ``noise_var`` (p,) plus
-    :meth:`ThermalImage.error_covariance` over the pixels (the point sensors first) at
-    that prediction (NaN: no rise)."""
-    image = setup.image
-    T0 = float(setup.T_initial)
-    n_pix = image.n_pixels
-    C = image.error_correlation()
+def frame_factors(obs_error, noise_var: np.ndarray, predicted: np.ndarray) -> list:
+    """The readings' error by frame: a list over the frames of ``predicted`` (n_frames, p)
+    deg C of ``(n_kept, L)``, ``L`` the lower Cholesky factor of the covariance of the
+    frame's finite entries, the noise ``noise_var`` (p,) plus ``obs_error(frame)`` (the
+    filter's forecast-dependent error, e.g. :attr:`FilterPieces.obs_error`: a camera's
+    model error at that prediction)."""
     out = []
     for row in predicted:
-        pix = row[-n_pix:]
-        R = np.diag(noise_var)
-        R[-n_pix:, -n_pix:] += image.error_covariance(np.where(np.isfinite(pix), pix, T0), T0,
-                                                      C)
+        R = np.diag(noise_var) + obs_error(row)
         m = np.isfinite(row)
         out.append((int(m.sum()), np.linalg.cholesky(R[np.ix_(m, m)])))
     return out
 
 
-def _whiten(frames, Y: np.ndarray) -> np.ndarray:
-    """(M, n) readings, frame after frame as :func:`_camera_factors` keeps them, each
+def whiten_frames(factors, Y: np.ndarray) -> np.ndarray:
+    """(M, n) readings, frame after frame as :func:`frame_factors` keeps them, each
     frame's block multiplied by its factor's inverse."""
     from scipy.linalg import solve_triangular
 
     out = np.empty_like(Y)
     a = 0
-    for n, L in frames:
+    for n, L in factors:
         out[:, a:a + n] = solve_triangular(L, Y[:, a:a + n].T, lower=True).T
         a += n
     return out
