@@ -42,7 +42,13 @@ variances; ``E_rw`` random-walk covariance. See docs/enkf.md.
 
 from importlib.metadata import PackageNotFoundError, version
 
-from .adaptive import AdaptiveInflation, InflationEstimator, innovation_loglik
+from .adaptive import (
+    AdaptiveInflation,
+    InflationEstimator,
+    innovation_loglik,
+    innovation_persistence,
+    normalized_innovation,
+)
 from .analysis import enkf_perturbed_obs, etkf, inflate, random_rotation
 from .health import HealthCheck
 from .importance import ImportanceSample, amis
@@ -88,6 +94,8 @@ __all__ = [
     "etkf",
     "inflate",
     "innovation_loglik",
+    "innovation_persistence",
+    "normalized_innovation",
     "random_rotation",
     "run_filter",
     "uniform_prior",

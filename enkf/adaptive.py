@@ -57,8 +57,13 @@ from dataclasses import dataclass
 
 import numpy as np
 
-__all__ = ["AdaptiveInflation", "InflationEstimator", "innovation_loglik", "innovation_statistics"]
+__all__ = ["PERSISTENCE_THRESHOLD", "AdaptiveInflation", "InflationEstimator",
+           "innovation_loglik", "innovation_persistence", "innovation_statistics", "normalized_innovation",
+           "persistence_flagged"]
 
+#: lag-1 correlation of the normalized innovations above which a run is flagged
+#: (:func:`persistence_flagged`; docs/beyond.md, "A model that misses the truth's physics")
+PERSISTENCE_THRESHOLD = 0.3
 
 @dataclass(frozen=True)
 class AdaptiveInflation:
@@ -186,3 +191,56 @@ class InflationEstimator:
         rho = (self.num + n0 * self.s.initial) / (self.den + n0)
         self.rho = float(np.clip(rho, *self.s.bounds))
         return self.rho
+
+
+def normalized_innovation(Y: np.ndarray, y: np.ndarray, R: np.ndarray) -> np.ndarray:
+    """Each component of the innovation over its forecast sd, ``(y - ȳ) / sqrt(var(Y) +
+    R_ii)`` (p,): unit variance when the forecast and ``R`` are right; NaN where ``y`` is.
+    ``Y`` (N, p) the forecast ensemble in observation space, ``R`` (p,) variances or
+    (p, p) covariance."""
+    Y = np.asarray(Y, float)
+    R = np.asarray(R, float)
+    var = Y.var(axis=0, ddof=1) + (R if R.ndim == 1 else np.diag(R))
+    with np.errstate(invalid="ignore", divide="ignore"):
+        return (np.asarray(y, float) - Y.mean(axis=0)) / np.sqrt(var)
+
+
+def innovation_persistence(z: np.ndarray, steps: np.ndarray | None = None) -> tuple[float, int]:
+    r"""Lag-1 correlation of the normalized innovations from one reading to the next.
+
+    ``z`` (M, p): :func:`normalized_innovation` of each step (a row of NaN where nothing
+    was analysed); ``steps`` (M,) bool: the steps to use (default all). Over the pairs of
+    consecutive steps ``(k - 1, k)`` both in ``steps``, and the components finite in both,
+
+    .. math::
+
+        r = \frac{\sum z_{k,i}\, z_{k-1,i}}{\sqrt{\sum z_{k,i}^2\,\sum z_{k-1,i}^2}}.
+
+    The filter's innovations are white when its model is right: each analysis takes out
+    what the data had to say. An error of the model that persists from step to step (a
+    wrong geometry, boundary or heat transport) leaves innovations that persist with it.
+    Returns ``(r, n)``, ``n`` the number of component pairs summed (``(nan, 0)`` without
+    any); with white innovations ``r`` scatters about 0 with sd ``1/sqrt(n)``.
+    """
+    z = np.asarray(z, float)
+    if z.ndim != 2:
+        raise ValueError(f"z must be (M, p) normalized innovations, got shape {z.shape}")
+    use = np.ones(z.shape[0], bool) if steps is None else np.asarray(steps, bool)
+    if use.shape != (z.shape[0],):
+        raise ValueError(f"steps must be ({z.shape[0]},) booleans, got shape {use.shape}")
+    pair = use[1:] & use[:-1]
+    a, b = z[1:][pair], z[:-1][pair]
+    ok = np.isfinite(a) & np.isfinite(b)
+    n = int(ok.sum())
+    if n == 0:
+        return float("nan"), 0
+    a, b = a[ok], b[ok]
+    den = float(np.sqrt(np.sum(a * a) * np.sum(b * b)))
+    return (float(np.sum(a * b) / den) if den > 0 else float("nan")), n
+
+
+def persistence_flagged(r: float, n: int, threshold: float = PERSISTENCE_THRESHOLD) -> bool:
+    """Whether a persistence ``r`` over ``n`` pairs (:func:`innovation_persistence`)
+    says the model misses something: above ``threshold`` and above 3 sd of white
+    innovations' ``r`` (``3 / sqrt(n)``)."""
+    return bool(n > 0 and np.isfinite(r) and r > max(threshold, 3.0 / np.sqrt(n)))

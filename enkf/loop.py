@@ -43,7 +43,7 @@ from collections.abc import Callable
 
 import numpy as np
 
-from .adaptive import InflationEstimator, innovation_loglik
+from .adaptive import InflationEstimator, innovation_loglik, normalized_innovation
 from .analysis import analysis, enkf_localized, inflate, random_rotation
 from .checks import as_generator, cov_sqrt, covariance, float_array, rows_times, variances
 from .health import HealthCheck
@@ -64,7 +64,7 @@ def _stats(X: np.ndarray, ddof: int = 1) -> tuple[np.ndarray, np.ndarray]:
 class _Record:
     """Per-step statistics of a run, filled step by step (step 0 is the prior)."""
 
-    def __init__(self, times: np.ndarray, n_par: int, n_tracked: int):
+    def __init__(self, times: np.ndarray, n_par: int, n_tracked: int, n_obs: int):
         M = times.size - 1
         self.times = times
         self.param_mean = np.full((M + 1, n_par), np.nan)
@@ -76,6 +76,7 @@ class _Record:
         self.analysis_latency = np.zeros(M)
         self.inflation = np.ones(M)
         self.loglik = np.full(M, np.nan)
+        self.innovation = np.full((M, n_obs), np.nan)
 
     def result(self, k: int, X: np.ndarray, theta: np.ndarray) -> FilterResult:
         """Steps ``0..k`` with the ensemble ``(X, theta)``."""
@@ -84,7 +85,7 @@ class _Record:
             self.param_std[: k + 1].copy(), self.tracked_mean[: k + 1].copy(),
             self.tracked_std[: k + 1].copy(), self.analysed[:k].copy(),
             self.latency[:k].copy(), self.analysis_latency[:k].copy(), X, theta,
-            self.inflation[:k].copy(), self.loglik[:k].copy())
+            self.inflation[:k].copy(), self.loglik[:k].copy(), self.innovation[:k].copy())
 
 
 class _Filter:
@@ -133,7 +134,7 @@ class _Filter:
         self._ahead: dict = {}
         self.seen = None  #: the analysed forecast of the current step (StepReport.forecast)
         self.rec = _Record(np.concatenate([[problem.t0], problem.obs_times]), self.n_par,
-                           problem.tracked.size)
+                           problem.tracked.size, self.p)
 
     def _check_sizes(self) -> None:
         P, n_state, p = self.P, self.n_state, self.p
@@ -261,8 +262,10 @@ class _Filter:
     def evidence(self, k: int, Y: np.ndarray, y: np.ndarray, rho: float, R: np.ndarray) -> None:
         """Record the log-density of this step's data under the forecast the analysis uses
         (with the adaptive factor ``rho``, error covariance ``R``): summed, the model's log
-        evidence."""
+        evidence; and its normalized innovation (before the factor: what the raw forecast
+        missed)."""
         self.rec.loglik[k - 1] = innovation_loglik(Y, y, R, rho)
+        self.rec.innovation[k - 1] = normalized_innovation(Y, y, R)
 
     def inflate_by(self, Z: np.ndarray, rho: float) -> np.ndarray:
         """Anomalies of the augmented ensemble times sqrt(rho): the state part, or all."""

@@ -335,6 +335,11 @@ class FilterResult:
         Log-density of each step's data under its forecast
         (:func:`enkf.adaptive.innovation_loglik`; NaN where nothing was analysed):
         the sum over a run compares models on the same data.
+    innovation_normalized : ndarray, shape (M, p)
+        Each step's innovation over its forecast sd, component by component
+        (:func:`enkf.adaptive.normalized_innovation`; NaN where nothing was analysed):
+        white when the model is right; :func:`enkf.adaptive.innovation_persistence`
+        measures how much it persists from step to step.
     """
 
     times: np.ndarray
@@ -349,6 +354,7 @@ class FilterResult:
     param_ensemble: np.ndarray
     inflation: np.ndarray | None = None
     innovation_loglik: np.ndarray | None = None
+    innovation_normalized: np.ndarray | None = None
 
 
 @dataclass(frozen=True)

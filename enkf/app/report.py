@@ -118,6 +118,25 @@ def _runs(t, on):
     return out
 
 
+def persistence_summary(est) -> dict | None:
+    """summary.json's ``innovation_persistence``: the lag-1 correlation of the normalized
+    innovations while the laser is off and over all readings, whether it is flagged
+    (:func:`enkf.adaptive.persistence_flagged`) and what that means; None when the run
+    did not record its innovations."""
+    from ..adaptive import PERSISTENCE_THRESHOLD, persistence_flagged
+    from ..tissue.identify import PERSISTENCE_ADVICE
+
+    if getattr(est, "innovation_normalized", None) is None:
+        return None
+    r_off, n_off = est.innovation_persistence("off")
+    r_all, n_all = est.innovation_persistence("all")
+    flagged = persistence_flagged(r_off, n_off)
+    return {"laser_off": None if n_off == 0 else round(r_off, 4), "laser_off_pairs": n_off,
+            "all": None if n_all == 0 else round(r_all, 4), "all_pairs": n_all,
+            "threshold": PERSISTENCE_THRESHOLD, "flagged": flagged,
+            "advice": PERSISTENCE_ADVICE.format(r=r_off) if flagged else None}
+
+
 def write_identify_outputs(out: Path, setup, est, times, data, *, absorption=None,
                            risk=None, media: dict | None = None) -> dict:
     """estimates.csv, summary.json, figures/estimates.png, fields/final.vtu into ``out``.
@@ -161,6 +180,10 @@ def write_identify_outputs(out: Path, setup, est, times, data, *, absorption=Non
             "sum": est.log_evidence() if hasattr(est, "log_evidence") else None,
             "per_reading": est.log_evidence() / max(1, int(np.sum(est.analysed)))
             if hasattr(est, "log_evidence") else None},
+        # whether the innovations persist from reading to reading while the laser is off:
+        # the model then misses something the data show, and the bands below the surface
+        # may be too narrow (docs/beyond.md)
+        "innovation_persistence": persistence_summary(est),
         "timing": {"filter_wall_s": float(est.filter_wall_s),
                    "step_latency_median_s": float(np.median(est.step_latency_s))
                    if len(est.step_latency_s) else 0.0,

@@ -13,7 +13,12 @@ import scipy.sparse as sp
 import fem
 from fem.threads import blas_threads, keep_freed_memory
 
-from ..adaptive import AdaptiveInflation, InflationEstimator
+from ..adaptive import (
+    AdaptiveInflation,
+    InflationEstimator,
+    innovation_persistence,
+    persistence_flagged,
+)
 from ..analysis import gaspari_cohn
 from ..checks import rows_times
 from ..discrepancy import discrepancy_posterior
@@ -27,7 +32,16 @@ from .forward import TissueForwardModel, observation_operator
 from .model_error import StructuredModelError
 from .setup import TissueFilterSetup
 
-__all__ = ["FilterPieces", "TissueEstimates", "assemble", "identify"]
+__all__ = ["PERSISTENCE_ADVICE", "FilterPieces", "TissueEstimates", "assemble", "identify"]
+
+#: what a flagged persistence means (summary.json, the command line's warning)
+PERSISTENCE_ADVICE = (
+    "the filter's innovations persist from reading to reading while the laser is off "
+    "(lag-1 correlation {r:.2f}; white when the model is right): the heat model misses "
+    "something the data show (the tissue's shape, boundaries, perfusion, conduction), and "
+    "the temperature bands below the surface, and the optics' bands, may be too narrow. "
+    "Check the geometry and the heat settings against the tissue; see docs/beyond.md, "
+    "'A model that misses the truth's physics'")
 
 
 @dataclass
@@ -48,6 +62,10 @@ class TissueEstimates:
     ``innovation_loglik``: (M,) log-density of each reading under the forecast (NaN where
     none was analysed; :func:`enkf.adaptive.innovation_loglik`): the sums of two models on
     the same data compare them.
+    ``innovation_normalized``: (M, p) each reading's innovation over its forecast sd
+    (:func:`enkf.adaptive.normalized_innovation`, NaN where none was analysed), and
+    ``laser_on``: (M,) whether the laser delivered energy during each step;
+    :meth:`innovation_persistence` tells from them whether the model misses something.
     ``sensor_offset_mean``/``sensor_offset_std``: (M+1, n_sensors) deg C, the point
     sensors' estimated offsets with ``sensor_offset_std > 0``; else None.
     With restarts (``setup.smoother_restarts``) the row of a restart's reading holds the
@@ -74,6 +92,8 @@ class TissueEstimates:
     effective_std: np.ndarray | None = None
     coagulated_fraction: np.ndarray | None = None
     innovation_loglik: np.ndarray | None = None
+    innovation_normalized: np.ndarray | None = None
+    laser_on: np.ndarray | None = None
     #: (M+1, n_sensors) deg C: mean and sd of the point sensors' estimated offsets
     #: (``setup.sensor_offset_std > 0``), else None
     sensor_offset_mean: np.ndarray | None = None
@@ -87,6 +107,27 @@ class TissueEstimates:
         if self.innovation_loglik is None:
             return float("nan")
         return float(np.nansum(self.innovation_loglik))
+
+    def innovation_persistence(self, laser: str = "off") -> tuple[float, int]:
+        """Lag-1 correlation of the normalized innovations from reading to reading, and the
+        number of pairs it sums (:func:`enkf.adaptive.innovation_persistence`), over the
+        steps where the laser is ``"off"`` (default), ``"on"``, or over ``"all"``.
+
+        With the laser off the forecast is heat conduction alone and the optics no longer
+        take up what the model gets wrong, so a heat model that misses the tissue's physics
+        (its shape, boundaries, conduction) leaves innovations that persist from frame to
+        frame: ``(nan, 0)`` when not recorded or no such pair.
+        """
+        if laser not in ("off", "on", "all"):
+            raise ValueError(f"laser must be 'off', 'on' or 'all', got {laser!r}")
+        z = self.innovation_normalized
+        if z is None or z.shape[0] == 0:
+            return float("nan"), 0
+        if laser == "all" or self.laser_on is None:
+            steps = None if laser == "all" else np.zeros(z.shape[0], bool)
+        else:
+            steps = self.laser_on[: z.shape[0]] == (laser == "on")
+        return innovation_persistence(z, steps)
 
     def param_band(self, i: int) -> tuple[np.ndarray, np.ndarray]:
         """(low, high) of parameter ``i`` over time: the ensemble's 2.3 % and 97.7 %
@@ -423,7 +464,12 @@ def _restarted(last: FilterResult, X: np.ndarray, theta: np.ndarray) -> FilterRe
     return FilterResult(last.times[-1:].copy(), theta.mean(axis=0)[None],
                         theta.std(axis=0, ddof=1)[None], np.full((1, nt), np.nan),
                         np.full((1, nt), np.nan), np.zeros(0, bool), empty, empty, X, theta,
-                        empty, empty)
+                        empty, empty, _no_rows(last.innovation_normalized))
+
+
+def _no_rows(a: np.ndarray | None) -> np.ndarray | None:
+    """``a``'s shape with no rows (a restart's row adds no step)."""
+    return None if a is None else np.zeros((0, *a.shape[1:]))
 
 
 def _join(parts: list[FilterResult]) -> FilterResult:
@@ -433,7 +479,7 @@ def _join(parts: list[FilterResult]) -> FilterResult:
         return parts[0]
     rows = ("times", "param_mean", "param_std", "tracked_mean", "tracked_std")
     steps = ("analysed", "step_latency_s", "analysis_latency_s", "inflation",
-             "innovation_loglik")
+             "innovation_loglik", "innovation_normalized")
     out = {k: np.concatenate([getattr(r, k)[:-1] for r in parts[:-1]]
                              + [getattr(parts[-1], k)]) for k in rows}
     out.update({k: np.concatenate([getattr(r, k) for r in parts]) for k in steps})
@@ -560,7 +606,7 @@ def identify(setup: TissueFilterSetup, times: np.ndarray, data: np.ndarray, *,
                       f"{clamped['member_steps']} member-steps over {clamped['forecast_steps']} "
                       f"forecast steps: {clamped['advice']}", RuntimeWarning, stacklevel=2)
     k = len(res.times)
-    return TissueEstimates(
+    est = TissueEstimates(
         times=res.times, names=setup.parameter_names, param_mean=res.param_mean[:, :n],
         param_std=res.param_std[:, :n],
         tracked_positions=setup.tracked_positions, tracked_mean=tr_mean[:k],
@@ -571,6 +617,13 @@ def identify(setup: TissueFilterSetup, times: np.ndarray, data: np.ndarray, *,
         effective_std=None if eff_std is None else eff_std[:k],
         coagulated_fraction=None if frac is None else frac[:k],
         innovation_loglik=res.innovation_loglik,
+        innovation_normalized=res.innovation_normalized,
+        laser_on=np.array([setup.mean_power(float(a), float(b)) > 0
+                           for a, b in zip(res.times[:-1], res.times[1:], strict=True)]),
         sensor_offset_mean=res.param_mean[:, -n_off:] if n_off else None,
         sensor_offset_std=res.param_std[:, -n_off:] if n_off else None,
         restarts=tuple(restarts))
+    r, n_pairs = est.innovation_persistence("off")
+    if persistence_flagged(r, n_pairs):
+        warnings.warn(PERSISTENCE_ADVICE.format(r=r), RuntimeWarning, stacklevel=2)
+    return est
