@@ -190,9 +190,14 @@ def test_identify_from_an_npz_image_series(tmp_path, cache):
     frames[4, 0, 1] = np.nan
     np.savez(tmp_path / "frames.npz", times=times, frames=frames)
     out = tmp_path / "img"
-    rc = run("identify", cfg, "--data", tmp_path / "frames.npz", "--out", out, "--quiet",
-             "--cache-dir", cache)
+    with pytest.warns(RuntimeWarning, match="persist from reading to reading"):
+        rc = run("identify", cfg, "--data", tmp_path / "frames.npz", "--out", out, "--quiet",
+                 "--cache-dir", cache)
     assert rc == 0 and (out / "estimates.csv").exists()
+    # frames that keep rising after the pulse: no heat model does that (lag-1 0.82)
+    pers = json.loads((out / "summary.json").read_text())["innovation_persistence"]
+    assert pers["flagged"] and pers["laser_off"] > 0.5 and pers["laser_off_pairs"] == 54
+    assert "docs/beyond.md" in pers["advice"]
     # the smoother's discrepancy is for point sensors: refused with a camera (exit 2)
     cfg.write_text(cfg.read_text().replace("[filter]\n", "[filter]\nsmoother_iterations = 2\n"
                                            "smoother_discrepancy = 0.01\n", 1))
@@ -315,6 +320,23 @@ def _identify_tiny(tmp_path, cache, filter_lines: str):
     assert run("identify", cfg, "--data", EX / "tiny_data.csv", "--out", out, "--quiet",
                "--cache-dir", cache) == 0
     return cfg, out, json.loads((out / "summary.json").read_text())
+
+
+def test_summary_and_run_json_say_whether_the_innovations_persist(tmp_path, cache):
+    """summary.json (and --follow's run.json) give the lag-1 persistence of the
+    innovations while the laser is off, and whether it is flagged: on the tiny twin's
+    data it is not (9 laser-off pairs of one sensor); with a camera whose frames go on
+    rising after the pulse it is (test_identify_from_an_npz_image_series)."""
+    cfg, out, s = _identify_tiny(tmp_path, cache, "")
+    pers = s["innovation_persistence"]
+    assert set(pers) == {"laser_off", "laser_off_pairs", "all", "all_pairs", "threshold",
+                         "flagged", "advice"}
+    assert pers["laser_off_pairs"] == 9 and pers["all_pairs"] == 17  # the reading at 1 s is missing
+    assert not pers["flagged"] and pers["advice"] is None and -1 <= pers["laser_off"] <= 1
+    assert run("identify", cfg, "--follow", EX / "tiny_data.csv", "--out", tmp_path / "f",
+               "--quiet", "--cache-dir", cache) == 0
+    live = json.loads((tmp_path / "f" / "run.json").read_text())["innovation_persistence"]
+    assert live["laser_off_pairs"] == 9 and not live["flagged"]
 
 
 def test_identify_reports_the_sensor_offsets(tmp_path, cache):

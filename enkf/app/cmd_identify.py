@@ -290,7 +290,7 @@ def _follow(args, cfg, absorption, seed, t_emu) -> int:
     from ..tissue import OnlineIdentifier
     from ..tissue.absorption import fill_prior_points
     from .readers import follow_csv
-    from .report import manifest
+    from .report import manifest, persistence_summary
 
     out = Path(args.out)
     if args.force and out.is_dir():
@@ -348,7 +348,10 @@ def _follow(args, cfg, absorption, seed, t_emu) -> int:
     finally:
         fh.close()
     _live_figure(out, ident, setup)
-    run_json(n)
+    persistence = persistence_summary(ident)
+    run_json(n, innovation_persistence=persistence)
+    if persistence["flagged"]:
+        warnings.warn(persistence["advice"], RuntimeWarning, stacklevel=2)
     # the result, even with --quiet (it hides the progress bars only)
     print(f"{n} readings assimilated -> {out}")
     return 0

@@ -121,18 +121,22 @@ def _runs(t, on):
 def persistence_summary(est) -> dict | None:
     """summary.json's ``innovation_persistence``: the lag-1 correlation of the normalized
     innovations while the laser is off and over all readings, whether it is flagged
-    (:func:`enkf.adaptive.persistence_flagged`) and what that means; None when the run
-    did not record its innovations."""
+    (:func:`enkf.adaptive.persistence_flagged`) and what that means, of ``est`` (a
+    :class:`~enkf.tissue.TissueEstimates` or an :class:`~enkf.tissue.OnlineIdentifier`);
+    None for an object without ``innovation_persistence``."""
     from ..adaptive import PERSISTENCE_THRESHOLD, persistence_flagged
     from ..tissue.identify import PERSISTENCE_ADVICE
 
-    if getattr(est, "innovation_normalized", None) is None:
+    if not hasattr(est, "innovation_persistence"):
         return None
     r_off, n_off = est.innovation_persistence("off")
     r_all, n_all = est.innovation_persistence("all")
     flagged = persistence_flagged(r_off, n_off)
-    return {"laser_off": None if n_off == 0 else round(r_off, 4), "laser_off_pairs": n_off,
-            "all": None if n_all == 0 else round(r_all, 4), "all_pairs": n_all,
+    def num(r):
+        return round(float(r), 4) if np.isfinite(r) else None
+
+    return {"laser_off": num(r_off), "laser_off_pairs": n_off,
+            "all": num(r_all), "all_pairs": n_all,
             "threshold": PERSISTENCE_THRESHOLD, "flagged": flagged,
             "advice": PERSISTENCE_ADVICE.format(r=r_off) if flagged else None}
 

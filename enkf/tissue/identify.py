@@ -32,7 +32,8 @@ from .forward import TissueForwardModel, observation_operator
 from .model_error import StructuredModelError
 from .setup import TissueFilterSetup
 
-__all__ = ["PERSISTENCE_ADVICE", "FilterPieces", "TissueEstimates", "assemble", "identify"]
+__all__ = ["PERSISTENCE_ADVICE", "FilterPieces", "TissueEstimates", "assemble", "identify",
+           "laser_persistence"]
 
 #: what a flagged persistence means (summary.json, the command line's warning)
 PERSISTENCE_ADVICE = (
@@ -110,24 +111,9 @@ class TissueEstimates:
 
     def innovation_persistence(self, laser: str = "off") -> tuple[float, int]:
         """Lag-1 correlation of the normalized innovations from reading to reading, and the
-        number of pairs it sums (:func:`enkf.adaptive.innovation_persistence`), over the
-        steps where the laser is ``"off"`` (default), ``"on"``, or over ``"all"``.
-
-        With the laser off the forecast is heat conduction alone and the optics no longer
-        take up what the model gets wrong, so a heat model that misses the tissue's physics
-        (its shape, boundaries, conduction) leaves innovations that persist from frame to
-        frame: ``(nan, 0)`` when not recorded or no such pair.
-        """
-        if laser not in ("off", "on", "all"):
-            raise ValueError(f"laser must be 'off', 'on' or 'all', got {laser!r}")
-        z = self.innovation_normalized
-        if z is None or z.shape[0] == 0:
-            return float("nan"), 0
-        if laser == "all" or self.laser_on is None:
-            steps = None if laser == "all" else np.zeros(z.shape[0], bool)
-        else:
-            steps = self.laser_on[: z.shape[0]] == (laser == "on")
-        return innovation_persistence(z, steps)
+        number of pairs it sums, over the steps where the laser is ``"off"`` (default),
+        ``"on"``, or over ``"all"``: :func:`laser_persistence`."""
+        return laser_persistence(self.innovation_normalized, self.laser_on, laser)
 
     def param_band(self, i: int) -> tuple[np.ndarray, np.ndarray]:
         """(low, high) of parameter ``i`` over time: the ensemble's 2.3 % and 97.7 %
@@ -465,6 +451,28 @@ def _restarted(last: FilterResult, X: np.ndarray, theta: np.ndarray) -> FilterRe
                         theta.std(axis=0, ddof=1)[None], np.full((1, nt), np.nan),
                         np.full((1, nt), np.nan), np.zeros(0, bool), empty, empty, X, theta,
                         empty, empty, _no_rows(last.innovation_normalized))
+
+
+def laser_persistence(z: np.ndarray | None, laser_on: np.ndarray | None,
+                      laser: str = "off") -> tuple[float, int]:
+    """:func:`enkf.adaptive.innovation_persistence` of the normalized innovations ``z``
+    (M, p) over the steps where the laser is ``"off"`` (``laser_on`` (M,) False), ``"on"``,
+    or over ``"all"``; ``(nan, 0)`` when ``z`` was not recorded or no pair is left.
+
+    With the laser off the forecast is heat conduction alone and the optics no longer take
+    up what the model gets wrong, so a heat model that misses the tissue's physics (its
+    shape, boundaries, conduction) leaves innovations that persist from frame to frame.
+    """
+    if laser not in ("off", "on", "all"):
+        raise ValueError(f"laser must be 'off', 'on' or 'all', got {laser!r}")
+    if z is None or len(z) == 0:
+        return float("nan"), 0
+    z = np.asarray(z, float)
+    if laser == "all":
+        return innovation_persistence(z)
+    if laser_on is None:
+        return float("nan"), 0
+    return innovation_persistence(z, np.asarray(laser_on, bool)[: z.shape[0]] == (laser == "on"))
 
 
 def _no_rows(a: np.ndarray | None) -> np.ndarray | None:

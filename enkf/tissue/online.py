@@ -12,7 +12,7 @@ from fem.threads import blas_threads, keep_freed_memory
 
 from ..adaptive import InflationEstimator
 from ..loop import run_filter
-from .identify import assemble, restart_ensemble, restart_points
+from .identify import assemble, laser_persistence, restart_ensemble, restart_points
 from .setup import TissueFilterSetup
 
 __all__ = ["OnlineEstimate", "OnlineIdentifier"]
@@ -32,6 +32,11 @@ class OnlineEstimate:
     #: (n_sensors,) deg C: the point sensors' estimated offsets (``sensor_offset_std > 0``)
     sensor_offset_mean: np.ndarray | None = None
     sensor_offset_std: np.ndarray | None = None
+    #: (n_obs,) the reading's innovation over its forecast sd (NaN where not analysed;
+    #: :func:`enkf.adaptive.normalized_innovation`), and whether the laser delivered
+    #: energy since the reading before
+    innovation_normalized: np.ndarray | None = None
+    laser_on: bool | None = None
 
 
 class OnlineIdentifier:
@@ -87,6 +92,16 @@ class OnlineIdentifier:
             self._noise.reset()
         return True
 
+    def innovation_persistence(self, laser: str = "off") -> tuple[float, int]:
+        """Lag-1 correlation of the normalized innovations of the readings so far, while
+        the laser is ``"off"`` (default), ``"on"``, or over ``"all"``, and the number of
+        pairs it sums (:func:`~enkf.tissue.identify.laser_persistence`, as
+        :meth:`TissueEstimates.innovation_persistence`)."""
+        if not self.history:
+            return laser_persistence(None, None, laser)
+        return laser_persistence(np.array([h.innovation_normalized for h in self.history]),
+                                 np.array([h.laser_on for h in self.history]), laser)
+
     def update(self, t: float, y) -> OnlineEstimate:
         """Assimilate the reading ``y`` ((p,) deg C, NaN = missing) taken at ``t`` (s)."""
         t = float(t)
@@ -122,7 +137,9 @@ class OnlineIdentifier:
         est = OnlineEstimate(t, p_mean[:n], p_std[:n], T_mean, T_std, bool(res.analysed[-1]),
                              time.perf_counter() - tic,
                              res.param_mean[-1, -n_off:] if n_off else None,
-                             res.param_std[-1, -n_off:] if n_off else None)
+                             res.param_std[-1, -n_off:] if n_off else None,
+                             res.innovation_normalized[-1].copy(),
+                             bool(self.setup.mean_power(self.time, t) > 0))
         self.time = t
         self.history.append(est)
         return est
