@@ -165,7 +165,7 @@ def plot(path: Path, rows) -> None:
     ax.axhline(0.9, color="0.5", ls=":", lw=1)
     ax.set(xlabel="lag-1 correlation of the innovations, laser off",
            ylabel="coverage of the +-2 sd band at 0.2 cm",
-           title="the innovations tell when the bands below the surface fail")
+           title="persistence of the innovations, laser off, and the coverage at 0.2 cm")
     ax.legend(fontsize=7, ncol=2)
     tmp = path.with_suffix(".tmp.png")
     fig.savefig(tmp, dpi=110)
