@@ -38,6 +38,8 @@ SUITE: dict[str, tuple[list | None, list | None]] = {
     "sensor_offset": (None, []),  # the same emulator and the independent truths
     "walk_bound": (None, []),  # the same emulator and the independent truths
     "image_vs_point": (None, []),
+    # the innovations' persistence against the bands' coverage: the independent truths
+    "persistence": (None, ["--seeds", *map(str, range(20))]),
     "sensitivity": ([], []),
 }
 
