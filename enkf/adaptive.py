@@ -58,12 +58,13 @@ from dataclasses import dataclass
 import numpy as np
 
 __all__ = ["PERSISTENCE_THRESHOLD", "AdaptiveInflation", "InflationEstimator",
-           "innovation_loglik", "innovation_persistence", "innovation_statistics", "normalized_innovation",
-           "persistence_flagged"]
+           "innovation_loglik", "innovation_persistence", "innovation_statistics",
+           "normalized_innovation", "persistence_flagged"]
 
 #: lag-1 correlation of the normalized innovations above which a run is flagged
 #: (:func:`persistence_flagged`; docs/beyond.md, "A model that misses the truth's physics")
 PERSISTENCE_THRESHOLD = 0.3
+
 
 @dataclass(frozen=True)
 class AdaptiveInflation:

@@ -76,7 +76,9 @@ class _Record:
         self.analysis_latency = np.zeros(M)
         self.inflation = np.ones(M)
         self.loglik = np.full(M, np.nan)
-        self.innovation = np.full((M, n_obs), np.nan)
+        # single precision: a correlation needs no more, and a long run of a large camera
+        # keeps M x p of them
+        self.innovation = np.full((M, n_obs), np.nan, dtype=np.float32)
 
     def result(self, k: int, X: np.ndarray, theta: np.ndarray) -> FilterResult:
         """Steps ``0..k`` with the ensemble ``(X, theta)``."""

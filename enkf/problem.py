@@ -335,7 +335,7 @@ class FilterResult:
         Log-density of each step's data under its forecast
         (:func:`enkf.adaptive.innovation_loglik`; NaN where nothing was analysed):
         the sum over a run compares models on the same data.
-    innovation_normalized : ndarray, shape (M, p)
+    innovation_normalized : ndarray of float32, shape (M, p)
         Each step's innovation over its forecast sd, component by component
         (:func:`enkf.adaptive.normalized_innovation`; NaN where nothing was analysed):
         white when the model is right; :func:`enkf.adaptive.innovation_persistence`

@@ -132,6 +132,7 @@ def persistence_summary(est) -> dict | None:
     r_off, n_off = est.innovation_persistence("off")
     r_all, n_all = est.innovation_persistence("all")
     flagged = persistence_flagged(r_off, n_off)
+
     def num(r):
         return round(float(r), 4) if np.isfinite(r) else None
 
