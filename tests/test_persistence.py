@@ -155,3 +155,19 @@ def test_identify_flags_a_truth_whose_conduction_the_model_misses(tissue, tmp_pa
         json.dumps(summary)  # plain JSON
     with pytest.raises(ValueError, match="laser"):
         est.innovation_persistence("maybe")
+
+
+def test_the_figure_draws_the_pixel_beside_the_first_point(tissue):
+    """identify's estimates.png draws, beside the first tracked point, the first sensor's
+    data; with a camera alone, the pixel whose centre is nearest the point (before: the
+    first data column, a corner pixel)."""
+    from enkf.app.report import _data_beside_first_point
+    from enkf.tissue import ThermalImage
+
+    cam = ThermalImage(x_range=(-0.2, 0.2), y_range=(-0.1, 0.1), shape=(2, 4))
+    s = tissue.setup(sensor_positions=np.zeros((0, 3)), image=cam,
+                     tracked_positions=[(0.12, 0.06, 0.0), (0.0, 0.0, 0.1)])
+    col, label = _data_beside_first_point(s)
+    # pixel centres: x -0.15, -0.05, 0.05, 0.15; y -0.05, 0.05 (rows in C order)
+    assert col == 7 and label == "data (pixel at 0.15, 0.05 cm)"
+    assert _data_beside_first_point(tissue.setup()) == (0, "data (first sensor)")

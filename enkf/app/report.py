@@ -52,8 +52,10 @@ def manifest(path: Path, *, command: str, config: dict | None, seed, timings: di
                       "finished": time.strftime("%Y-%m-%dT%H:%M:%S%z"), **(extra or {})})
 
 
-def plot_identification(path, est, times, data, power, names_obs=None) -> None:
-    """Temperature tracks (top, with the data of the first sensor) and parameters (bottom).
+def plot_identification(path, est, times, data, power, data_column: int = 0,
+                        data_label: str = "data (first column)") -> None:
+    """Temperature tracks (top, with ``data[:, data_column]`` beside the first tracked
+    point, labelled ``data_label``) and parameters (bottom).
 
     Temperature bands are mean +- 2 sd; parameter bands are the ensemble's 2.3 % and 97.7 %
     quantiles (positive, like the members: the filter works on log parameters, where a
@@ -84,7 +86,7 @@ def plot_identification(path, est, times, data, power, names_obs=None) -> None:
         ax = axes_t[j]
         m, s = est.tracked_mean[:, j], est.tracked_std[:, j]
         if j == 0 and data is not None and data.shape[1]:
-            ax.plot(times, data[:, 0], "k.", ms=2.5, label="data (first column)")
+            ax.plot(times, data[:, data_column], "k.", ms=2.5, label=data_label)
         ax.plot(t, m, "r-", lw=1.4, label=f"{method} mean")
         ax.fill_between(t, m - 2 * s, m + 2 * s, color="r", alpha=0.15, lw=0, label="$\\pm 2$ sd")
         x, y, z = est.tracked_positions[j]
@@ -101,6 +103,13 @@ def plot_identification(path, est, times, data, power, names_obs=None) -> None:
         ax.set(title=f"{name} [{PARAMETER_LABELS.get(name, '')}]", xlabel="time [s]")
         if i == 0:
             ax.legend(fontsize=8)
+    # a model that misses the data's physics: said where the bands are drawn
+    summary = persistence_summary(est)
+    if summary is not None and summary["flagged"]:
+        fig.suptitle(f"Caution: the innovations persist while the laser is off (lag-1 "
+                     f"{summary['laser_off']:.2f}):\nthe model misses something the data show, "
+                     "and the bands below the surface may be too narrow (summary.json)",
+                     color="firebrick", fontsize=9)
     fig.savefig(path, dpi=110)
     plt.close(fig)
 
@@ -116,6 +125,18 @@ def _runs(t, on):
     if start is not None:
         out.append((start, t[-1]))
     return out
+
+
+def _data_beside_first_point(setup) -> tuple[int, str]:
+    """The data column drawn beside the first tracked point, and its label: the first
+    sensor; with a camera alone, the pixel whose centre is nearest the point."""
+    n_sensors = setup.sensor_positions.shape[0]
+    if n_sensors or setup.image is None or not len(setup.tracked_positions):
+        return 0, "data (first sensor)" if n_sensors else "data (first column)"
+    centres = setup.image.pixel_centers()[:, :2]
+    k = int(np.argmin(np.hypot(*(centres - setup.tracked_positions[0][:2]).T)))
+    x, y = centres[k]
+    return n_sensors + k, f"data (pixel at {x:.3g}, {y:.3g} cm)"
 
 
 def persistence_summary(est) -> dict | None:
@@ -162,7 +183,8 @@ def write_identify_outputs(out: Path, setup, est, times, data, *, absorption=Non
     # "final": the last step the health check accepted (when it stopped the run, the
     # rejected step is the last row of estimates.csv and summary["rejected"])
     k = len(est.times) - (2 if est.diverged and len(est.times) > 1 else 1)
-    plot_identification(out / "figures" / "estimates.png", est, times, data, setup.power)
+    plot_identification(out / "figures" / "estimates.png", est, times, data, setup.power,
+                        *_data_beside_first_point(setup))
     summary = {
         "parameters": {n: {"estimate_final": float(est.param_mean[k, i]),
                            "std_final": float(est.param_std[k, i]),
