@@ -142,6 +142,7 @@ def transport_streams(
             elif nref[m] == _INF:
                 tl[T_MISSED] += w
                 continue
+        npk = nref[m]  # the packet's own refractive index (see _mc_kernel)
         inside = True
         alive = True
         j = 0
@@ -235,7 +236,7 @@ def transport_streams(
                         mnew = M[(ix * ny + inew) * nz + iz]
                     else:
                         mnew = M[(ix * ny + iy) * nz + inew]
-                    if not matched and nref[mnew] != nref[m]:
+                    if not matched and nref[mnew] != npk:
                         ua = ux if axis == 0 else (uy if axis == 1 else uz)
                         cin = abs(ua)
                         smooth = False
@@ -255,19 +256,23 @@ def transport_streams(
                                 if c > 0.0:
                                     smooth = True
                                     cin = min(1.0, c)
-                        rf, cat = _fresnel(nref[m], nref[mnew], cin)
-                        s0, s1, s2, s3, r1 = next_double(s0, s1, s2, s3)
-                        if smooth:
-                            ux, uy, uz = _turn_smooth(ux, uy, uz, gx, gy, gz, cin, cat,
-                                                      nref[m] / nref[mnew], r1 < rf, axis, sgn)
-                            if r1 < rf:
-                                continue
-                        else:
-                            if r1 < rf:
-                                ux, uy, uz = _mirror(ux, uy, uz, axis)
-                                continue
-                            ux, uy, uz = _refract_face(ux, uy, uz, nref[m] / nref[mnew], cat,
-                                                       axis, sgn)
+                        if smooth or npk == nref[m]:
+                            rf, cat = _fresnel(npk, nref[mnew], cin)
+                            s0, s1, s2, s3, r1 = next_double(s0, s1, s2, s3)
+                            if smooth:
+                                ux, uy, uz = _turn_smooth(ux, uy, uz, gx, gy, gz, cin, cat,
+                                                          npk / nref[mnew], r1 < rf, axis, sgn)
+                                if r1 >= rf:
+                                    npk = nref[mnew]
+                                elif (ux if axis == 0 else (uy if axis == 1 else uz)) * sgn <= 0.0:
+                                    continue
+                            else:
+                                if r1 < rf:
+                                    ux, uy, uz = _mirror(ux, uy, uz, axis)
+                                    continue
+                                ux, uy, uz = _refract_face(ux, uy, uz, npk / nref[mnew], cat,
+                                                           axis, sgn)
+                                npk = nref[mnew]
                     if axis == 0:
                         ix = inew
                     elif axis == 1:
@@ -297,7 +302,7 @@ def transport_streams(
                 if escaping:
                     if not matched:
                         ua = ux if axis == 0 else (uy if axis == 1 else uz)
-                        rf, cat = _fresnel(nref[m], n_out, abs(ua))
+                        rf, cat = _fresnel(npk, n_out, abs(ua))
                         s0, s1, s2, s3, r1 = next_double(s0, s1, s2, s3)
                         if r1 < rf:
                             ux, uy, uz = _mirror(ux, uy, uz, axis)

@@ -194,26 +194,26 @@ def _refract_face(ux, uy, uz, ratio, cat, axis, sgn):
 def _turn_smooth(ux, uy, uz, gx, gy, gz, cin, cat, mu, reflected, axis, sgn):
     """Reflect about, or refract through, the smoothed normal g (unit, into the new medium).
 
-    ``cin``: cosine of incidence on g, ``cat`` of transmission, ``mu = n1 / n2``. The
-    component normal to the voxel face crossed is then mirrored where the new direction
-    disagrees with the outcome, so that the voxel walk stays consistent (see
-    :mod:`mcmatlab_py._mc_kernel`).
+    ``cin``: cosine of incidence on g, ``cat`` of transmission, ``mu = n1 / n2``. A
+    reflected direction is the true one, also where it still points into the new voxel
+    (the kernel then lets the packet travel on through it in its own medium, as
+    MCmatlab). A refracted direction that points back out of the new voxel has the
+    component normal to the voxel face crossed mirrored, so that the packet enters the
+    medium it refracted into (see :mod:`mcmatlab_py._mc_kernel`).
     """
     if reflected:
-        ux -= 2.0 * cin * gx
-        uy -= 2.0 * cin * gy
-        uz -= 2.0 * cin * gz
-    else:  # Snell's law in vector form
-        k_ = cat - mu * cin
-        ux = mu * ux + k_ * gx
-        uy = mu * uy + k_ * gy
-        uz = mu * uz + k_ * gz
-        un = math.sqrt(ux * ux + uy * uy + uz * uz)
-        ux /= un
-        uy /= un
-        uz /= un
+        return ux - 2.0 * cin * gx, uy - 2.0 * cin * gy, uz - 2.0 * cin * gz
+    # Snell's law in vector form
+    k_ = cat - mu * cin
+    ux = mu * ux + k_ * gx
+    uy = mu * uy + k_ * gy
+    uz = mu * uz + k_ * gz
+    un = math.sqrt(ux * ux + uy * uy + uz * uz)
+    ux /= un
+    uy /= un
+    uz /= un
     ua = ux if axis == 0 else (uy if axis == 1 else uz)
-    if reflected == (ua * sgn > 0.0):
+    if ua * sgn <= 0.0:
         return _mirror(ux, uy, uz, axis)
     return ux, uy, uz
 
