@@ -43,6 +43,15 @@ class OutputSpec:
         return self.oi, self.of, self.consider, ext, paths, path_n
 
 
+def far_field_solid_angles(res: int) -> np.ndarray:
+    """(res, res) sr: the solid angle of each (theta, phi) bin of ``MC.far_field`` (theta
+    in ``res`` equal steps over [0, pi], phi over [-pi, pi]); ``far_field`` over it is the
+    radiant intensity per W incident (W/sr/W), what MCmatlab draws. The bins sum to 4 pi."""
+    edges = np.linspace(0.0, np.pi, int(res) + 1)
+    band = np.cos(edges[:-1]) - np.cos(edges[1:])
+    return np.repeat((2.0 * np.pi / int(res) * band)[:, None], int(res), axis=1)
+
+
 def output_spec(G, MC, n_sub: int, parent: np.ndarray | None) -> OutputSpec:
     """Pack ``MC``'s output requests for the kernel; ``parent`` maps sub-media to ``G.media``."""
     oi = np.zeros(O.OI_SIZE, dtype=np.int64)

@@ -25,6 +25,7 @@ from pathlib import Path
 import numpy as np
 
 from mcmatlab_py import IntensityDistribution, Medium, Model
+from mcmatlab_py.mc_outputs import far_field_solid_angles
 
 CYLINDER_RADIUS = 0.01  #: cm; its axis lies along x at y = 0, z = 3 radii
 
@@ -114,11 +115,9 @@ def far_field_figure(model):
     fig, axes = plt.subplots(1, 2, figsize=(11, 4), layout="constrained")
     for ax, sim, title in ((axes[0], model.MC, "excitation, 450 nm"),
                            (axes[1], model.FMC, "fluorescence, 550 nm")):
-        res = sim.far_field_res
-        th_edges = np.linspace(0, np.pi, res + 1)
-        solid = 2 * np.pi / res * (np.cos(th_edges[:-1]) - np.cos(th_edges[1:]))  # sr per bin
+        solid = far_field_solid_angles(sim.far_field_res)  # sr per bin
         im = ax.pcolormesh(np.degrees(sim.far_field_phi), np.degrees(sim.far_field_theta),
-                           sim.far_field / solid[:, None], shading="nearest", cmap="inferno")
+                           sim.far_field / solid, shading="nearest", cmap="inferno")
         ax.set(xlabel="phi [deg]", title=f"Far field, {title}")
         fig.colorbar(im, ax=ax, label="[W/sr/W.incident excitation]")
     axes[0].set_ylabel("theta [deg] (0: +z, down; 180: up through the top)")

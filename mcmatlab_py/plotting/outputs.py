@@ -18,6 +18,7 @@ import numpy as np
 
 from ..broadband import is_broadband
 from ..layered import absorption_vs_depth, radial_reflectance_transmittance
+from ..mc_outputs import far_field_solid_angles
 
 __all__ = ["plot_az_fz", "plot_boundary_irradiance", "plot_example_paths", "plot_far_field",
            "plot_light_collector", "plot_radial_reflectance_transmittance"]
@@ -80,16 +81,19 @@ def plot_example_paths(model, *, use_pyvista: bool = False, simulation: str = "M
 
 
 def plot_far_field(model, simulation: str = "MC"):
-    """``MC.far_field`` (W/W per bin) over theta (from +z) and phi."""
+    """The radiant intensity of the escaping light, ``MC.far_field`` over each bin's solid
+    angle (W/sr/W incident, as MCmatlab draws it), over theta (from +z) and phi."""
     import matplotlib.pyplot as plt
 
     MC, prefix = _run(model, simulation)
     FF = _all_wavelengths(MC, _need(MC.far_field, "far field (MC.far_field_res)"))
+    FF = np.asarray(FF) / far_field_solid_angles(FF.shape[0])
     fig, ax = plt.subplots(figsize=(6, 4), constrained_layout=True)
     im = ax.pcolormesh(np.degrees(MC.far_field_phi), np.degrees(MC.far_field_theta), FF,
-                       shading="nearest", cmap="inferno")
-    ax.set(xlabel="phi [deg]", ylabel="theta [deg]", title=f"{prefix}Far field of the escaping light")
-    fig.colorbar(im, ax=ax, label="power per bin [W/W.incident]")
+                       shading="nearest", cmap="inferno", vmin=0.0)
+    ax.set(xlabel="phi [deg]", ylabel="theta [deg] (0: +z, down)",
+           title=f"{prefix}Far field of the escaping light")
+    fig.colorbar(im, ax=ax, label="radiant intensity [W/sr/W.incident]")
     return fig
 
 
@@ -130,12 +134,17 @@ def plot_boundary_irradiance(model, simulation: str = "MC"):
     fig, axes = plt.subplots(2, 3, figsize=(11, 6), constrained_layout=True)
     ext = {"x": [-G.Ly / 2, G.Ly / 2, G.Lz, 0], "y": [-G.Lx / 2, G.Lx / 2, G.Lz, 0],
            "z": [-G.Lx / 2, G.Lx / 2, -G.Ly / 2, G.Ly / 2]}
+    labels = {"x": ("y [cm]", "z [cm]"), "y": ("x [cm]", "z [cm]"), "z": ("x [cm]", "y [cm]")}
     for ax, face in zip(axes.T.ravel(), ("xpos", "xneg", "ypos", "yneg", "zpos", "zneg"),
                         strict=True):
-        im = ax.imshow(_all_wavelengths(MC, getattr(MC, f"NI_{face}")).T, extent=ext[face[0]],
-                       aspect="auto", cmap="inferno", origin="lower" if face[0] == "z" else "upper")
-        ax.set_title(f"{prefix}NI_{face}")
-        fig.colorbar(im, ax=ax)
+        NI = np.asarray(_all_wavelengths(MC, getattr(MC, f"NI_{face}")))
+        # irradiance is >= 0: a face no light leaves is drawn black, not mid-scale
+        im = ax.imshow(NI.T, extent=ext[face[0]], aspect="auto", cmap="inferno", vmin=0.0,
+                       vmax=max(float(NI.max()), 1e-300),
+                       origin="lower" if face[0] == "z" else "upper")
+        ax.set(title=f"{prefix}NI_{face}" + ("" if NI.max() > 0 else " (no light)"),
+               xlabel=labels[face[0]][0], ylabel=labels[face[0]][1])
+        fig.colorbar(im, ax=ax, label="[W/cm$^2$/W.incident]")
     return fig
 
 

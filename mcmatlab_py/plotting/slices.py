@@ -38,10 +38,13 @@ def orthogonal_slices(fig, data: np.ndarray, G, positions, *, cmap="viridis", no
         norm = BoundaryNorm(np.arange(len(categories) + 1) - 0.5, len(categories))
     widths = [G.Lx, G.Lx, G.Ly]
     axes = fig.subplots(1, 3, gridspec_kw={"width_ratios": widths})
+    def at(v, length):  # a centre that rounding put 1e-17 off zero is drawn as 0
+        return f"{0.0 if abs(v) < 1e-9 * length else v:.3g}"
+
     panels = [
-        (data[:, :, iz].T, [x0, x1, y0, y1], "x [cm]", "y [cm]", f"xy at z = {G.z[iz]:.3g} cm"),
-        (data[:, iy, :].T, [x0, x1, G.Lz, 0], "x [cm]", "z [cm]", f"xz at y = {G.y[iy]:.3g} cm"),
-        (data[ix, :, :].T, [y0, y1, G.Lz, 0], "y [cm]", "z [cm]", f"yz at x = {G.x[ix]:.3g} cm"),
+        (data[:, :, iz].T, [x0, x1, y0, y1], "x [cm]", "y [cm]", f"xy at z = {at(G.z[iz], G.Lz)} cm"),
+        (data[:, iy, :].T, [x0, x1, G.Lz, 0], "x [cm]", "z [cm]", f"xz at y = {at(G.y[iy], G.Ly)} cm"),
+        (data[ix, :, :].T, [y0, y1, G.Lz, 0], "y [cm]", "z [cm]", f"yz at x = {at(G.x[ix], G.Lx)} cm"),
     ]
     images = []
     for k, (ax, (img, ext, xl, yl, t)) in enumerate(zip(axes, panels, strict=True)):
