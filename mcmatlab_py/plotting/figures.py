@@ -119,9 +119,11 @@ def monte_carlo_figures(model) -> dict:
         raise ValueError("MC.NA is empty: run model.run_monte_carlo() before plot('MC')")
     figs = {"media_properties": media_properties_figure(model)}
     s = _summed(MC)
+    # a distributed source (example 26) emits inside the cuboid: per W emitted
+    per = "emitted" if getattr(MC, "source_distribution", None) is not None else "incident"
     figs.update(_log_slice_figures(G, (
         ("NA", total(MC.NA), f"normalized absorbed power per volume{s}", "W/cm$^3$/W"),
-        ("NFR", total(MC.NFR), f"normalized fluence rate{s}", "W/cm$^2$/W"))))
+        ("NFR", total(MC.NFR), f"normalized fluence rate{s}", "W/cm$^2$/W")), per))
     if is_broadband(MC.wavelength):
         from .spectral import spectrum_figure
 
@@ -129,15 +131,16 @@ def monte_carlo_figures(model) -> dict:
     return figs
 
 
-def _log_slice_figures(G, fields) -> dict:
-    """One figure of orthogonal log-scale slices per ``(key, data, what, unit)``."""
+def _log_slice_figures(G, fields, per: str = "incident") -> dict:
+    """One figure of orthogonal log-scale slices per ``(key, data, what, unit)``, per W
+    ``per`` (incident, or emitted by a distributed source)."""
     figs = {}
     for key, data, what, unit in fields:
         fig = _figure(name=key)
         shown = np.where(data > 0, data, np.nan)
         orthogonal_slices(fig, shown, G, DEFAULT_SLICES, cmap="inferno",
                           norm=positive_log_norm(data), label=f"{key} [{unit}]",
-                          title=f"{key}: {what} [{unit} incident]")
+                          title=f"{key}: {what} [{unit} {per}]")
         figs[key] = fig
     return figs
 
