@@ -41,14 +41,13 @@ from ._mc_kernel import (
 )
 from ._mc_steps import (
     _clamp,
+    _cross_interface,
     _fresnel,
     _hg_cos,
     _interface_normal,
     _mirror,
     _plane_distance,
-    _refract_face,
     _spin,
-    _turn_smooth,
 )
 from ._rng import next_double, seed_stream
 from ._sources import SI_SURFACE, launch, sample_pwl
@@ -259,20 +258,11 @@ def transport_streams(
                         if smooth or npk == nref[m]:
                             rf, cat = _fresnel(npk, nref[mnew], cin)
                             s0, s1, s2, s3, r1 = next_double(s0, s1, s2, s3)
-                            if smooth:
-                                ux, uy, uz = _turn_smooth(ux, uy, uz, gx, gy, gz, cin, cat,
-                                                          npk / nref[mnew], r1 < rf, axis, sgn)
-                                if r1 >= rf:
-                                    npk = nref[mnew]
-                                elif (ux if axis == 0 else (uy if axis == 1 else uz)) * sgn <= 0.0:
-                                    continue
-                            else:
-                                if r1 < rf:
-                                    ux, uy, uz = _mirror(ux, uy, uz, axis)
-                                    continue
-                                ux, uy, uz = _refract_face(ux, uy, uz, npk / nref[mnew], cat,
-                                                           axis, sgn)
-                                npk = nref[mnew]
+                            ux, uy, uz, npk, stays = _cross_interface(
+                                ux, uy, uz, smooth, gx, gy, gz, cin, cat, npk, nref[mnew],
+                                r1 < rf, axis, sgn)
+                            if stays:
+                                continue
                     if axis == 0:
                         ix = inew
                     elif axis == 1:

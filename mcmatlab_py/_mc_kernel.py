@@ -56,6 +56,7 @@ from . import _mc_outputs as O
 from ._atomic import fetch_add
 from ._mc_steps import (
     _clamp,
+    _cross_interface,
     _enter_top,
     _fresnel,
     _hg_cos,
@@ -64,7 +65,6 @@ from ._mc_steps import (
     _plane_distance,
     _refract_face,
     _spin,
-    _turn_smooth,
 )
 from ._mc_tally import (  # noqa: F401 (re-exported: the Python layer reads them here)
     N_TALLY,
@@ -291,6 +291,9 @@ def transport_batch(
                         ua = ux if axis == 0 else (uy if axis == 1 else uz)
                         cin = abs(ua)
                         smooth = False
+                        gx = 0.0
+                        gy = 0.0
+                        gz = 0.0
                         if use_normals:
                             gx, gy, gz = _interface_normal(normals, M, nref, nref[mnew], px, py,
                                                            pz, nx, ny, nz, dx, dy, dz)
@@ -318,21 +321,11 @@ def transport_batch(
                                         cnt[3] += 1
                                 if record_path:
                                     O.path_point(paths, path_n, ip, px, py, pz, w / W_ONE)
-                            if smooth:
-                                ux, uy, uz = _turn_smooth(ux, uy, uz, gx, gy, gz, cin, cat,
-                                                          npk / nref[mnew], r1 < rf, axis, sgn)
-                                if r1 >= rf:
-                                    npk = nref[mnew]
-                                elif (ux if axis == 0 else (uy if axis == 1 else uz)) * sgn <= 0.0:
-                                    continue  # reflected back into its voxel
-                                # else reflected on into the new voxel, in its own medium
-                            else:
-                                if r1 < rf:  # reflect
-                                    ux, uy, uz = _mirror(ux, uy, uz, axis)
-                                    continue
-                                ux, uy, uz = _refract_face(ux, uy, uz, npk / nref[mnew], cat,
-                                                           axis, sgn)
-                                npk = nref[mnew]
+                            ux, uy, uz, npk, stays = _cross_interface(
+                                ux, uy, uz, smooth, gx, gy, gz, cin, cat, npk, nref[mnew],
+                                r1 < rf, axis, sgn)
+                            if stays:  # reflected back into its voxel
+                                continue
                     if axis == 0:
                         ix = inew
                     elif axis == 1:

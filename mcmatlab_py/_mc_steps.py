@@ -219,6 +219,32 @@ def _turn_smooth(ux, uy, uz, gx, gy, gz, cin, cat, mu, reflected, axis, sgn):
 
 
 @numba.njit(cache=True, inline="always", fastmath=_FASTMATH)
+def _cross_interface(ux, uy, uz, smooth, gx, gy, gz, cin, cat, npk, n_new, reflected, axis,
+                     sgn):
+    """The packet at a change of refractive index, Fresnel's draw made (``reflected``):
+    ``(ux, uy, uz, npk, stays)``, its new direction, its own refractive index, and whether
+    it stays in its voxel.
+
+    About the smoothed normal g (``smooth``; :func:`_turn_smooth`): a refracted packet
+    takes ``n_new`` and enters; a reflected one keeps its index and stays where its true
+    direction points back, else travels on into the new voxel in its own medium (as
+    MCmatlab). About the voxel face: mirrored and stays, or refracted and enters.
+    """
+    if smooth:
+        ux, uy, uz = _turn_smooth(ux, uy, uz, gx, gy, gz, cin, cat, npk / n_new, reflected,
+                                  axis, sgn)
+        if not reflected:
+            return ux, uy, uz, n_new, False
+        ua = ux if axis == 0 else (uy if axis == 1 else uz)
+        return ux, uy, uz, npk, ua * sgn <= 0.0
+    if reflected:
+        ux, uy, uz = _mirror(ux, uy, uz, axis)
+        return ux, uy, uz, npk, True
+    ux, uy, uz = _refract_face(ux, uy, uz, npk / n_new, cat, axis, sgn)
+    return ux, uy, uz, n_new, False
+
+
+@numba.njit(cache=True, inline="always", fastmath=_FASTMATH)
 def _cut_at_face(px, py, pz, ux, uy, uz, Lx, Ly, Lz):
     """Where a move from ``(px, py, pz)`` (inside the cuboid ``[0, L]^3``) along ``u``
     leaves it: ``(axis, d, ua, qx, qy, qz)``, the axis of the face crossed, the distance
