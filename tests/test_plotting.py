@@ -97,3 +97,45 @@ def test_interactive_slicer_builds_off_screen(model):
     assert img.cell_data["T"][c] == pytest.approx(model.HS.T_voxels[2, 5, 3])
     plotter = interactive_slicer(model, "HS", show=False)
     plotter.close()
+
+
+def test_far_field_and_boundary_figures_are_drawn_as_mcmatlab():
+    """The far field as radiant intensity (per bin over its solid angle: the bins' solid
+    angles sum to 4 pi), a face no light leaves drawn black from 0 with its units, and
+    slice titles without rounding noise."""
+    from mcmatlab_py.mc_outputs import far_field_solid_angles
+    from mcmatlab_py.plotting.outputs import plot_boundary_irradiance, plot_far_field
+
+    sr = far_field_solid_angles(12)
+    assert sr.shape == (12, 12) and sr.sum() == pytest.approx(4 * np.pi, rel=1e-12)
+    # a pencil beam straight down into a non-scattering slab: light leaves only at the bottom
+    m = Model()
+    G = m.G
+    G.nx = G.ny = G.nz = 5
+    G.Lx = G.Ly = G.Lz = 0.1
+    G.media = [Medium("clear", 1.0, 1e-8, 1.0, 1.0)]
+    G.geom_func = lambda X, Y, Z: np.zeros(X.shape, dtype=int)
+    MC = m.MC
+    MC.n_photons_requested, MC.seed, MC.progress = 200, 1, False
+    MC.calc_normalized_irradiance = True
+    MC.far_field_res = 12
+    MC.light_source.source_type = "pencil"
+    m.run_monte_carlo()
+    fig = plot_far_field(m)
+    np.testing.assert_allclose(fig.axes[0].collections[0].get_array().reshape(12, 12),
+                               MC.far_field / sr, rtol=1e-12)
+    fig = plot_boundary_irradiance(m)
+    titles = {ax.get_title(): ax for ax in fig.axes if ax.images}
+    dark = titles["NI_zneg (no light)"].images[0]
+    assert dark.get_clim() == (0.0, 1.0)
+    assert titles["NI_zpos"].images[0].get_clim()[0] == 0.0
+    assert "W/cm" in fig.axes[-1].get_ylabel()
+    # Example 17's grid: the middle voxel's centre is 6.9e-18 cm, not 0, by rounding
+    from mcmatlab_py.plotting.slices import orthogonal_slices
+
+    G.nx, G.Lx = 201, 0.1
+    assert G.x[100] != 0.0
+    f = plt.figure()
+    orthogonal_slices(f, np.ones((201, 5, 5)), G, (0.5, 0.5, 0.5))
+    assert "x = 0 cm" in f.axes[2].get_title()
+    plt.close("all")

@@ -140,7 +140,7 @@ def plot_boundary_irradiance(model, simulation: str = "MC"):
         NI = np.asarray(_all_wavelengths(MC, getattr(MC, f"NI_{face}")))
         # irradiance is >= 0: a face no light leaves is drawn black, not mid-scale
         im = ax.imshow(NI.T, extent=ext[face[0]], aspect="auto", cmap="inferno", vmin=0.0,
-                       vmax=max(float(NI.max()), 1e-300),
+                       vmax=float(NI.max()) if NI.max() > 0 else 1.0,
                        origin="lower" if face[0] == "z" else "upper")
         ax.set(title=f"{prefix}NI_{face}" + ("" if NI.max() > 0 else " (no light)"),
                xlabel=labels[face[0]][0], ylabel=labels[face[0]][1])
