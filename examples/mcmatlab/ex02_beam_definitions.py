@@ -42,6 +42,7 @@ import numpy as np
 
 from mcmatlab_py import Medium, Model
 from mcmatlab_py.light_source import beam_axes, sample_light_source
+from mcmatlab_py.mc_outputs import far_field_solid_angles
 
 LINE_LENGTH = 0.05  #: cm, the isotropic line emitter
 TOPHAT_RADIUS = 0.01  #: cm, focal plane of the second source
@@ -300,8 +301,10 @@ def beams_figure(models: dict):
         ax.set(xlabel="x [cm]", ylabel="y [cm] (NI_zpos)" if col == 0 else None)
         ax = axes[2, col]
         ax.pcolormesh(np.degrees(MC.far_field_phi), np.degrees(MC.far_field_theta),
-                      MC.far_field, shading="nearest", cmap="inferno")
-        ax.set(xlabel="phi [deg]", ylabel="theta [deg] (far field)" if col == 0 else None,
+                      MC.far_field / far_field_solid_angles(MC.far_field_res),  # W/sr/W
+                      shading="nearest", cmap="inferno", vmin=0.0)
+        ax.set(xlabel="phi [deg]",
+               ylabel="theta [deg] (far field, W/sr/W)" if col == 0 else None,
                ylim=(180, 0))
     fig.suptitle("Example 2: focal plane (sampled), light leaving the bottom face 1 mm below, "
                  "far field")

@@ -30,6 +30,7 @@ from pathlib import Path
 import numpy as np
 
 from mcmatlab_py import Medium, Model
+from mcmatlab_py.mc_outputs import far_field_solid_angles
 
 G_HG = 0.9  #: anisotropy of the Henyey-Greenstein comparison
 
@@ -172,14 +173,13 @@ def far_field_figure(model):
     MC = model.MC
     FF, th, res = MC.far_field, MC.far_field_theta, MC.far_field_res
     fig, (ax0, ax1) = plt.subplots(1, 2, figsize=(9, 3.6), layout="constrained")
-    im = ax0.pcolormesh(np.degrees(MC.far_field_phi), np.degrees(th), FF, shading="nearest",
-                        cmap="inferno")
-    fig.colorbar(im, ax=ax0, label="power per bin [W/W]")
+    sr = far_field_solid_angles(res)  # sr per (theta, phi) bin
+    im = ax0.pcolormesh(np.degrees(MC.far_field_phi), np.degrees(th), FF / sr,
+                        shading="nearest", cmap="inferno", vmin=0.0)
+    fig.colorbar(im, ax=ax0, label="radiant intensity [W/sr/W]")
     ax0.set(xlabel="phi [deg]", ylabel="theta [deg]", ylim=(180, 0),
             title="far field of the scattered light")
-    edges = np.linspace(0.0, math.pi, res + 1)
-    solid = 2 * math.pi * (np.cos(edges[:-1]) - np.cos(edges[1:]))  # sr per theta ring
-    per_sr = FF.sum(axis=1) / solid / FF.sum()
+    per_sr = FF.sum(axis=1) / sr.sum(axis=1) / FF.sum()  # per sr of each theta ring
     t = np.linspace(0.0, math.pi, 200)
     ax1.step(np.degrees(th), per_sr, where="mid", label="Monte Carlo")
     ax1.plot(np.degrees(t), (1 + np.cos(t) ** 2) * 3 / (16 * math.pi), label="Rayleigh")
