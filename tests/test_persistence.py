@@ -134,7 +134,7 @@ def _cooling_data(setup, TC_factor, seed):
 
 
 def test_identify_flags_a_truth_whose_conduction_the_model_misses(tissue, tmp_path):
-    from enkf.app.report import persistence_summary
+    from enkf.tissue.identify import persistence_summary
 
     power = HeatSimulation(P=0.5, duration_on=1.0, duration_off=15.0).laser_power
     s = tissue.setup(power=power, random_walk_std=0.0)

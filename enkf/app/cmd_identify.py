@@ -289,8 +289,9 @@ def _follow(args, cfg, absorption, seed, t_emu) -> int:
     """
     from ..tissue import OnlineIdentifier
     from ..tissue.absorption import fill_prior_points
+    from ..tissue.identify import persistence_summary
     from .readers import follow_csv
-    from .report import manifest, persistence_summary
+    from .report import manifest
 
     out = Path(args.out)
     if args.force and out.is_dir():

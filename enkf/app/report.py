@@ -9,6 +9,7 @@ from pathlib import Path
 
 import numpy as np
 
+from ..tissue.identify import persistence_summary
 from ..tissue.parameters import OPTICS_NAMES, PARAMETER_LABELS
 from .rundir import write_json
 
@@ -137,30 +138,6 @@ def _data_beside_first_point(setup) -> tuple[int, str]:
     k = int(np.argmin(np.hypot(*(centres - setup.tracked_positions[0][:2]).T)))
     x, y = centres[k]
     return n_sensors + k, f"data (pixel at {x:.3g}, {y:.3g} cm)"
-
-
-def persistence_summary(est) -> dict | None:
-    """summary.json's ``innovation_persistence``: the lag-1 correlation of the normalized
-    innovations while the laser is off and over all readings, whether it is flagged
-    (:func:`enkf.adaptive.persistence_flagged`) and what that means, of ``est`` (a
-    :class:`~enkf.tissue.TissueEstimates` or an :class:`~enkf.tissue.OnlineIdentifier`);
-    None for an object without ``innovation_persistence``."""
-    from ..adaptive import PERSISTENCE_THRESHOLD, persistence_flagged
-    from ..tissue.identify import PERSISTENCE_ADVICE
-
-    if not hasattr(est, "innovation_persistence"):
-        return None
-    r_off, n_off = est.innovation_persistence("off")
-    r_all, n_all = est.innovation_persistence("all")
-    flagged = persistence_flagged(r_off, n_off)
-
-    def num(r):
-        return round(float(r), 4) if np.isfinite(r) else None
-
-    return {"laser_off": num(r_off), "laser_off_pairs": n_off,
-            "all": num(r_all), "all_pairs": n_all,
-            "threshold": PERSISTENCE_THRESHOLD, "flagged": flagged,
-            "advice": PERSISTENCE_ADVICE.format(r=r_off) if flagged else None}
 
 
 def write_identify_outputs(out: Path, setup, est, times, data, *, absorption=None,

@@ -12,7 +12,7 @@ from mcmatlab_py.progress import Progress
 
 from ..problem import DEFAULT_METHOD
 from ..tissue.absorption import fill_prior_points
-from ..tissue.identify import identify
+from ..tissue.identify import identify, persistence_summary
 from ..tissue.outputs import write_estimates_csv, write_json
 from ..tissue.parameters import PARAMETER_NAMES, TRACKED_DEPTHS
 from .figures import plot_data, plot_results
@@ -77,6 +77,8 @@ def run_experiment(scenario: str, seed: int = 0, *, n_members: int = 50, method:
                            "table": [emu.spec.n_mua, emu.spec.n_mus],
                            "build_seconds": emu.build_seconds, "exact_mode": bool(exact)}
     summary["seed"] = seed
+    # whether the innovations persist once the laser is off (docs/beyond.md), as identify's
+    summary["innovation_persistence"] = persistence_summary(est)
     summary["wall_seconds"] = time.perf_counter() - t0
     return PaperRun(scenario, truth, data, est, summary)
 

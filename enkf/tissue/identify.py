@@ -14,6 +14,7 @@ import fem
 from fem.threads import blas_threads, keep_freed_memory
 
 from ..adaptive import (
+    PERSISTENCE_THRESHOLD,
     AdaptiveInflation,
     InflationEstimator,
     innovation_persistence,
@@ -33,7 +34,7 @@ from .model_error import StructuredModelError
 from .setup import TissueFilterSetup
 
 __all__ = ["PERSISTENCE_ADVICE", "FilterPieces", "TissueEstimates", "assemble", "identify",
-           "laser_persistence"]
+           "laser_persistence", "persistence_summary"]
 
 #: what a flagged persistence means (summary.json, the command line's warning)
 PERSISTENCE_ADVICE = (
@@ -473,6 +474,27 @@ def laser_persistence(z: np.ndarray | None, laser_on: np.ndarray | None,
     if laser_on is None:
         return float("nan"), 0
     return innovation_persistence(z, np.asarray(laser_on, bool)[: z.shape[0]] == (laser == "on"))
+
+
+def persistence_summary(est) -> dict | None:
+    """summary.json's ``innovation_persistence``: the lag-1 correlation of the normalized
+    innovations while the laser is off and over all readings, whether it is flagged
+    (:func:`enkf.adaptive.persistence_flagged`) and what that means, of ``est`` (a
+    :class:`~enkf.tissue.TissueEstimates` or an :class:`~enkf.tissue.OnlineIdentifier`);
+    None for an object without ``innovation_persistence``."""
+    if not hasattr(est, "innovation_persistence"):
+        return None
+    r_off, n_off = est.innovation_persistence("off")
+    r_all, n_all = est.innovation_persistence("all")
+    flagged = persistence_flagged(r_off, n_off)
+
+    def num(r):
+        return round(float(r), 4) if np.isfinite(r) else None
+
+    return {"laser_off": num(r_off), "laser_off_pairs": n_off,
+            "all": num(r_all), "all_pairs": n_all,
+            "threshold": PERSISTENCE_THRESHOLD, "flagged": flagged,
+            "advice": PERSISTENCE_ADVICE.format(r=r_off) if flagged else None}
 
 
 def _no_rows(a: np.ndarray | None) -> np.ndarray | None:
