@@ -191,19 +191,12 @@ def _refract_face(ux, uy, uz, ratio, cat, axis, sgn):
 
 
 @numba.njit(cache=True, inline="always", fastmath=_FASTMATH)
-def _turn_smooth(ux, uy, uz, gx, gy, gz, cin, cat, mu, reflected, axis, sgn):
-    """Reflect about, or refract through, the smoothed normal g (unit, into the new medium).
-
-    ``cin``: cosine of incidence on g, ``cat`` of transmission, ``mu = n1 / n2``. A
-    reflected direction is the true one, also where it still points into the new voxel
-    (the kernel then lets the packet travel on through it in its own medium, as
-    MCmatlab). A refracted direction that points back out of the new voxel has the
-    component normal to the voxel face crossed mirrored, so that the packet enters the
-    medium it refracted into (see :mod:`mcmatlab_py._mc_kernel`).
-    """
-    if reflected:
-        return ux - 2.0 * cin * gx, uy - 2.0 * cin * gy, uz - 2.0 * cin * gz
-    # Snell's law in vector form
+def _refract_smooth(ux, uy, uz, gx, gy, gz, cin, cat, mu, axis, sgn):
+    """Snell's law in vector form through the smoothed normal g (unit, into the new
+    medium): ``cin`` the cosine of incidence on g, ``cat`` of transmission, ``mu = n1 /
+    n2``. A refracted direction that points back out of the new voxel has the component
+    normal to the voxel face crossed mirrored, so that the packet enters the medium it
+    refracted into (see :mod:`mcmatlab_py._mc_kernel`)."""
     k_ = cat - mu * cin
     ux = mu * ux + k_ * gx
     uy = mu * uy + k_ * gy
@@ -225,16 +218,18 @@ def _cross_interface(ux, uy, uz, smooth, gx, gy, gz, cin, cat, npk, n_new, refle
     ``(ux, uy, uz, npk, stays)``, its new direction, its own refractive index, and whether
     it stays in its voxel.
 
-    About the smoothed normal g (``smooth``; :func:`_turn_smooth`): a refracted packet
-    takes ``n_new`` and enters; a reflected one keeps its index and stays where its true
-    direction points back, else travels on into the new voxel in its own medium (as
-    MCmatlab). About the voxel face: mirrored and stays, or refracted and enters.
+    About the smoothed normal g (``smooth``, ``cin`` the cosine of incidence on it): a
+    refracted packet takes ``n_new`` and enters (:func:`_refract_smooth`); a reflected one
+    takes its true direction and keeps its index, and stays where that points back, else
+    travels on into the new voxel in its own medium (as MCmatlab). About the voxel face:
+    mirrored and stays, or refracted and enters.
     """
     if smooth:
-        ux, uy, uz = _turn_smooth(ux, uy, uz, gx, gy, gz, cin, cat, npk / n_new, reflected,
-                                  axis, sgn)
         if not reflected:
+            ux, uy, uz = _refract_smooth(ux, uy, uz, gx, gy, gz, cin, cat, npk / n_new,
+                                         axis, sgn)
             return ux, uy, uz, n_new, False
+        ux, uy, uz = ux - 2.0 * cin * gx, uy - 2.0 * cin * gy, uz - 2.0 * cin * gz
         ua = ux if axis == 0 else (uy if axis == 1 else uz)
         return ux, uy, uz, npk, ua * sgn <= 0.0
     if reflected:

@@ -44,14 +44,15 @@ def make_setup(**kw):
     return TissueFilterSetup(**args)
 
 
-def twin_data(s, mua, mus, seed=0):
-    """Synthetic data from the filter's own model (an identical twin), noise var 0.01."""
+def twin_data(s, mua, mus, seed=0, times=None):
+    """Synthetic data of one sensor at the origin from the setup's own model (an identical
+    twin), noise var 0.01; ``times`` (s) default 0.1 ... 2.0."""
     from enkf.tissue import TissueForwardModel
 
     model = TissueForwardModel(s)
     P = fem.probe_matrix(model.mesh, np.zeros((3, 1)))
     T = np.zeros((1, model.mesh.p.shape[1]))
-    times = 0.1 * np.arange(1, 21)
+    times = 0.1 * np.arange(1, 21) if times is None else times
     out, t0 = [], 0.0
     for t1 in times:
         T = model(T, np.array([[mua, mus]]), t0, t1)

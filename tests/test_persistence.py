@@ -14,11 +14,11 @@ from __future__ import annotations
 
 import json
 import warnings
+from dataclasses import replace
 
 import numpy as np
 import pytest
 
-import fem
 from enkf import FilterConfig, FilterProblem, run_filter
 from enkf.adaptive import (
     PERSISTENCE_THRESHOLD,
@@ -26,7 +26,7 @@ from enkf.adaptive import (
     normalized_innovation,
     persistence_flagged,
 )
-from enkf.tissue import TissueForwardModel, identify
+from enkf.tissue import identify
 from mcmatlab_py.heat import HeatSimulation
 
 
@@ -114,33 +114,18 @@ def test_the_filter_s_innovations_persist_only_when_its_model_is_wrong():
         assert persistence_flagged(r, n), r
 
 
-def _cooling_data(setup, TC_factor, seed):
-    """One sensor at the origin over a 1 s pulse and 15 s of cooling, from the tissue's
-    model with its conduction times ``TC_factor``; noise variance 0.01."""
-    nominal = dict(setup.nominal, TC=setup.nominal["TC"] * TC_factor)
-    from dataclasses import replace
-
-    model = TissueForwardModel(replace(setup, nominal=nominal))
-    P = fem.probe_matrix(model.mesh, np.zeros((3, 1)))
-    T = np.zeros((1, model.mesh.p.shape[1]))
-    times = np.round(0.1 * np.arange(1, 161), 10)
-    out, t0 = [], 0.0
-    for t1 in times:
-        T = model(T, np.array([[1.0, 100.0]]), t0, t1)
-        out.append((P @ T.T)[0, 0])
-        t0 = t1
-    rng = np.random.default_rng(seed)
-    return times, np.array(out)[:, None] + 0.1 * rng.standard_normal((len(times), 1))
-
-
 def test_identify_flags_a_truth_whose_conduction_the_model_misses(tissue, tmp_path):
     from enkf.tissue.identify import persistence_summary
 
     power = HeatSimulation(P=0.5, duration_on=1.0, duration_off=15.0).laser_power
     s = tissue.setup(power=power, random_walk_std=0.0)
-    # measured lag-1 (seed 2): -0.08 with the model's conduction, 0.58 with three times it
+    # data of one sensor over a 1 s pulse and 15 s of cooling, from the tissue's model with
+    # its conduction times `factor`; measured lag-1 (seed 2): -0.08 with the model's
+    # conduction, 0.58 with three times it
     for factor, flagged in ((1.0, False), (3.0, True)):
-        times, data = _cooling_data(s, factor, seed=2)
+        truth = replace(s, nominal=dict(s.nominal, TC=s.nominal["TC"] * factor))
+        times, data = tissue.twin_data(truth, 1.0, 100.0, seed=2,
+                                       times=np.round(0.1 * np.arange(1, 161), 10))
         with warnings.catch_warnings(record=True) as caught:
             warnings.simplefilter("always")
             est = identify(s, times, data)

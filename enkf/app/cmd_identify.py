@@ -372,6 +372,7 @@ def _live_figure(out, ident, setup) -> None:
     import numpy as np
 
     from ..tissue import TissueEstimates
+    from ..tissue.identify import persistence_summary
     from .report import plot_identification
 
     h = ident.history
@@ -384,11 +385,10 @@ def _live_figure(out, ident, setup) -> None:
         tracked_mean=np.array([e.tracked_mean for e in h]),
         tracked_std=np.array([e.tracked_std for e in h]),
         analysed=np.array([e.analysed for e in h]),
-        step_latency_s=np.array([e.latency_s for e in h]), filter_wall_s=0.0,
-        # the innovations' persistence: the figure says so when the model misses something
-        innovation_normalized=np.array([e.innovation_normalized for e in h]),
-        laser_on=np.array([bool(e.laser_on) for e in h]))
+        step_latency_s=np.array([e.latency_s for e in h]), filter_wall_s=0.0)
     (Path(out) / "figures").mkdir(exist_ok=True)
     tmp = Path(out) / "figures" / ".estimates.png.tmp.png"
-    plot_identification(tmp, est, None, None, setup.power)
+    # the caution when the innovations persist, from the identifier's own record
+    plot_identification(tmp, est, None, None, setup.power,
+                        persistence=persistence_summary(ident))
     tmp.replace(Path(out) / "figures" / "estimates.png")  # a viewer never sees half a file

@@ -54,9 +54,11 @@ def manifest(path: Path, *, command: str, config: dict | None, seed, timings: di
 
 
 def plot_identification(path, est, times, data, power, data_column: int = 0,
-                        data_label: str = "data (first column)") -> None:
+                        data_label: str = "data (first column)",
+                        persistence: dict | None = None) -> None:
     """Temperature tracks (top, with ``data[:, data_column]`` beside the first tracked
-    point, labelled ``data_label``) and parameters (bottom).
+    point, labelled ``data_label``) and parameters (bottom); a caution above them when
+    ``persistence`` (:func:`~enkf.tissue.identify.persistence_summary`) is flagged.
 
     Temperature bands are mean +- 2 sd; parameter bands are the ensemble's 2.3 % and 97.7 %
     quantiles (positive, like the members: the filter works on log parameters, where a
@@ -105,10 +107,9 @@ def plot_identification(path, est, times, data, power, data_column: int = 0,
         if i == 0:
             ax.legend(fontsize=8)
     # a model that misses the data's physics: said where the bands are drawn
-    summary = persistence_summary(est)
-    if summary is not None and summary["flagged"]:
+    if persistence is not None and persistence["flagged"]:
         fig.suptitle(f"Caution: the innovations persist while the laser is off (lag-1 "
-                     f"{summary['laser_off']:.2f}):\nthe model misses something the data show, "
+                     f"{persistence['laser_off']:.2f}):\nthe model misses something the data show, "
                      "and the bands below the surface may be too narrow (summary.json)",
                      color="firebrick", fontsize=9)
     fig.savefig(path, dpi=110)
@@ -160,8 +161,9 @@ def write_identify_outputs(out: Path, setup, est, times, data, *, absorption=Non
     # "final": the last step the health check accepted (when it stopped the run, the
     # rejected step is the last row of estimates.csv and summary["rejected"])
     k = len(est.times) - (2 if est.diverged and len(est.times) > 1 else 1)
+    persistence = persistence_summary(est)
     plot_identification(out / "figures" / "estimates.png", est, times, data, setup.power,
-                        *_data_beside_first_point(setup))
+                        *_data_beside_first_point(setup), persistence=persistence)
     summary = {
         "parameters": {n: {"estimate_final": float(est.param_mean[k, i]),
                            "std_final": float(est.param_std[k, i]),
@@ -187,7 +189,7 @@ def write_identify_outputs(out: Path, setup, est, times, data, *, absorption=Non
         # whether the innovations persist from reading to reading while the laser is off:
         # the model then misses something the data show, and the bands below the surface
         # may be too narrow (docs/beyond.md)
-        "innovation_persistence": persistence_summary(est),
+        "innovation_persistence": persistence,
         "timing": {"filter_wall_s": float(est.filter_wall_s),
                    "step_latency_median_s": float(np.median(est.step_latency_s))
                    if len(est.step_latency_s) else 0.0,

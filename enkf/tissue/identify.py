@@ -476,14 +476,12 @@ def laser_persistence(z: np.ndarray | None, laser_on: np.ndarray | None,
     return innovation_persistence(z, np.asarray(laser_on, bool)[: z.shape[0]] == (laser == "on"))
 
 
-def persistence_summary(est) -> dict | None:
+def persistence_summary(est) -> dict:
     """summary.json's ``innovation_persistence``: the lag-1 correlation of the normalized
     innovations while the laser is off and over all readings, whether it is flagged
-    (:func:`enkf.adaptive.persistence_flagged`) and what that means, of ``est`` (a
-    :class:`~enkf.tissue.TissueEstimates` or an :class:`~enkf.tissue.OnlineIdentifier`);
-    None for an object without ``innovation_persistence``."""
-    if not hasattr(est, "innovation_persistence"):
-        return None
+    (:func:`enkf.adaptive.persistence_flagged`) and what that means (``advice``, also
+    the warning's text), of ``est`` (a :class:`~enkf.tissue.TissueEstimates` or an
+    :class:`~enkf.tissue.OnlineIdentifier`)."""
     r_off, n_off = est.innovation_persistence("off")
     r_all, n_all = est.innovation_persistence("all")
     flagged = persistence_flagged(r_off, n_off)
@@ -653,7 +651,7 @@ def identify(setup: TissueFilterSetup, times: np.ndarray, data: np.ndarray, *,
         sensor_offset_mean=res.param_mean[:, -n_off:] if n_off else None,
         sensor_offset_std=res.param_std[:, -n_off:] if n_off else None,
         restarts=tuple(restarts))
-    r, n_pairs = est.innovation_persistence("off")
-    if persistence_flagged(r, n_pairs):
-        warnings.warn(PERSISTENCE_ADVICE.format(r=r), RuntimeWarning, stacklevel=2)
+    persistence = persistence_summary(est)
+    if persistence["flagged"]:
+        warnings.warn(persistence["advice"], RuntimeWarning, stacklevel=2)
     return est

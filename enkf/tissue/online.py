@@ -97,8 +97,6 @@ class OnlineIdentifier:
         the laser is ``"off"`` (default), ``"on"``, or over ``"all"``, and the number of
         pairs it sums (:func:`~enkf.tissue.identify.laser_persistence`, as
         :meth:`TissueEstimates.innovation_persistence`)."""
-        if not self.history:
-            return laser_persistence(None, None, laser)
         return laser_persistence(np.array([h.innovation_normalized for h in self.history]),
                                  np.array([h.laser_on for h in self.history]), laser)
 
