@@ -96,3 +96,16 @@ def test_bad_sensor_offset(kw, pattern, tissue):
         kw = dict(kw, image=ThermalImage((-0.1, 0.1), (-0.1, 0.1), (2, 2)))
     with pytest.raises(ValueError, match=pattern):
         tissue.setup(**kw)
+
+
+def test_sensor_offset_with_the_trend_model(tissue):
+    """The trend model's rates and the sensors' offsets side by side in the members: the
+    drift moves the levels by the rates alone (not by the offsets), and the offset is
+    still found (a reading 0.5 deg C high)."""
+    s = tissue.setup(sensor_offset_std=1.0, n_members=100, parameter_model="trend")
+    times, data = tissue.twin_data(s, 1.4, 100.0)
+    est = identify(s, times, data + 0.5)
+    assert est.diverged is None
+    assert est.param_mean.shape == (21, 2)
+    m, sd = est.sensor_offset_mean[-1, 0], est.sensor_offset_std[-1, 0]
+    assert abs(m - 0.5) < 3 * sd + 0.02 and sd < 0.5 * est.sensor_offset_std[0, 0]
