@@ -55,11 +55,14 @@ ROOT = Path(__file__).resolve().parents[1]
 DEFAULT_OUT = str(ROOT / "validation" / "reports" / "image_vs_point.md")
 
 
-def camera_truth(truth: str, scenario: str, camera, frame: tuple = CAMERA):
+def camera_truth(truth: str, scenario: str, camera, frame: tuple = CAMERA,
+                 heat_theta: float = 0.5):
     """``times (n,), temps (n, 3), images (n, n_pixels), params {name: (n,)}`` of a truth
-    (``frame``: the camera's ``TruthConfig.camera`` tuple, for the fine truth)."""
+    (``frame``: the camera's ``TruthConfig.camera`` tuple, ``heat_theta`` its time scheme,
+    for the fine truth)."""
     if truth == "fine":
-        return generate_truth(TruthConfig(scenario=scenario, camera=frame))
+        return generate_truth(TruthConfig(scenario=scenario, camera=frame,
+                                          heat_theta=heat_theta))
     surf = independent_surface(truth, scenario, camera.sample_points()[:, :2])
     opt = np.array([optics(scenario, float(t)) for t in TIMES])
     return SimpleNamespace(times=TIMES, temps=independent_truth(truth, scenario),
@@ -71,6 +74,10 @@ def _shown(path: str) -> str:
     """``path`` relative to the repository when it lies inside it."""
     p = Path(path).resolve()
     return str(p.relative_to(ROOT)) if p.is_relative_to(ROOT) else str(p)
+
+
+def _scheme(theta: float) -> str:
+    return {0.5: "Crank-Nicolson", 1.0: "backward Euler"}.get(theta, f"theta = {theta:g}")
 
 
 def noisy_images(images: np.ndarray, seed: int, variance: float = 0.01) -> np.ndarray:
@@ -118,11 +125,17 @@ def main(argv=None):
     ap.add_argument("--window", type=float, default=None, metavar="HALF",
                     help="the camera's half-width (cm; default 0.2: x, y in [-0.2, 0.2]), "
                          "16 x 16 pixels; another one runs a new fine truth")
+    ap.add_argument("--theta", type=float, default=0.5,
+                    help="the filters' time scheme (TissueFilterSetup.theta; 1: backward "
+                         "Euler, the reports before session 21)")
+    ap.add_argument("--truth-theta", type=float, default=0.5,
+                    help="the fine truth's time scheme (TruthConfig.heat_theta; 1 before "
+                         "session 21)")
     ap.add_argument("--out", default=DEFAULT_OUT)
     args = ap.parse_args(argv)
     frame = CAMERA if args.window is None else (
         -args.window, args.window, -args.window, args.window, *CAMERA[4:])
-    me = {"model_error": args.model_error}
+    me = {"model_error": args.model_error, "theta": args.theta}
     if args.parameter_model == "trend":
         me.update(parameter_model="trend", random_walk_std=TREND_WALK)
     emu = emulator_for(progress=False)
@@ -134,6 +147,8 @@ def main(argv=None):
                f"--truth {args.truth} --parameter-model {args.parameter_model}"
                + ("" if args.image_error is None else f" --image-error {args.image_error}")
                + ("" if args.window is None else f" --window {args.window}")
+               + ("" if args.theta == 0.5 else f" --theta {args.theta:g}")
+               + ("" if args.truth_theta == 0.5 else f" --truth-theta {args.truth_theta:g}")
                + ("" if args.out == DEFAULT_OUT else f" --out {_shown(args.out)}"))
     truth_name = {"fine": "the paper's fine grid (our Monte Carlo and FEM on 100 x 100 x 50)",
                   "A": "independent model A (analog Monte Carlo, finite-difference box)",
@@ -146,7 +161,9 @@ def main(argv=None):
              f"error {filter_camera.model_error_rel_std} of the predicted rise at each of the "
              f"correlation lengths {list(filter_camera.model_error_lengths)} cm. Filter: "
              "N = 50, ETKF, the paper's priors, "
-             f"model error {args.model_error!r}, on the 20 x 20 x 10 model; the point sensor's "
+             f"model error {args.model_error!r}, on the 20 x 20 x 10 model stepped by "
+             f"{_scheme(args.theta)} at 0.1 s (the fine truth's heat: "
+             f"{_scheme(args.truth_theta)}); the point sensor's "
              "the paper's (random walk), the image's with the parameter model "
              f"{args.parameter_model!r}. Mean over the seeds; errors and spreads of the "
              "parameters relative to the truth at t = 15 s; 'covered': the share of seeds whose "
@@ -157,10 +174,11 @@ def main(argv=None):
               "with its +-2 sd band; the band holds the truth where it holds zero).", ""]
     shown = {}
     for sc in args.scenarios:
-        truth = camera_truth(args.truth, sc, camera, frame)
+        truth = camera_truth(args.truth, sc, camera, frame, args.truth_theta)
         rows = {"point": [], "image": []}
         for seed in args.seeds:
-            point = filter_setup(sc, emu, seed=seed, model_error=args.model_error)
+            point = filter_setup(sc, emu, seed=seed, model_error=args.model_error,
+                                 theta=args.theta)
             est = identify(point, truth.times[1:], noisy_sensor(truth, seed)[:, None])
             rows["point"].append(metrics(est, truth))
             if seed == args.seeds[0]:

@@ -547,6 +547,8 @@ def identify_config_from_dict(cfg: dict) -> IdentifyConfig:
     if exact and second is not None:
         raise ConfigError("filter.emulator.exact = true is not built for two estimated media "
                           "(filter.medium = [first, second]): use the emulator")
+    if "theta" in cfg.get("HS", {}):
+        setup_kw["theta"] = float(model.HS.theta)  # the filter's time scheme (checked by HS)
     if "dt" in cfg.get("HS", {}) and model.HS.dt is not None:
         setup_kw["max_dt"] = float(model.HS.dt)  # the filter's longest heat step
         try:
