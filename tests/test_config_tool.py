@@ -106,6 +106,7 @@ def with_(path: str, value, base=None):
     ("run.workers", "two", "run.workers must be an integer >= 1, got 'two'"),
     ("run.workers", 0, "run.workers must be an integer >= 1, got 0"),
     ("paper", {"scenario": "constant"}, "unknown key config.paper"),
+    ("HS.theta", 0.2, "HS.theta must be in [0.5, 1]"),
 ])
 def test_bad_config_raises_config_error_naming_key_and_value(path, value, message):
     cfg = with_(path, value)
@@ -159,6 +160,17 @@ def test_prior_table_sets_each_parameters_own_range():
                                           r"the prior \[80, 400\] \(filter.prior.mus\)"):
         identify_config_from_dict(with_("filter.prior.mus", [80.0, 400.0],
                                         with_("filter.bounds.mus", [100.0, 1000.0])))
+
+
+def test_hs_theta_is_the_filters_time_scheme():
+    """[HS] theta reaches the filter's heat steps; without it the filter's default
+    (Crank-Nicolson)."""
+    assert "theta" not in identify_config_from_dict(with_("HS.dt", 0.1)).setup_kw
+    setup = identify_config_from_dict(with_("HS.theta", 1.0)).setup(
+        absorption=lambda mua, mus: None)
+    assert setup.theta == 1.0
+    setup = identify_config_from_dict(with_("HS.dt", 0.1)).setup(absorption=lambda mua, mus: None)
+    assert setup.theta == 0.5
 
 
 def test_bounds_become_the_health_check_range():

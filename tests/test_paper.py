@@ -61,3 +61,13 @@ def test_paper_bad_input(tmp_path, capsys):
     assert main(["paper", "constant", "--out", str(tmp_path / "o"), "--members", "1",
                  "--quiet"]) == 2
     assert "--members must be >= 2, got 1" in capsys.readouterr().err
+
+
+def test_truth_key_holds_the_heat_scheme():
+    """The fine truth's time scheme is in its cache key; backward-Euler truths (before the
+    key had it) keep their old keys, so their caches stay valid."""
+    from enkf.paper import TruthConfig
+
+    old = TruthConfig(heat_theta=1.0)
+    assert TruthConfig().key() != old.key()
+    assert old.key() == "256302e53539898f81bd"  # the constant truth's key before the scheme
