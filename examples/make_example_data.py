@@ -60,6 +60,7 @@ def main(paper: bool = False, out_dir: Path = HERE, photons: int | None = None,
     if two_layer:  # the sensor of [sensors], the Monte Carlo's voxels as the heat mesh
         model.MC.n_photons_requested = 10**6
         model.HS.temp_sensor_positions = [(0.0, 0.0, 0.0)]
+        model.HS.theta = 0.5  # Crank-Nicolson: backward Euler at 0.1 s lags the epidermis
     if photons is not None:
         model.MC.n_photons_requested = photons
     model.MC.progress = model.HS.progress = False
