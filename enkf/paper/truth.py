@@ -33,8 +33,9 @@ class TruthConfig:
     #: also record a camera's images: (x0, x1, y0, y1, ny, nx, subsamples), see CAMERA
     camera: tuple | None = None
     #: the heat steps' time scheme (0.1 s steps): 0.5 Crank-Nicolson, within 0.06% of the
-    #: peak of the converged solution (steps of 0.0125 s) on the constant case; backward
-    #: Euler (1, before session 21) was 0.6% off, in the filter's own direction
+    #: peak of the solution converged in time (the pixels included) on the constant case;
+    #: backward Euler (1, before session 21) lagged by 0.57%, as the filter's own model did
+    #: then (validation/reports/coarse_model_error.md)
     heat_theta: float = 0.5
 
     def key(self) -> str:

@@ -219,7 +219,8 @@ def assemble(setup: TissueFilterSetup, param_bounds=None, warm_dt: float | None 
 
         def dynamics(U, t0, t1):
             U = U.copy()
-            U[:, :n] += U[:, n:2 * n] * ((t1 - t0) * walk_scale(t0, t1))  # the rates; offsets after them
+            # the rates (columns n to 2n); sensor offsets, if any, come after them
+            U[:, :n] += U[:, n:2 * n] * ((t1 - t0) * walk_scale(t0, t1))
             return U
 
         bounds_extra = np.tile([-1e3, 1e3], (n, 1))  # rates: no physical bound
