@@ -19,7 +19,9 @@ from pathlib import Path
 
 import numpy as np
 
-from enkf.paper import SCENARIOS, run_experiment
+from enkf.paper import SCENARIOS, TruthConfig, run_experiment
+
+DEFAULT_OUT = str(Path(__file__).parent / "reports" / "paper_runs.md")
 
 
 def checks(s: dict) -> dict[str, bool]:
@@ -47,11 +49,19 @@ def main(argv=None):
     ap.add_argument("--seeds", type=int, nargs="+", default=[0, 1, 2, 3, 4])
     ap.add_argument("--scenarios", nargs="+", default=list(SCENARIOS), choices=SCENARIOS)
     ap.add_argument("--twin", action="store_true", help="also run identical-twin experiments")
-    ap.add_argument("--out", default=str(Path(__file__).parent / "reports" / "paper_runs.md"))
+    ap.add_argument("--theta", type=float, default=None,
+                    help="the filter's (and the twin's) time scheme, TissueFilterSetup.theta "
+                         "(default: its default, Crank-Nicolson; 1: backward Euler)")
+    ap.add_argument("--truth-theta", type=float, default=None,
+                    help="the fine truth's, TruthConfig.heat_theta (default: its default)")
+    ap.add_argument("--out", default=DEFAULT_OUT)
     args = ap.parse_args(argv)
     lines = ["# The paper's experiments over several seeds", "",
              f"Command: `python validation/paper_runs.py --seeds {' '.join(map(str, args.seeds))}"
-             f"{' --twin' if args.twin else ''}`",
+             f"{' --twin' if args.twin else ''}"
+             + ("" if args.theta is None else f" --theta {args.theta:g}")
+             + ("" if args.truth_theta is None else f" --truth-theta {args.truth_theta:g}")
+             + ("" if args.out == DEFAULT_OUT else f" --out {args.out}") + "`",
              "", "Fine-grid truth 100 x 100 x 50 (cached), filter N = 50 on 20 x 20 x 10 with the "
              "emulator. The seed sets the sensor noise and the filter's random numbers.", ""]
     runs = [(sc, False) for sc in args.scenarios]
@@ -63,7 +73,10 @@ def main(argv=None):
         lines += [f"## {sc}{note}", ""]
         rows, passed = [], {}
         for seed in args.seeds:
-            s = run_experiment(sc, seed, progress=False, twin=twin).summary
+            kw = {} if args.theta is None else {"theta": args.theta}
+            if args.truth_theta is not None:
+                kw["truth_config"] = TruthConfig(heat_theta=args.truth_theta)
+            s = run_experiment(sc, seed, progress=False, twin=twin, **kw).summary
             c = checks(s)
             for k, v in c.items():
                 passed.setdefault(k, []).append(v)

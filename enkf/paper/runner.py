@@ -56,7 +56,7 @@ def run_experiment(scenario: str, seed: int = 0, *, n_members: int = 50, method:
                        mc_grid=tcfg.grid, n_mua=emulator_table, n_mus=emulator_table,
                        client=client)
     if twin:
-        truth = twin_truth(scenario, emu, truth)
+        truth = twin_truth(scenario, emu, truth, theta=overrides.get("theta"))
     data = noisy_sensor(truth, seed)
     absorption = emu
     if exact:

@@ -113,14 +113,17 @@ def generate_truth(cfg: TruthConfig, *, cache_dir: str | Path | None = None,
     return Truth(times, temps, true_parameters(cfg.scenario, times), wall, images)
 
 
-def twin_truth(scenario: str, emulator, like: Truth, coarse=(20, 20, 10)) -> Truth:
+def twin_truth(scenario: str, emulator, like: Truth, coarse=(20, 20, 10),
+               theta: float | None = None) -> Truth:
     """The identical-twin truth: the filter's own coarse model run at the true parameters.
 
     Data drawn from it carry no model error, so a filter that misses a target on them
     misses it for want of information (or by its own approximations), not because the
-    coarse model differs from the fine one. ``like`` gives the times.
+    coarse model differs from the fine one. ``like`` gives the times; ``theta`` the time
+    scheme of the heat steps (None: the filter's default).
     """
-    setup = filter_setup(scenario, emulator, n_members=1, coarse=coarse)  # its laser
+    kw = {} if theta is None else {"theta": theta}
+    setup = filter_setup(scenario, emulator, n_members=1, coarse=coarse, **kw)  # its laser
     model = TissueForwardModel(setup)
     probes = fem.probe_matrix(model.mesh, setup.tracked_positions.T)
     times = like.times
