@@ -161,7 +161,7 @@ def fine_data(cfg, truth: dict, photons: int = 10**6, seed: int = 4242) -> np.nd
 
 
 def fine_truth(cfg, truth: dict, photons: int = 10**6, seed: int = 4242,
-               cache_dir=None) -> dict:
+               cache_dir=None, theta: float = FINE_THETA) -> dict:
     """The surface sensor (``"sensor"``, (N_STEPS, 1)) and the frames of :func:`camera`
     (``"camera"``, (N_STEPS, 256), each pixel the mean of its 4 x 4 probes) from direct
     Monte Carlo (``photons``, ``seed``) and the heat simulation on the Monte Carlo's voxels,
@@ -174,14 +174,14 @@ def fine_truth(cfg, truth: dict, photons: int = 10**6, seed: int = 4242,
 
     parts = (CONFIG.read_bytes(), cfg.medium, truth["mua"], truth["mus"], int(photons), seed,
              camera(), N_STEPS, DT)
-    if FINE_THETA != 1.0:  # the backward-Euler truths of before keep their keys
-        parts = (*parts, FINE_THETA)
+    if theta != 1.0:  # the backward-Euler truths of before keep their keys
+        parts = (*parts, theta)
     key = hashlib.sha256(repr(parts).encode()).hexdigest()[:20]
     path = Path(cache_dir or default_cache_dir()) / "layered-fine" / f"fine-{key}.npz"
     if path.exists():
         with np.load(path) as f:
             return {"sensor": f["sensor"], "camera": f["camera"]}
-    out = _run_fine_truth(cfg, truth, photons, seed)
+    out = _run_fine_truth(cfg, truth, photons, seed, theta)
     path.parent.mkdir(parents=True, exist_ok=True)
     tmp = path.with_suffix(f".{os.getpid()}.tmp.npz")
     np.savez(tmp, **out)
@@ -189,13 +189,14 @@ def fine_truth(cfg, truth: dict, photons: int = 10**6, seed: int = 4242,
     return out
 
 
-def _run_fine_truth(cfg, truth: dict, photons: int, seed: int) -> dict:
+def _run_fine_truth(cfg, truth: dict, photons: int, seed: int, theta: float = FINE_THETA
+                    ) -> dict:
     model = copy.deepcopy(cfg.model)
     m = model.G.media[cfg.medium]
     m.mua, m.mus = truth["mua"], truth["mus"]
     model.MC.n_photons_requested = int(photons)
     model.MC.seed = seed
-    model.HS.theta = FINE_THETA
+    model.HS.theta = theta
     points = np.asarray(cfg.setup_kw["sensor_positions"], float).reshape(-1, 3)
     probes = camera().sample_points()
     model.HS.temp_sensor_positions = [tuple(p) for p in np.vstack([points, probes])]
@@ -349,12 +350,20 @@ def main(argv=None):
                          "default: ThermalImage's, 0.04)")
     ap.add_argument("--fine-smoother", action="store_true",
                     help="with --fine and --smoother: the smoother on the fine truth too")
+    ap.add_argument("--theta", type=float, default=None,
+                    help="the filter's time scheme (TissueFilterSetup.theta; default the "
+                         "config's, Crank-Nicolson; 1: backward Euler, the reports before "
+                         "session 21)")
+    ap.add_argument("--fine-theta", type=float, default=FINE_THETA,
+                    help="the fine truth's time scheme (1: the reports before session 21)")
     ap.add_argument("--out", default=str(HERE / "reports" / "layered.md"))
     args = ap.parse_args(argv)
     ident = load_script(validation_dir(), "identifiability")
     cfg = load_identify(CONFIG)
     cfg = model_config(cfg, args.grid, args.emulator_photons, args.emulator_seed,
                        args.emulator_table)
+    if args.theta is not None:
+        cfg.setup_kw = {**cfg.setup_kw, "theta": args.theta}
     if args.heat_operator is not None:
         cfg.setup_kw = {**cfg.setup_kw, "heat_operator": args.heat_operator,
                         "heat_mass": "lumped" if args.heat_operator == "p1" else "averaged"}
@@ -392,7 +401,7 @@ def main(argv=None):
         key = (truth["mua"], truth["mus"])
         if key not in fines:
             fines[key] = fine_truth(cfg, truth, args.fine_photons, args.fine_seed,
-                                    args.cache_dir)
+                                    args.cache_dir, args.fine_theta)
         return fines[key]
 
     for kind in kinds:
@@ -541,6 +550,8 @@ def _changes(args, cfg) -> list[str]:
         out.append(f"emulator {args.emulator_photons:,} photons")
     if args.emulator_seed is not None:
         out.append(f"emulator seed {args.emulator_seed}")
+    if args.theta is not None:
+        cfg.setup_kw = {**cfg.setup_kw, "theta": args.theta}
     if args.heat_operator is not None:
         out.append(f"filter heat operator {args.heat_operator}")
     if args.emulator_table is not None:
