@@ -66,7 +66,7 @@ def fine_truth(photons: int, coarse_mesh, mua: float = 1.0, mus: float = 100.0, 
     from mcmatlab_py.emulator import default_cache_dir
 
     key = hashlib.sha256(json.dumps(dict(P=POWER, T0=T0, on=ON, off=OFF, photons=photons,
-                                         E=E, A=A, mua=mua, mus=mus, version=1)).encode()
+                                         E=E, A=A, mua=mua, mus=mus, version=2)).encode()
                          ).hexdigest()[:16]
     path = default_cache_dir() / f"risk-truth-{key}.npz"
     if path.exists():
@@ -77,6 +77,7 @@ def fine_truth(photons: int, coarse_mesh, mua: float = 1.0, mus: float = 100.0, 
     model.G.media = [replace(m, mua=mua, mus=mus, E=E, A=A) for m in model.G.media]
     model.HS.P, model.HS.T_initial = POWER, T0
     model.HS.duration_on, model.HS.duration_off = ON, OFF
+    model.HS.theta = 0.5  # Crank-Nicolson, as the paper's truths (version 1: backward Euler)
     model.HS.temp_sensor_positions = [tuple(p) for p in coarse_mesh.p.T]
     model.run_monte_carlo()
     model.simulate_heat_distribution()
