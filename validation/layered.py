@@ -551,7 +551,7 @@ def _changes(args, cfg) -> list[str]:
     if args.emulator_seed is not None:
         out.append(f"emulator seed {args.emulator_seed}")
     if args.theta is not None:
-        cfg.setup_kw = {**cfg.setup_kw, "theta": args.theta}
+        out.append(f"filter heat steps theta = {args.theta:g}")
     if args.heat_operator is not None:
         out.append(f"filter heat operator {args.heat_operator}")
     if args.emulator_table is not None:
@@ -562,6 +562,8 @@ def _changes(args, cfg) -> list[str]:
         out.append(f"fine truth {_photons(args.fine_photons)} photons")
     if args.fine_seed != 4242:
         out.append(f"fine truth seed {args.fine_seed}")
+    if args.fine_theta != FINE_THETA:
+        out.append(f"fine truth's heat steps theta = {args.fine_theta:g}")
     return out
 
 

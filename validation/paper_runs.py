@@ -64,6 +64,9 @@ def main(argv=None):
              + ("" if args.out == DEFAULT_OUT else f" --out {args.out}") + "`",
              "", "Fine-grid truth 100 x 100 x 50 (cached), filter N = 50 on 20 x 20 x 10 with the "
              "emulator. The seed sets the sensor noise and the filter's random numbers.", ""]
+    kw = {} if args.theta is None else {"theta": args.theta}
+    if args.truth_theta is not None:
+        kw["truth_config"] = TruthConfig(heat_theta=args.truth_theta)
     runs = [(sc, False) for sc in args.scenarios]
     if args.twin:
         runs += [(sc, True) for sc in args.scenarios]
@@ -73,9 +76,6 @@ def main(argv=None):
         lines += [f"## {sc}{note}", ""]
         rows, passed = [], {}
         for seed in args.seeds:
-            kw = {} if args.theta is None else {"theta": args.theta}
-            if args.truth_theta is not None:
-                kw["truth_config"] = TruthConfig(heat_theta=args.truth_theta)
             s = run_experiment(sc, seed, progress=False, twin=twin, **kw).summary
             c = checks(s)
             for k, v in c.items():

@@ -41,7 +41,7 @@ from pathlib import Path
 import numpy as np
 
 import fem
-from enkf.paper import emulator_for, filter_setup, paper_model
+from enkf.paper import TruthConfig, emulator_for, filter_setup, paper_model
 from enkf.tissue import TissueForwardModel, identify
 from enkf.tissue.risk import MCMATLAB_A, MCMATLAB_E, RiskTracker, plot_depth_maps
 
@@ -77,7 +77,7 @@ def fine_truth(photons: int, coarse_mesh, mua: float = 1.0, mus: float = 100.0, 
     model.G.media = [replace(m, mua=mua, mus=mus, E=E, A=A) for m in model.G.media]
     model.HS.P, model.HS.T_initial = POWER, T0
     model.HS.duration_on, model.HS.duration_off = ON, OFF
-    model.HS.theta = 0.5  # Crank-Nicolson, as the paper's truths (version 1: backward Euler)
+    model.HS.theta = TruthConfig.heat_theta  # as the paper's truths (version 1: backward Euler)
     model.HS.temp_sensor_positions = [tuple(p) for p in coarse_mesh.p.T]
     model.run_monte_carlo()
     model.simulate_heat_distribution()
