@@ -73,6 +73,24 @@ def test_slices_show_the_data(model):
     plt.close("all")
 
 
+def test_light_maps_slice_at_their_maximum_and_draw_zero_dark(model):
+    """The xy slice of NA lies at the depth of NA's maximum (not the top layer, air in most
+    examples), and a voxel of zero is drawn in the scale's lowest colour, not blank (which
+    read as inferno's hottest)."""
+    from mcmatlab_py.plotting.figures import light_slices
+
+    MC = model.MC
+    iz = np.unravel_index(np.argmax(MC.NA), MC.NA.shape)[2]
+    assert light_slices(MC.NA)[2] == pytest.approx(iz / (MC.NA.shape[2] - 1))
+    xy = model.plot("MC")["NA"].axes[0].images[0]
+    np.testing.assert_array_equal(xy.get_array().filled(0.0),
+                                  np.where(MC.NA > 0, MC.NA, 0.0)[:, :, iz].T)
+    cmap = xy.get_cmap()
+    np.testing.assert_allclose(cmap.get_bad(), cmap(0.0))
+    assert light_slices(np.zeros((4, 4, 6))) == (0.5, 0.5, 0.0)
+    plt.close("all")
+
+
 def test_fmc_needs_its_run_and_bad_names_fail(model):
     with pytest.raises(ValueError, match=r"run model.run_monte_carlo\('fluorescence'\)"):
         model.plot("FMC")

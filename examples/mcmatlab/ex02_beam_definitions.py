@@ -298,7 +298,7 @@ def beams_figure(models: dict):
         ax = axes[1, col]
         ax.imshow(MC.NI_zpos.T, origin="lower", cmap="inferno",
                   extent=[-G.Lx / 2, G.Lx / 2, -G.Ly / 2, G.Ly / 2])
-        ax.set(xlabel="x [cm]", ylabel="y [cm] (NI_zpos)" if col == 0 else None)
+        ax.set(xlabel="x [cm]", ylabel="y [cm], light leaving the bottom" if col == 0 else None)
         ax = axes[2, col]
         ax.pcolormesh(np.degrees(MC.far_field_phi), np.degrees(MC.far_field_theta),
                       MC.far_field / far_field_solid_angles(MC.far_field_res),  # W/sr/W

@@ -199,7 +199,8 @@ def layers_figure(model, k: int = 8):
     for ax in (ax0, ax1):
         for z, label in ((Z_WATER, "air / water"), (Z_REFLECTOR, "water / reflector")):
             ax.axhline(z, color="0.5", lw=0.8, ls="--")
-            ax.text(-G.Lx / 2 * 0.97, z - 0.002, label, fontsize=7, color="0.3")
+            ax.text(-G.Lx / 2 * 0.97, z - 0.002, label, fontsize=7, color="0.2",
+                    bbox={"fc": "w", "ec": "none", "alpha": 0.7, "pad": 1})
     return fig
 
 

@@ -134,7 +134,7 @@ def images_figure(model):
         h = LC.field_size / 2
         im = ax.imshow(LC.image.T, origin="lower", extent=[-h, h, -h, h], cmap="inferno")
         ax.set(xlabel="X [cm]", ylabel="Y [cm]", title=f"Collected {what}")
-        fig.colorbar(im, ax=ax, label="[W/cm$^2$/W.incident]")
+        fig.colorbar(im, ax=ax, label="image irradiance [W/cm$^2$ per W incident]")
     return fig
 
 

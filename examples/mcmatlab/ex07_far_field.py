@@ -118,8 +118,9 @@ def far_field_figure(model):
         solid = far_field_solid_angles(sim.far_field_res)  # sr per bin
         im = ax.pcolormesh(np.degrees(sim.far_field_phi), np.degrees(sim.far_field_theta),
                            sim.far_field / solid, shading="nearest", cmap="inferno")
-        ax.set(xlabel="phi [deg]", title=f"Far field, {title}")
-        fig.colorbar(im, ax=ax, label="[W/sr/W.incident excitation]")
+        # theta = 0 at the top, as the far fields of examples 2 and 21
+        ax.set(xlabel="phi [deg]", title=f"Far field, {title}", ylim=(180, 0))
+        fig.colorbar(im, ax=ax, label="radiant intensity [W/sr per W of excitation]")
     axes[0].set_ylabel("theta [deg] (0: +z, down; 180: up through the top)")
     return fig
 

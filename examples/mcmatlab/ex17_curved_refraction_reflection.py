@@ -125,10 +125,11 @@ def droplet_figure(model, k: int = 6):
             title=f"{MC.n_example_paths} example paths, first {k} segments")
     ax0.set_aspect("equal")
     row = MC.NI_zpos[:, G.ny // 2]
-    ax1.step(G.x, row, where="mid")
+    # a bin no light left is a gap, not a drop off the log axis
+    ax1.step(G.x, np.where(row > 0, row, np.nan), where="mid")
     ax1.axvspan(-DROPLET_RADIUS, DROPLET_RADIUS, color="C3", alpha=0.1, label="droplet base")
     ax1.axhline(1 / (G.Lx * G.Ly), color="0.5", ls="--", lw=0.8, label="incident plane wave")
-    ax1.set(xlabel="x [cm]", ylabel="NI_zpos [W/cm$^2$/W]", yscale="log",
+    ax1.set(xlabel="x [cm]", ylabel="irradiance leaving the bottom [W/cm$^2$ per W]", yscale="log",
             title="light leaving the bottom, y = 0")
     ax1.legend(fontsize=7)
     return fig

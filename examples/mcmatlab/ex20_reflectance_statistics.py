@@ -149,14 +149,14 @@ def statistics_figure(result: dict):
     im = ax0.imshow(np.where(NI > 0, NI, np.nan).T, origin="lower", cmap="inferno",
                     extent=[-G.Lx / 2, G.Lx / 2, -G.Ly / 2, G.Ly / 2],
                     norm=LogNorm(max(positive.min(), positive.max() * 1e-4), positive.max()))
-    fig.colorbar(im, ax=ax0, label="NI_zneg [W/cm$^2$/W]")
+    fig.colorbar(im, ax=ax0, label="irradiance leaving the top [W/cm$^2$ per W]")
     ax0.set(xlabel="x [cm]", ylabel="y [cm]", title="light leaving the top (mismatched)")
     for i, name in enumerate(("matched", "mismatched")):
         Rd = result[f"Rd_{name}"]
         mean, sem = statistics(Rd)
         ax1.plot(np.full(Rd.size, i), Rd, "o", color=f"C{i}", alpha=0.5, label=f"{name}: runs")
         ax1.errorbar(i + 0.15, mean, yerr=sem, fmt="s", color=f"C{i}", capsize=4,
-                     label=f"mean {mean:.4f} +- {sem:.4f}")
+                     label=f"mean {mean:.4f} ± {sem:.4f}")
     ax1.set(xticks=[0, 1], xticklabels=["matched", "mismatched"], xlim=(-0.5, 1.6),
             ylabel="diffuse reflectance Rd", title=f"{N_RUNS} runs of {model.MC.n_photons} photons")
     ax1.legend(fontsize=7, loc="center right")

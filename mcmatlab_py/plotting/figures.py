@@ -7,11 +7,14 @@ import numpy as np
 from ..broadband import is_broadband, total
 from .slices import orthogonal_slices
 
-__all__ = ["fluorescence_figures", "geometry_figures", "heat_figures", "media_properties_figure",
-           "monte_carlo_figures", "positive_log_norm"]
+__all__ = ["fluorescence_figures", "geometry_figures", "heat_figures", "light_slices",
+           "media_properties_figure", "monte_carlo_figures", "positive_log_norm"]
 
-#: relative slice positions of the G and MC figures: through the middle in x and y, and the
-#: irradiated surface (MCmatlab's NdimSliderPlot default, with y through the middle)
+#: relative slice positions of the G figure: through the middle in x and y, and the
+#: irradiated surface (MCmatlab's NdimSliderPlot default, with y through the middle). The
+#: light's maps put their xy slice at the depth of their maximum instead
+#: (:func:`light_slices`): MCmatlab's 3-D view shows the top face under a slice through
+#: the middle; a flat layout of the top layer shows only air in most examples.
 DEFAULT_SLICES = (0.5, 0.5, 0.0)
 #: a log colour scale spans at most this many decades below the maximum
 LOG_DECADES = 6
@@ -131,14 +134,31 @@ def monte_carlo_figures(model) -> dict:
     return figs
 
 
+def light_slices(data: np.ndarray) -> tuple[float, float, float]:
+    """Relative slice positions of a light map (nx, ny, nz): x and y through the middle,
+    z at the depth of the map's maximum (the top layer when the map is all zero)."""
+    a = np.asarray(data, float)
+    nz = a.shape[2]
+    if nz < 2 or not np.any(a > 0):
+        return (0.5, 0.5, 0.0)
+    iz = int(np.unravel_index(np.nanargmax(np.where(a > 0, a, -np.inf)), a.shape)[2])
+    return (0.5, 0.5, iz / (nz - 1))
+
+
 def _log_slice_figures(G, fields, per: str = "incident") -> dict:
     """One figure of orthogonal log-scale slices per ``(key, data, what, unit)``, per W
     ``per`` (incident, or emitted by a distributed source)."""
+    import matplotlib as mpl
+
+    # zero (log10 of it: -inf) drawn as the scale's lowest colour, as MCmatlab does; the
+    # default (blank) read as inferno's top, the hottest colour
+    base = mpl.colormaps["inferno"]
+    cmap = base.with_extremes(bad=base(0.0), under=base(0.0))
     figs = {}
     for key, data, what, unit in fields:
         fig = _figure(name=key)
         shown = np.where(data > 0, data, np.nan)
-        orthogonal_slices(fig, shown, G, DEFAULT_SLICES, cmap="inferno",
+        orthogonal_slices(fig, shown, G, light_slices(data), cmap=cmap,
                           norm=positive_log_norm(data), label=f"{key} [{unit}]",
                           title=f"{key}: {what} [{unit} {per}]")
         figs[key] = fig

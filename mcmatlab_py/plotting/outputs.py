@@ -121,7 +121,7 @@ def plot_light_collector(model, simulation: str = "MC"):
     h = LC.field_size / 2
     im = ax.imshow(img.T, origin="lower", extent=[-h, h, -h, h], cmap="inferno")
     ax.set(xlabel="X [cm]", ylabel="Y [cm]", title=f"{prefix}Image at 1x magnification")
-    fig.colorbar(im, ax=ax, label="[W/cm$^2$/W.incident]")
+    fig.colorbar(im, ax=ax, label="image irradiance [W/cm$^2$ per W incident]")
     return fig
 
 
@@ -144,7 +144,7 @@ def plot_boundary_irradiance(model, simulation: str = "MC"):
                        origin="lower" if face[0] == "z" else "upper")
         ax.set(title=f"{prefix}NI_{face}" + ("" if NI.max() > 0 else " (no light)"),
                xlabel=labels[face[0]][0], ylabel=labels[face[0]][1])
-        fig.colorbar(im, ax=ax, label="[W/cm$^2$/W.incident]")
+        fig.colorbar(im, ax=ax, label="irradiance [W/cm$^2$ per W incident]")
     return fig
 
 
@@ -177,5 +177,5 @@ def plot_radial_reflectance_transmittance(model):
         if mcml is not None:
             ax.plot(MC.radial_r, mcml, ".", label="MCML bins")
         ax.set(xlabel="r [cm]", ylabel=f"{label} [cm$^{{-2}}$]", yscale="log")
-        ax.legend()
+        ax.legend(loc="upper left", fontsize=8)  # the tails are noisiest at large |r|
     return fig

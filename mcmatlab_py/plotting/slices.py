@@ -27,6 +27,7 @@ def orthogonal_slices(fig, data: np.ndarray, G, positions, *, cmap="viridis", no
     """
     from matplotlib.colors import BoundaryNorm, ListedColormap
     from matplotlib.patches import Patch
+    from matplotlib.ticker import MaxNLocator
 
     ix, iy, iz = slice_indices(data.shape, positions)
     x0, x1, y0, y1 = -G.Lx / 2, G.Lx / 2, -G.Ly / 2, G.Ly / 2
@@ -52,6 +53,8 @@ def orthogonal_slices(fig, data: np.ndarray, G, positions, *, cmap="viridis", no
         images.append(ax.imshow(img, extent=ext, cmap=cmap, norm=norm, aspect="equal",
                                 interpolation="nearest", origin="lower" if k == 0 else "upper"))
         ax.set(xlabel=xl, ylabel=yl, title=t)
+        # a narrow panel (a deep block's xz and yz) would run its default ticks together
+        ax.xaxis.set_major_locator(MaxNLocator(nbins=4))
     # where the other slices cut each panel
     axes[0].axhline(G.y[iy], color="w", lw=0.6, ls="--")
     axes[0].axvline(G.x[ix], color="w", lw=0.6, ls="--")

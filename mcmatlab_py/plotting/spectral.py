@@ -82,7 +82,8 @@ def media_properties_vs_wavelength(model, M=None):
         ax.grid(True, alpha=0.4)
         if field in ("mua", "mus"):
             ax.set_yscale("log")
-    axes[0].legend(fontsize=7, loc="best")
+    # beside the panels: on the absorption panel it hid the curves (example 23)
+    fig.legend(*axes[0].get_legend_handles_labels(), fontsize=7, loc="outside right upper")
     if thermal:
         T = HS.T_voxels if HS.T_voxels is not None else HS.T_initial
         FD = 0.0 if HS.Omega_voxels is None else -np.expm1(-HS.Omega_voxels)
