@@ -142,7 +142,12 @@ class HeatSimulation(StrictAttributes):
     n_updates: int = 10  #: reports (plots, frames) per pulse; at least one per phase
     #: every this many updates, re-evaluate FR-, T-, FD-dependent media (0: never)
     media_prop_recalc_period: int = 0
-    slice_positions: tuple = (0.5, 1.0, 1.0)  #: relative (x, y, z) of the slices, 0..1
+    #: relative (x, y, z) of the temperature slices, 0..1 (figures, live plot, movie); None:
+    #: through the hottest voxel (of the rise above ``T_initial``; the damage figures:
+    #: through the most damaged voxel), the middle when nothing heated. MCmatlab's default
+    #: (0.5, 1, 1) puts the xy and xz slices on the bottom and back walls of its 3-D view;
+    #: this port's flat layout of three panels would show those faces, most often unheated.
+    slice_positions: tuple | None = None
     plot_temp_limits: tuple = (math.nan, math.nan)  #: deg C colour range (NaN: the data's)
     live_plot: bool = False  #: draw the temperature slices at every update (this port's)
     make_movie: bool = False  #: write the update frames as an MP4 (imageio-ffmpeg)
@@ -248,10 +253,14 @@ class HeatSimulation(StrictAttributes):
                                  f"{G.Ly / 2}] x [0, {G.Lz}]")
 
     def _validate_plotting(self) -> None:
-        s = np.asarray(self.slice_positions, dtype=float)
-        if s.shape != (3,) or not np.all((s >= 0) & (s <= 1)):
-            raise ValueError(f"HS.slice_positions must be three numbers in [0, 1], got "
-                             f"{self.slice_positions!r}")
+        if self.slice_positions is not None:
+            try:
+                s = np.asarray(self.slice_positions, dtype=float)
+            except (TypeError, ValueError):
+                s = np.full(0, np.nan)
+            if s.shape != (3,) or not np.all((s >= 0) & (s <= 1)):
+                raise ValueError("HS.slice_positions must be three numbers in [0, 1] (or None: "
+                                 f"through the hottest voxel), got {self.slice_positions!r}")
         lim = np.asarray(self.plot_temp_limits, dtype=float)
         if lim.shape != (2,) or np.any(np.isinf(lim)) or (
                 not np.isnan(lim).any() and lim[1] <= lim[0]):

@@ -64,12 +64,16 @@ def test_slices_show_the_data(model):
     np.testing.assert_array_equal(geo.axes[1].images[0].get_array(),
                                   G.medium_map()[:, iy, :].T)
     heat = model.plot("HS")
+    hottest = np.unravel_index(np.argmax(model.HS.T_voxels), MC.NFR.shape)
     np.testing.assert_allclose(heat["temperature"].axes[0].images[0].get_array(),
-                               model.HS.T_voxels[:, :, slice_indices(
-                                   G.medium_map().shape, model.HS.slice_positions)[2]].T)
+                               model.HS.T_voxels[:, :, hottest[2]].T)
     lines = heat["sensor_temperatures"].axes[0].lines
     np.testing.assert_array_equal(lines[1].get_ydata(), model.HS.sensor_temps[:, 1])
     assert lines[0].get_label() == "1, blood"
+    # the two sensors lie on one vertical: one label "1,2" in the xy panel, not two on top
+    xy, xz, _ = heat["sensor_positions"].axes[:3]
+    assert [t.get_text() for t in xy.texts] == ["1,2"]
+    assert [t.get_text() for t in xz.texts] == ["1", "2"]
     plt.close("all")
 
 
@@ -88,6 +92,53 @@ def test_light_maps_slice_at_their_maximum_and_draw_zero_dark(model):
     cmap = xy.get_cmap()
     np.testing.assert_allclose(cmap.get_bad(), cmap(0.0))
     assert light_slices(np.zeros((4, 4, 6))) == (0.5, 0.5, 0.0)
+    plt.close("all")
+
+
+def test_heat_maps_slice_through_their_maximum_unless_positions_are_set(model):
+    """By default (``HS.slice_positions = None``) the temperature panels, the live plot's
+    and the movie's cut through the hottest voxel and the damage panels through the most
+    damaged one (MCmatlab's default, (0.5, 1, 1), drew the bottom layer and the back face:
+    cold); positions the user sets are kept."""
+    from mcmatlab_py.plotting.figures import heat_slices
+    from mcmatlab_py.plotting.movie import TemperatureMonitor
+
+    G, HS = model.G, model.HS
+    assert HS.slice_positions is None
+    T, Om = HS.T_voxels, HS.Omega_voxels
+    figs = model.plot("HS")
+    for name, field in (("temperature", T), ("sensor_positions", T), ("damage", Om),
+                        ("fractional_damage", Om)):
+        ix, iy, iz = np.unravel_index(np.argmax(field), field.shape)
+        titles = [ax.get_title() for ax in figs[name].axes[:3]]
+        assert titles == [f"xy at z = {G.z[iz]:.3g} cm", f"xz at y = {G.y[iy]:.3g} cm",
+                          f"yz at x = {G.x[ix]:.3g} cm"], name
+    for name, top in (("temperature", T.max()), ("fractional_damage", -np.expm1(-Om.max()))):
+        for ax in figs[name].axes[:3]:  # each panel holds the maximum
+            assert ax.images[0].get_array().max() == pytest.approx(top), (name, ax.get_title())
+    # the movie's slices follow the hottest voxel from update to update
+    mon = TemperatureMonitor(model, G.medium_map(), show=False, record=False)
+    for hot in ((1, 6, 2), (5, 2, 4)):
+        T_vox = np.full(T.shape, HS.T_initial)
+        T_vox[hot] += 10.0
+        mon.update(T_vox, 0.1)
+        for ax in mon.axes:
+            assert ax.images[0].get_array().max() == HS.T_initial + 10.0
+        cut_x = [line.get_xdata()[0] for line in mon.axes[0].lines if line.get_gid() == "cut"]
+        assert cut_x[1] == pytest.approx(G.x[hot[0]])
+    plt.close(mon.fig)
+    # nothing heated: through the middle; positions set by the user: exactly those
+    assert heat_slices(HS, np.zeros(T.shape)) == (0.5, 0.5, 0.5)
+    try:
+        HS.slice_positions = (0.25, 0.75, 1.0)
+        assert heat_slices(HS, T - HS.T_initial) == (0.25, 0.75, 1.0)
+        ix, iy, iz = slice_indices(T.shape, HS.slice_positions)
+        xy, xz, yz = [ax.images[0].get_array() for ax in model.plot("HS")["temperature"].axes[:3]]
+        np.testing.assert_array_equal(xy, T[:, :, iz].T)
+        np.testing.assert_array_equal(xz, T[:, iy, :].T)
+        np.testing.assert_array_equal(yz, T[ix, :, :].T)
+    finally:
+        HS.slice_positions = None
     plt.close("all")
 
 

@@ -18,7 +18,8 @@ fractions must agree.
 
 Differences from MCmatlab: a fixed photon count instead of 0.1 min; the custom phase
 function is tabulated on 4001 angles and sampled exactly as a piecewise-linear density
-(MCmatlab: 200 bins); the Henyey-Greenstein comparison is this port's addition.
+(MCmatlab: 200 bins); the Henyey-Greenstein comparison is this port's addition; the
+slices of the geometry, NA and NFR are zoomed on the column (:func:`zoom_on_column`).
 """
 
 from __future__ import annotations
@@ -190,6 +191,23 @@ def far_field_figure(model):
     return fig
 
 
+def zoom_on_column(fig, G, half_width: int = 10) -> None:
+    """Zoom the three slice panels of a ``model.plot`` figure onto the scattering column:
+    ``half_width`` voxels either side of it across, the whole depth down (the xz and yz
+    panels stretched to the figure's height).
+
+    On the cuboid's whole width the one-voxel column is narrower than a pixel of the xz
+    and yz panels, and ``imshow``'s nearest-voxel resampling drops it; zoomed, it is a
+    stripe of 1 / (2 half_width + 1) of each panel's width.
+    """
+    w = (half_width + 0.5) * G.dx  # cm, the column's centre is at x = y = 0
+    xy, xz, yz = fig.axes[:3]
+    xy.set(xlim=(-w, w), ylim=(-w, w))
+    for ax in (xz, yz):
+        ax.set_xlim(-w, w)
+        ax.set_aspect("auto")
+
+
 if __name__ == "__main__":
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--quick", action="store_true", help="small grid, few photons (seconds)")
@@ -206,8 +224,11 @@ if __name__ == "__main__":
     from mcmatlab_py.plotting.outputs import plot_far_field
 
     model = models["rayleigh"]
-    model.plot("G", args.out / "ex21")
-    model.plot("MC", args.out / "ex21")
+    for what in ("G", "MC"):
+        for name, fig in model.plot(what).items():
+            if name in ("geometry", "NA", "NFR"):
+                zoom_on_column(fig, model.G)
+            fig.savefig(args.out / f"ex21_{name}.png", dpi=110)
     plot_far_field(model).savefig(args.out / "ex21_far_field.png", dpi=110)  # MCmatlab's figure 9
     far_field_figure(model).savefig(args.out / "ex21_phase_function.png", dpi=110)
     print(f"figures in {args.out}")

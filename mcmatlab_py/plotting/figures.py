@@ -5,15 +5,17 @@ from __future__ import annotations
 import numpy as np
 
 from ..broadband import is_broadband, total
-from .slices import orthogonal_slices
+from .slices import orthogonal_slices, slices_through_maximum
 
-__all__ = ["fluorescence_figures", "geometry_figures", "heat_figures", "light_slices",
-           "media_properties_figure", "monte_carlo_figures", "positive_log_norm"]
+__all__ = ["fluorescence_figures", "geometry_figures", "heat_figures", "heat_slices",
+           "light_slices", "media_properties_figure", "monte_carlo_figures",
+           "positive_log_norm"]
 
 #: relative slice positions of the G figure: through the middle in x and y, and the
 #: irradiated surface (MCmatlab's NdimSliderPlot default, with y through the middle). The
 #: light's maps put their xy slice at the depth of their maximum instead
-#: (:func:`light_slices`): MCmatlab's 3-D view shows the top face under a slice through
+#: (:func:`light_slices`), and the heat's maps cut through their maximum
+#: (:func:`heat_slices`): MCmatlab's 3-D view shows the top face under a slice through
 #: the middle; a flat layout of the top layer shows only air in most examples.
 DEFAULT_SLICES = (0.5, 0.5, 0.0)
 #: a log colour scale spans at most this many decades below the maximum
@@ -137,12 +139,17 @@ def monte_carlo_figures(model) -> dict:
 def light_slices(data: np.ndarray) -> tuple[float, float, float]:
     """Relative slice positions of a light map (nx, ny, nz): x and y through the middle,
     z at the depth of the map's maximum (the top layer when the map is all zero)."""
-    a = np.asarray(data, float)
-    nz = a.shape[2]
-    if nz < 2 or not np.any(a > 0):
-        return (0.5, 0.5, 0.0)
-    iz = int(np.unravel_index(np.nanargmax(np.where(a > 0, a, -np.inf)), a.shape)[2])
-    return (0.5, 0.5, iz / (nz - 1))
+    return slices_through_maximum(data, axes=(2,), fallback=DEFAULT_SLICES)
+
+
+def heat_slices(HS, field: np.ndarray) -> tuple[float, float, float]:
+    """Relative slice positions of a heat map: ``HS.slice_positions`` where the user set
+    them; where they are None (the default), through the voxel of the largest positive
+    value of ``field`` (nx, ny, nz): the temperature rise above ``HS.T_initial``, or the
+    damage integral; through the middle when no value is positive (nothing heated)."""
+    if HS.slice_positions is not None:
+        return tuple(float(p) for p in HS.slice_positions)
+    return slices_through_maximum(field)
 
 
 def _log_slice_figures(G, fields, per: str = "incident") -> dict:
@@ -205,16 +212,21 @@ def heat_figures(model) -> dict:
                          "plot('HS')")
     M = G.medium_map()
     names = _media_names(G)
-    pos = HS.slice_positions
+    T = HS.T_voxels
+    pos = heat_slices(HS, T - HS.T_initial)  # through the hottest voxel
     figs = {}
     sensors = np.asarray(HS.temp_sensor_positions, float).reshape(-1, 3)
     if sensors.size:
         fig = _figure(name="Temperature sensor illustration")
         axes, _ = orthogonal_slices(fig, M, G, pos, categories=names,
                                     title="Temperature sensor illustration")
-        for i, (x, y, z) in enumerate(sensors, start=1):
-            for ax, (u, v) in zip(axes, ((x, y), (x, z), (y, z)), strict=True):
-                ax.text(u, v, str(i), ha="center", va="center", fontsize=11, weight="bold")
+        for ax, (a, b) in zip(axes, ((0, 1), (0, 2), (1, 2)), strict=True):
+            at = {}  # sensors in line along the panel's normal share one label: "1,2,3"
+            for i, p in enumerate(sensors, start=1):
+                at.setdefault((p[a], p[b]), []).append(str(i))
+            for (u, v), ids in at.items():
+                ax.text(u, v, ",".join(ids), ha="center", va="center", fontsize=11,
+                        weight="bold")
         figs["sensor_positions"] = fig
         fig = _figure(width=8.0, height=4.8, name="Temperature sensor data")
         ax = fig.subplots()
@@ -231,7 +243,6 @@ def heat_figures(model) -> dict:
     lim = np.asarray(HS.plot_temp_limits, float)
     from matplotlib.colors import Normalize
 
-    T = HS.T_voxels
     norm = Normalize(vmin=T.min() if np.isnan(lim[0]) else lim[0],
                      vmax=T.max() if np.isnan(lim[1]) else lim[1])
     orthogonal_slices(fig, T, G, pos, cmap="hot", norm=norm, label="temperature [deg C]",
@@ -239,6 +250,7 @@ def heat_figures(model) -> dict:
     figs["temperature"] = fig
     if any(m.E is not None and m.A is not None and m.A > 0 for m in G.media):
         Om = HS.Omega_voxels
+        pos = heat_slices(HS, Om)  # through the most damaged voxel
         fig = _figure(name="Thermal damage illustration")
         orthogonal_slices(fig, np.where(Om > 1, len(names), M), G, pos,
                           categories=[*names, "damage"],

@@ -1,11 +1,11 @@
 """The heat run's live temperature slices and its movie (MCmatlab's ``makeMovie``).
 
 At every update of a heat run :class:`TemperatureMonitor` redraws the three
-orthogonal temperature slices (``HS.slice_positions``, colour range
-``HS.plot_temp_limits``) and, for a movie, keeps the rendered frame; the movie opens on
-the geometry illustration (first run only) and the frames are written as an H.264 MP4
-by the ffmpeg binary of the imageio-ffmpeg package (:func:`write_movie`), holding the
-first and last frame for a second as MCmatlab does.
+orthogonal temperature slices (at ``HS.slice_positions``, by default through the hottest
+voxel of each update; colour range ``HS.plot_temp_limits``) and, for a movie, keeps the
+rendered frame; the movie opens on the geometry illustration (first run only) and the
+frames are written as an H.264 MP4 by the ffmpeg binary of the imageio-ffmpeg package
+(:func:`write_movie`), holding the first and last frame for a second as MCmatlab does.
 """
 
 from __future__ import annotations
@@ -14,7 +14,8 @@ from pathlib import Path
 
 import numpy as np
 
-from .slices import orthogonal_slices
+from .figures import heat_slices
+from .slices import orthogonal_slices, update_slices
 
 __all__ = ["FPS", "HOLD_FRAMES", "TemperatureMonitor", "write_movie"]
 
@@ -34,12 +35,14 @@ class TemperatureMonitor:
         self.frames: list[np.ndarray] = []
         G, HS = model.G, model.HS
         self.limits = np.asarray(HS.plot_temp_limits, float)
+        empty = np.full((G.nx, G.ny, G.nz), np.nan)
+        self.positions = heat_slices(HS, empty)  # the user's, or the middle until it heats
         self.fig = plt.figure(figsize=FRAME_SIZE, dpi=100, layout="constrained")
         if self.fig.canvas.manager is not None:
             self.fig.canvas.manager.set_window_title("Temperature evolution")
         self.axes, self.images = orthogonal_slices(
-            self.fig, np.full((G.nx, G.ny, G.nz), np.nan), G, HS.slice_positions, cmap="hot",
-            norm=Normalize(0, 1), label="temperature [deg C]", title="Temperature evolution")
+            self.fig, empty, G, self.positions, cmap="hot", norm=Normalize(0, 1),
+            label="temperature [deg C]", title="Temperature evolution")
 
     def _rgb(self, fig) -> np.ndarray:
         fig.canvas.draw()
@@ -53,24 +56,21 @@ class TemperatureMonitor:
 
         G = self.model.G
         fig = plt.figure(figsize=FRAME_SIZE, dpi=100, layout="constrained")
-        orthogonal_slices(fig, self.M, G, self.model.HS.slice_positions,
+        orthogonal_slices(fig, self.M, G, self.positions,
                           categories=[m.name for m in G.media], title="Geometry illustration")
         self.frames.append(self._rgb(fig))
         plt.close(fig)
 
     def update(self, T_vox: np.ndarray, t: float, *, record: bool | None = None) -> None:
         """Show the voxel temperatures (deg C) at time ``t`` (s); keep the frame if recording."""
-        from .slices import slice_indices
-
         HS = self.model.HS
-        ix, iy, iz = slice_indices(T_vox.shape, HS.slice_positions)
+        self.positions = heat_slices(HS, T_vox - HS.T_initial)
         lo = float(T_vox.min()) if np.isnan(self.limits[0]) else self.limits[0]
         hi = float(T_vox.max()) if np.isnan(self.limits[1]) else self.limits[1]
         if hi <= lo:
             hi = lo + 1.0
-        for im, data in zip(self.images, (T_vox[:, :, iz].T, T_vox[:, iy, :].T,
-                                          T_vox[ix, :, :].T), strict=True):
-            im.set_data(data)
+        update_slices(self.axes, self.images, T_vox, self.model.G, self.positions)
+        for im in self.images:
             im.set_clim(lo, hi)
         self.fig.suptitle(f"Temperature evolution, t = {t:#.3g} s")
         if self.record if record is None else record:

@@ -10,12 +10,51 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["orthogonal_slices", "slice_indices"]
+__all__ = ["MIDDLE", "orthogonal_slices", "slice_indices", "slices_through_maximum",
+           "update_slices"]
+
+#: relative slice positions through the middle of the cuboid
+MIDDLE = (0.5, 0.5, 0.5)
 
 
 def slice_indices(shape, positions) -> tuple[int, int, int]:
     """Voxel indices of the slices at relative ``positions`` (0: first voxel, 1: last)."""
     return tuple(int(round(float(p) * (n - 1))) for p, n in zip(positions, shape, strict=True))
+
+
+def slices_through_maximum(data: np.ndarray, axes=(0, 1, 2),
+                           fallback=MIDDLE) -> tuple[float, float, float]:
+    """Relative slice positions through the voxel of the largest positive value of ``data``
+    (nx, ny, nz) along ``axes``; along the other axes, and along all of them when no value
+    is positive, at ``fallback``.
+
+    The inverse of :func:`slice_indices`: voxel ``i`` of ``n`` is at ``i / (n - 1)``.
+    """
+    a = np.asarray(data, float)
+    if not np.any(a > 0):
+        return tuple(float(p) for p in fallback)
+    ijk = np.unravel_index(np.argmax(np.where(a > 0, a, -np.inf)), a.shape)
+    return tuple(ijk[k] / max(a.shape[k] - 1, 1) if k in axes else float(fallback[k])
+                 for k in range(3))
+
+
+def _at(v, length) -> str:
+    """A slice's coordinate for a title: a centre that rounding put 1e-17 off zero is 0."""
+    return f"{0.0 if abs(v) < 1e-9 * length else v:.3g}"
+
+
+def _panels(data: np.ndarray, G, positions) -> list[tuple[np.ndarray, str]]:
+    """The (image, title) of the xy, xz and yz panels; ``data`` (nx, ny, nz)."""
+    ix, iy, iz = slice_indices(data.shape, positions)
+    return [(data[:, :, iz].T, f"xy at z = {_at(G.z[iz], G.Lz)} cm"),
+            (data[:, iy, :].T, f"xz at y = {_at(G.y[iy], G.Ly)} cm"),
+            (data[ix, :, :].T, f"yz at x = {_at(G.x[ix], G.Lx)} cm")]
+
+
+def _cuts(shape, G, positions) -> list[tuple[float, float]]:
+    """(horizontal, vertical) line of each panel: where the other two slices cut it, cm."""
+    ix, iy, iz = slice_indices(shape, positions)
+    return [(G.y[iy], G.x[ix]), (G.z[iz], G.x[ix]), (G.z[iz], G.y[iy])]
 
 
 def orthogonal_slices(fig, data: np.ndarray, G, positions, *, cmap="viridis", norm=None,
@@ -29,7 +68,6 @@ def orthogonal_slices(fig, data: np.ndarray, G, positions, *, cmap="viridis", no
     from matplotlib.patches import Patch
     from matplotlib.ticker import MaxNLocator
 
-    ix, iy, iz = slice_indices(data.shape, positions)
     x0, x1, y0, y1 = -G.Lx / 2, G.Lx / 2, -G.Ly / 2, G.Ly / 2
     if categories is not None:
         import matplotlib as mpl
@@ -39,29 +77,21 @@ def orthogonal_slices(fig, data: np.ndarray, G, positions, *, cmap="viridis", no
         norm = BoundaryNorm(np.arange(len(categories) + 1) - 0.5, len(categories))
     widths = [G.Lx, G.Lx, G.Ly]
     axes = fig.subplots(1, 3, gridspec_kw={"width_ratios": widths})
-    def at(v, length):  # a centre that rounding put 1e-17 off zero is drawn as 0
-        return f"{0.0 if abs(v) < 1e-9 * length else v:.3g}"
-
-    panels = [
-        (data[:, :, iz].T, [x0, x1, y0, y1], "x [cm]", "y [cm]", f"xy at z = {at(G.z[iz], G.Lz)} cm"),
-        (data[:, iy, :].T, [x0, x1, G.Lz, 0], "x [cm]", "z [cm]", f"xz at y = {at(G.y[iy], G.Ly)} cm"),
-        (data[ix, :, :].T, [y0, y1, G.Lz, 0], "y [cm]", "z [cm]", f"yz at x = {at(G.x[ix], G.Lx)} cm"),
-    ]
+    extents = [[x0, x1, y0, y1], [x0, x1, G.Lz, 0], [y0, y1, G.Lz, 0]]
+    labels = [("x [cm]", "y [cm]"), ("x [cm]", "z [cm]"), ("y [cm]", "z [cm]")]
     images = []
-    for k, (ax, (img, ext, xl, yl, t)) in enumerate(zip(axes, panels, strict=True)):
+    for k, (ax, (img, t), ext, (xl, yl), (h, v)) in enumerate(zip(
+            axes, _panels(data, G, positions), extents, labels, _cuts(data.shape, G, positions),
+            strict=True)):
         # y up in the xy panel; z down (into the tissue) in the others, as MCmatlab
         images.append(ax.imshow(img, extent=ext, cmap=cmap, norm=norm, aspect="equal",
                                 interpolation="nearest", origin="lower" if k == 0 else "upper"))
         ax.set(xlabel=xl, ylabel=yl, title=t)
         # a narrow panel (a deep block's xz and yz) would run its default ticks together
         ax.xaxis.set_major_locator(MaxNLocator(nbins=4))
-    # where the other slices cut each panel
-    axes[0].axhline(G.y[iy], color="w", lw=0.6, ls="--")
-    axes[0].axvline(G.x[ix], color="w", lw=0.6, ls="--")
-    axes[1].axhline(G.z[iz], color="w", lw=0.6, ls="--")
-    axes[1].axvline(G.x[ix], color="w", lw=0.6, ls="--")
-    axes[2].axhline(G.z[iz], color="w", lw=0.6, ls="--")
-    axes[2].axvline(G.y[iy], color="w", lw=0.6, ls="--")
+        # where the other slices cut the panel (gid: found again by update_slices)
+        ax.axhline(h, color="w", lw=0.6, ls="--", gid="cut")
+        ax.axvline(v, color="w", lw=0.6, ls="--", gid="cut")
     if categories is not None:
         present = np.unique(data)
         handles = [Patch(color=cmap(i), label=categories[i]) for i in present]
@@ -71,3 +101,15 @@ def orthogonal_slices(fig, data: np.ndarray, G, positions, *, cmap="viridis", no
     if title:
         fig.suptitle(title)
     return axes, images
+
+
+def update_slices(axes, images, data: np.ndarray, G, positions) -> None:
+    """Show ``data`` (nx, ny, nz) at ``positions`` on the panels that
+    :func:`orthogonal_slices` drew (their colour scales are left as they are)."""
+    for ax, im, (img, t), (h, v) in zip(axes, images, _panels(data, G, positions),
+                                        _cuts(data.shape, G, positions), strict=True):
+        im.set_data(img)
+        ax.set_title(t)
+        hline, vline = [line for line in ax.lines if line.get_gid() == "cut"]
+        hline.set_ydata([h, h])
+        vline.set_xdata([v, v])
