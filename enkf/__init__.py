@@ -49,7 +49,7 @@ from .adaptive import (
     innovation_persistence,
     normalized_innovation,
 )
-from .analysis import enkf_perturbed_obs, etkf, inflate, random_rotation
+from .analysis import enkf_perturbed_obs, etkf, inflate, random_rotation, relax_to_prior_spread
 from .health import HealthCheck
 from .importance import ImportanceSample, amis
 from .loop import run_filter
@@ -97,6 +97,7 @@ __all__ = [
     "innovation_persistence",
     "normalized_innovation",
     "random_rotation",
+    "relax_to_prior_spread",
     "run_filter",
     "uniform_prior",
 ]

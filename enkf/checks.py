@@ -10,7 +10,8 @@ import numbers
 
 import numpy as np
 
-__all__ = ["as_generator", "cov_sqrt", "covariance", "float_array", "rows_times", "variances"]
+__all__ = ["as_generator", "cov_sqrt", "covariance", "float_array", "fraction", "rows_times",
+           "variances"]
 
 
 def as_generator(rng: np.random.Generator | int, name: str = "rng") -> np.random.Generator:
@@ -24,6 +25,13 @@ def as_generator(rng: np.random.Generator | int, name: str = "rng") -> np.random
     if isinstance(rng, numbers.Integral) and not isinstance(rng, bool) and rng >= 0:
         return np.random.default_rng(int(rng))
     raise ValueError(f"{name} must be a numpy.random.Generator or a non-negative int seed, got {rng!r}")
+
+
+def fraction(x, name: str) -> float:
+    """``x`` as a float in [0, 1]; else a ``ValueError`` that names ``name`` and the value."""
+    if isinstance(x, bool) or not isinstance(x, numbers.Real) or not 0.0 <= x <= 1.0:
+        raise ValueError(f"{name} must be a number in [0, 1], got {x!r}")
+    return float(x)
 
 
 def float_array(x, name: str, ndim: int | tuple[int, ...], finite: bool = True) -> np.ndarray:

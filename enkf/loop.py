@@ -44,7 +44,7 @@ from collections.abc import Callable
 import numpy as np
 
 from .adaptive import InflationEstimator, innovation_loglik, normalized_innovation
-from .analysis import analysis, enkf_localized, inflate, random_rotation
+from .analysis import analysis, enkf_localized, inflate, random_rotation, relax_to_prior_spread
 from .checks import as_generator, cov_sqrt, covariance, float_array, rows_times, variances
 from .health import HealthCheck
 from .problem import FilterConfig, FilterDivergence, FilterProblem, FilterResult, StepReport
@@ -279,8 +279,14 @@ class _Filter:
         Z[:, :self.n_state] = inflate(Z[:, :self.n_state], np.sqrt(rho))
         return Z
 
-    def spread_out(self, Z: np.ndarray, rho: float = 1.0) -> tuple[np.ndarray, np.ndarray]:
-        """Inflation and rotation of an analysed augmented ensemble; (X, U) back."""
+    def spread_out(self, Z: np.ndarray, rho: float = 1.0,
+                   forecast: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+        """Relaxation to the ``forecast``'s spread (the state part, ``config.rtps``),
+        inflation and rotation of an analysed augmented ensemble; (X, U) back."""
+        if self.config.rtps > 0 and forecast is not None:
+            Z = Z.copy()
+            Z[:, :self.n_state] = relax_to_prior_spread(forecast, Z[:, :self.n_state],
+                                                        self.config.rtps)
         Z = self.inflate_by(Z, rho)
         if self.config.inflation != 1.0:
             Z = inflate(Z, self.config.inflation)
@@ -306,6 +312,7 @@ class _Filter:
         X0, U0 = self.X, self.U
         # a structured model error is drawn with the first forecast, then belongs to the step
         Xf, Uf, v = self.advance(X0, U0, self.physical(U0), t_a, t_b, v, dU)
+        X_forecast = Xf
         Y = self.observe(Xf, Uf, k, tic)
         R = self.obs_cov_for(Y)
         rho = self.adapt(k, Y, y, R)
@@ -324,7 +331,7 @@ class _Filter:
         X, U, _ = self.advance(X0, U0, self.physical(U0), t_a, t_b, V if v is not None else None,
                                D if dU is not None else None)
         # with ES-MDA the estimated factor widens the analysis (posterior inflation)
-        return self.spread_out(np.concatenate([X, U], axis=1), rho)
+        return self.spread_out(np.concatenate([X, U], axis=1), rho, X_forecast)
 
     def step(self, k: int) -> None:
         """Step ``k - 1 -> k``: noises, forecast, analysis (if any datum), statistics."""
@@ -355,7 +362,8 @@ class _Filter:
                     Z = self.inflate_by(Z, rho)
                     Y = self.observe(Z[:, :self.n_state], Z[:, self.n_state:], k, tic)
                 self.seen = (Z[:, :self.n_state], Y, y, R)
-                self.X, self.U = self.spread_out(self.analyse(Z, Y, y, R))
+                self.X, self.U = self.spread_out(self.analyse(Z, Y, y, R),
+                                                 forecast=Z[:, :self.n_state])
         if observed:
             self.rec.analysed[k - 1] = True
             self.rec.analysis_latency[k - 1] = time.perf_counter() - tic_a

@@ -13,7 +13,7 @@ import numpy as np
 
 from .adaptive import AdaptiveInflation
 from .analysis import METHODS
-from .checks import as_generator, covariance, float_array, variances
+from .checks import as_generator, covariance, float_array, fraction, variances
 from .transforms import IdentityTransform, Transform
 
 __all__ = [
@@ -77,6 +77,10 @@ class FilterConfig:
         Estimate a factor on the forecast covariance from the innovations
         (:mod:`enkf.adaptive`) and apply it before each analysis (after it with
         ``mda > 1``), on top of ``inflation``. Default: none.
+    rtps : float
+        Relaxation to prior spread of the state part after each analysis,
+        :math:`\\alpha \\in [0, 1]` (:func:`enkf.analysis.relax_to_prior_spread`;
+        0 = none, the default). The parameters keep their random walk.
     """
 
     n_members: int = 50
@@ -87,6 +91,7 @@ class FilterConfig:
     rotate: bool = False
     mda: int = 1
     adaptive_inflation: AdaptiveInflation | None = None
+    rtps: float = 0.0
 
     def __post_init__(self):
         if (
@@ -104,6 +109,7 @@ class FilterConfig:
         if not isinstance(self.mda, numbers.Integral) or isinstance(self.mda, bool) or self.mda < 1:
             raise ValueError(f"mda must be an int >= 1, got {self.mda!r}")
         as_generator(self.seed, "seed")
+        fraction(self.rtps, "rtps")
         if self.adaptive_inflation is not None and not isinstance(self.adaptive_inflation,
                                                                   AdaptiveInflation):
             raise ValueError("adaptive_inflation must be an enkf.AdaptiveInflation or None, got "

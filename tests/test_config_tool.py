@@ -80,6 +80,8 @@ def with_(path: str, value, base=None):
     ("filter.estimate", ["mua"], "filter.estimate must be"),
     ("filter.prior_range", [2.0, 0.5], "filter.prior_range must have lo < hi"),
     ("filter.inflation", float("nan"), "filter.inflation must be finite, got nan"),
+    ("filter.rtps", 1.5, "filter.rtps must be <= 1"),
+    ("filter.rtps", -0.1, "filter.rtps must be >= 0, got -0.1"),
     ("filter.grid", [5, 5, 0], "filter.grid[2] must be >= 1, got 0"),
     ("filter.transforms", "logit", "filter.transforms must be \"log\""),
     ("filter.emulator.n_mua", 2, "filter.emulator.n_mua must be >= 4, got 2"),
@@ -171,6 +173,15 @@ def test_hs_theta_is_the_filters_time_scheme():
     assert setup.theta == 1.0
     setup = identify_config_from_dict(with_("HS.dt", 0.1)).setup(absorption=lambda mua, mus: None)
     assert setup.theta == 0.5
+
+
+def test_filter_rtps_reaches_the_setup_and_the_filter():
+    """[filter] rtps reaches TissueFilterSetup (and so FilterConfig); default 0 (none)."""
+    setup = identify_config_from_dict(with_("filter.rtps", 0.3)).setup(
+        absorption=lambda mua, mus: None)
+    assert setup.rtps == 0.3
+    setup = identify_config_from_dict(with_("HS.dt", 0.1)).setup(absorption=lambda mua, mus: None)
+    assert setup.rtps == 0.0
 
 
 def test_bounds_become_the_health_check_range():

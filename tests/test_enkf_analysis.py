@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 import scipy.linalg as sla
 
-from enkf import enkf_perturbed_obs, etkf, inflate, random_rotation
+from enkf import enkf_perturbed_obs, etkf, inflate, random_rotation, relax_to_prior_spread
 from enkf.toy_models import kalman_analysis, kalman_filter, simulate_linear_gaussian
 
 # A small linear-Gaussian system: 3 states, 2 correlated observations.
@@ -192,6 +192,35 @@ def test_inflate():
     np.testing.assert_allclose(np.cov(Ei.T), 1.21 * np.cov(E.T), atol=1e-13)
     lam = np.array([1.0, 2.0, 1.0, 0.5])
     np.testing.assert_allclose(np.var(inflate(E, lam), 0), lam**2 * np.var(E, 0))
+
+
+@pytest.mark.parametrize("alpha", [0.0, 0.3, 1.0])
+def test_rtps_moves_each_spread_the_stated_way_back(alpha):
+    """Whitaker & Hamill's RTPS: sd_a <- (1 - alpha) sd_a + alpha sd_f, component by
+    component, the mean and the members' correlations unchanged; a component the
+    analysis left without spread is kept as it is."""
+    rng = np.random.default_rng(5)
+    Ef = rng.standard_normal((40, 5)) * [1.0, 2.0, 0.5, 1.0, 3.0]
+    Ea = Ef.mean(0) + 0.3 * (Ef - Ef.mean(0)) + 0.1 * rng.standard_normal((40, 5))
+    Ea[:, 3] = 7.0  # no analysis spread
+    out = relax_to_prior_spread(Ef, Ea, alpha)
+    sf, sa = Ef.std(0, ddof=1), Ea.std(0, ddof=1)
+    want = np.where(sa > 0, (1 - alpha) * sa + alpha * sf, 0.0)
+    np.testing.assert_allclose(out.std(0, ddof=1), want, rtol=1e-12, atol=1e-15)
+    np.testing.assert_allclose(out.mean(0), Ea.mean(0), atol=1e-13)
+    keep = [0, 1, 2, 4]
+    np.testing.assert_allclose(np.corrcoef(out[:, keep].T), np.corrcoef(Ea[:, keep].T),
+                               atol=1e-12)
+    assert out is not Ea
+
+
+@pytest.mark.parametrize("alpha", [-0.1, 1.5, float("nan")])
+def test_rtps_bad_alpha_names_it(alpha):
+    E = np.ones((4, 2))
+    with pytest.raises(ValueError, match="^alpha"):
+        relax_to_prior_spread(E, E, alpha)
+    with pytest.raises(ValueError, match="same shape"):
+        relax_to_prior_spread(E, np.ones((4, 3)), 0.5)
 
 
 def test_random_rotation_preserves_mean_and_covariance():

@@ -213,6 +213,8 @@ def test_health_bounds_collapse_and_custom_hook():
         ({"n_members": 2.5}, "n_members"),
         ({"method": "4dvar"}, "method"),
         ({"inflation": -1.0}, "inflation"),
+        ({"rtps": 1.5}, "rtps"),
+        ({"rtps": True}, "rtps"),
         ({"seed": None}, "seed"),
     ],
 )
@@ -361,3 +363,34 @@ def test_obs_error_adds_to_the_observation_covariance_of_each_step(method):
     assert len(seen) == res.analysed.sum() and all(v.shape == (1,) for v in seen)
     c = run_filter(linear_problem(), FilterConfig(n_members=30, seed=2))
     assert res.param_std[-1, 0] > c.param_std[-1, 0]  # less information
+
+
+@pytest.mark.parametrize("mda", [1, 3])
+def test_rtps_relaxes_the_state_spread_to_the_forecast(mda):
+    """With ``rtps`` the filter's analysed state spread lies the stated fraction of the way
+    back to its forecast spread (re-computed here from each step's forecast and analysis
+    ensembles, which the filter reports), the parameters are left alone, and alpha = 0
+    is the filter without it, bit for bit."""
+    problem = linear_problem(M=6)
+    seen = {}
+
+    def keep(rep):
+        if rep.step and rep.forecast is not None:
+            seen[rep.step] = (rep.forecast[0].copy(), rep.state_ensemble.copy())
+
+    base = run_filter(problem, FilterConfig(n_members=30, seed=2, mda=mda))
+    zero = run_filter(problem, FilterConfig(n_members=30, seed=2, mda=mda, rtps=0.0))
+    np.testing.assert_array_equal(base.state_ensemble, zero.state_ensemble)
+    a = 0.6
+    run_filter(problem, FilterConfig(n_members=30, seed=2, mda=mda, rtps=a), callback=keep)
+    assert sorted(seen) == list(range(1, 7))
+    plain = {}
+    run_filter(problem, FilterConfig(n_members=30, seed=2, mda=mda),
+               callback=lambda r: plain.__setitem__(r.step, r.state_ensemble.copy()))
+    # step 1 starts from the same prior: its plain analysis is the one RTPS relaxes
+    Xf, Xa = seen[1]
+    sa, sf = plain[1].std(0, ddof=1), Xf.std(0, ddof=1)
+    np.testing.assert_allclose(Xa.std(0, ddof=1), (1 - a) * sa + a * sf, rtol=1e-10)
+    np.testing.assert_allclose(Xa.mean(0), plain[1].mean(0), rtol=1e-12, atol=1e-12)
+    for k, (Xf, Xa) in seen.items():  # never wider than the forecast, never narrower
+        assert np.all(Xa.std(0, ddof=1) <= Xf.std(0, ddof=1) * (1 + 1e-12)), k

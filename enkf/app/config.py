@@ -83,7 +83,8 @@ _CAMERA_KEYS = {"x_range", "y_range", "shape", "noise_var", "subsamples", "model
                 "model_error_lengths"}
 _FILTER_KEYS = {
     "n_members", "method", "estimate", "grid", "prior_range", "model_noise_std",
-    "random_walk_std", "random_walk_when_off", "inflation", "mda", "seed", "parameter_model",
+    "random_walk_std", "random_walk_when_off", "inflation", "rtps", "mda", "seed",
+    "parameter_model",
     "localization_radius", "heat_mass", "transforms", "emulator", "bounds", "prior",
     "model_error", "adaptive_inflation", "coagulation", "medium", "sensor_offset_std",
     "smoother_iterations", "smoother_knots", "smoother_discrepancy",
@@ -214,7 +215,8 @@ _LIMITS = {"sensors.noise_var": 1e4, "sensors.camera.noise_var": 1e4,
            "filter.n_members": 100_000, "filter.grid": 1000, "filter.model_noise_std": 100.0,
            "filter.sensor_offset_std": 100.0,
            "filter.random_walk_std": 10.0, "filter.random_walk_when_off": 10.0,
-           "filter.inflation": 100.0, "filter.localization_radius": 1e3, "filter.mda": 100,
+           "filter.inflation": 100.0, "filter.rtps": 1.0, "filter.localization_radius": 1e3,
+           "filter.mda": 100,
            "filter.smoother_iterations": 100, "filter.smoother_knots": 50,
            "filter.smoother_restart_iterations": 100, "filter.smoother_restart_knots": 50,
            "filter.smoother_restart_delay": 1e6,
@@ -487,7 +489,7 @@ def identify_config_from_dict(cfg: dict) -> IdentifyConfig:
     if prior:
         setup_kw["prior"] = prior
     for k, kw in (("model_noise_std", dict(lo=0)), ("random_walk_when_off", dict(lo=0)),
-                  ("sensor_offset_std", dict(lo=0)),
+                  ("sensor_offset_std", dict(lo=0)), ("rtps", dict(lo=0)),
                   ("inflation", dict(positive=True)), ("localization_radius", dict(positive=True))):
         if k in flt:
             setup_kw[k] = _num(f"filter.{k}", flt[k], **kw)

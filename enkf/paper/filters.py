@@ -40,6 +40,16 @@ def filter_setup(scenario: str, absorption, *, seed: int = 0, n_members: int = 5
         # (four did as well, three keeps every step below 100 ms on 2 busy cores).
         # Chosen over seeds 0-4 (validation/reports/paper_runs.md, fine truth and twin).
         overrides.setdefault("mda", 3)
+    if scenario in ("time-varying", "pulse-train"):
+        # the analysis of 50 members takes too much spread out of the temperatures beneath
+        # the surface while the optics drift: on identical twins (no model error) the +-2 sd
+        # band at 0.2 cm held the pulse train's truth on 0.88 of the steps (11 of 20 seeds
+        # >= 0.9). Relaxing a tenth of the way back to the forecast's spread (RTPS) gives
+        # 0.95 (16 of 20) and 0.93 on the fine truth (15 of 20, 8 before), mus and mua as
+        # before; the time-varying case is unchanged to slightly better. 0.25 over-widens
+        # and costs the time-varying mus (10 of 20 within 10% on twins, 14 with 0.1);
+        # constant and all-params gain nothing. 20 seeds each, validation/reports/rtps.md
+        overrides.setdefault("rtps", 0.1)
     overrides.setdefault("random_walk_std", rw)
     # optical properties change by heating: when they may drift, hold them still while the
     # laser is off (they no longer act on the forecast then, and a walk only lets them wander)

@@ -272,7 +272,7 @@ def assemble(setup: TissueFilterSetup, param_bounds=None, warm_dt: float | None 
                                      time_scale=setup.adaptive_inflation_time_scale)
     config = FilterConfig(n_members=setup.n_members, method=setup.method,
                           inflation=setup.inflation, seed=setup.seed, mda=setup.mda,
-                          adaptive_inflation=adaptive)
+                          adaptive_inflation=adaptive, rtps=setup.rtps)
     if param_bounds is None:
         param_bounds = setup.default_param_bounds()
     # stop on non-finite values, a parameter mean beyond the bounds, or a collapsed

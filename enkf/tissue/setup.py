@@ -9,6 +9,7 @@ import numpy as np
 
 import fem
 
+from ..checks import fraction
 from ..problem import DEFAULT_METHOD
 from .absorption import Absorption
 from .parameters import (
@@ -133,6 +134,9 @@ class TissueFilterSetup:
     n_members: int = 50
     method: str = DEFAULT_METHOD  #: "etkf" or "enkf" (see enkf.problem.FilterConfig)
     inflation: float = 1.0
+    #: relaxation of the temperatures' analysis spread back towards the forecast's, alpha
+    #: in [0, 1] (Whitaker & Hamill 2012; enkf.analysis.relax_to_prior_spread): 0 = none
+    rtps: float = 0.0
     mda: int = 1  #: analysis iterations per step (see enkf.driver.FilterConfig.mda)
     seed: int = 0
     #: time scheme of the forecast's heat steps: 0.5 (default) Crank-Nicolson, 1 backward
@@ -229,6 +233,7 @@ class TissueFilterSetup:
                 raise ValueError(f"prior[{name!r}] must be (lo, hi) with 0 < lo < hi "
                                  f"({PARAMETER_UNITS[name]}), got {rng!r}")
             self.prior[name] = (p_lo, p_hi)
+        fraction(self.rtps, "rtps")
         self.sensor_positions = np.asarray(self.sensor_positions, float).reshape(-1, 3)
         if self.sensor_positions.shape[0] == 0 and self.image is None:
             raise ValueError("sensor_positions is empty and there is no image: nothing observed")
