@@ -33,6 +33,7 @@ SUITE: dict[str, tuple[list | None, list | None]] = {
     "enkf_posterior": (None, []),
     "identifiability": ([], []),
     "paper_runs": (None, ["--twin"]),
+    "rtps": (None, []),  # the paper's scenarios with and without relaxation to prior spread
     # builds the emulator of examples/own_data.toml (long on 2 cores): full suite only
     "model_error_coverage": (None, ["--seeds", "20"]),
     "sensor_offset": (None, []),  # the same emulator and the independent truths
