@@ -11,7 +11,10 @@ at z = 0, 0.1, 0.2 cm, the mean coverage, the mean band sd and the RMS error of 
 and the parameter targets (mus within 10% at 15 s; mua's mean relative error; stopped
 runs). Writes ``validation/reports/rtps.md`` (and ``.json``).
 
-    python validation/rtps.py [--seeds 20] [--alphas 0 0.1 0.25] [--scenarios ...]
+    python validation/rtps.py [--seeds 20] [--alphas 0 0.1 0.25] [--scenarios ...] [--adaptive]
+
+``--adaptive`` adds rows with the adaptive inflation of ``enkf.adaptive`` (the factor on
+the forecast's temperature covariance estimated from the innovations) in RTPS's place.
 """
 
 from __future__ import annotations
@@ -29,8 +32,9 @@ from enkf.paper import SCENARIOS, run_experiment
 DEFAULT_OUT = str(Path(__file__).parent / "reports" / "rtps.md")
 
 
-def one(scenario: str, twin: bool, seed: int, alpha: float) -> dict:
-    run = run_experiment(scenario, seed, progress=False, twin=twin, rtps=alpha)
+def one(scenario: str, twin: bool, seed: int, alpha: float, adaptive: bool = False) -> dict:
+    run = run_experiment(scenario, seed, progress=False, twin=twin, rtps=alpha,
+                         adaptive_inflation=adaptive)
     s = run.summary
     p = s["parameters"]
     return {"cov": [t["coverage_2sd"] for t in s["temperatures"].values()],
@@ -40,7 +44,7 @@ def one(scenario: str, twin: bool, seed: int, alpha: float) -> dict:
             "stopped": bool(s["diverged"])}
 
 
-def row(scenario: str, twin: bool, alpha: float, runs: list[dict]) -> str:
+def row(scenario: str, twin: bool, alpha: float | str, runs: list[dict]) -> str:
     cov = np.array([r["cov"] for r in runs])
     sd = np.mean([r["sd"] for r in runs], axis=0)
     rmse = np.sqrt(np.mean(np.square([r["rmse"] for r in runs]), axis=0))
@@ -48,7 +52,8 @@ def row(scenario: str, twin: bool, alpha: float, runs: list[dict]) -> str:
     def three(a, fmt):
         return " / ".join(fmt.format(v) for v in a)
 
-    return (f"| {scenario} | {'twin' if twin else 'fine'} | {alpha:g} | "
+    alpha = alpha if isinstance(alpha, str) else f"{alpha:g}"
+    return (f"| {scenario} | {'twin' if twin else 'fine'} | {alpha} | "
             f"{three((cov >= 0.9).sum(axis=0), '{}')} | {three(cov.mean(axis=0), '{:.3f}')} | "
             f"{three(sd, '{:.3f}')} | {three(rmse, '{:.3f}')} | "
             f"{sum(r['mus_err'] <= 0.10 for r in runs)} | "
@@ -61,6 +66,8 @@ def main(argv=None):
     ap.add_argument("--seeds", type=int, default=20)
     ap.add_argument("--alphas", type=float, nargs="+", default=[0.0, 0.1, 0.25])
     ap.add_argument("--scenarios", nargs="+", default=list(SCENARIOS), choices=SCENARIOS)
+    ap.add_argument("--adaptive", action="store_true",
+                    help="also rows with adaptive inflation (enkf.adaptive) instead of RTPS")
     ap.add_argument("--out", default=DEFAULT_OUT)
     args = ap.parse_args(argv)
     warnings.simplefilter("ignore", RuntimeWarning)  # the emulator's clamp counts
@@ -73,11 +80,18 @@ def main(argv=None):
                 raw[f"{scenario} {'twin' if twin else 'fine'} {alpha:g}"] = runs
                 rows.append(row(scenario, twin, alpha, runs))
                 print(rows[-1], flush=True)
+            if args.adaptive:
+                runs = [one(scenario, twin, s, 0.0, adaptive=True) for s in range(args.seeds)]
+                raw[f"{scenario} {'twin' if twin else 'fine'} adaptive"] = runs
+                rows.append(row(scenario, twin, "0, adaptive inflation", runs))
+                print(rows[-1], flush=True)
     cmd = "python validation/rtps.py" + (f" --seeds {args.seeds}" if args.seeds != 20 else "")
     if args.alphas != [0.0, 0.1, 0.25]:
         cmd += " --alphas " + " ".join(f"{a:g}" for a in args.alphas)
     if args.scenarios != list(SCENARIOS):
         cmd += " --scenarios " + " ".join(args.scenarios)
+    if args.adaptive:
+        cmd += " --adaptive"
     if args.out != DEFAULT_OUT:
         cmd += f" --out {args.out}"
     lines = [
