@@ -206,6 +206,29 @@ def test_health_bounds_collapse_and_custom_hook():
     assert info.value.result.tracked_mean[-1, 0] > 1.0
 
 
+def test_health_state_bounds_stop_a_runaway_state():
+    """A state whose mean leaves ``state_bounds`` stops the run at that step (a model that
+    throws its second component out at t = 4 here); inside them the run is untouched."""
+    def forecast(X, theta, t0, t1):
+        Xn = linear_forecast(X, theta, t0, t1)
+        if t1 >= 4.0:
+            Xn[:, 1] += 1e4
+        return Xn
+
+    problem = linear_problem(forecast=forecast)
+    with pytest.raises(FilterDivergence) as info:
+        run_filter(problem, FilterConfig(n_members=20), health=HealthCheck(state_bounds=(-1e3, 1e3)))
+    assert (info.value.step, info.value.time) == (4, 4.0)
+    assert "state column 1 mean" in info.value.what and "[-1000, 1000]" in info.value.what
+    assert info.value.result.tracked_mean[-1, 1] > 1e3
+    plain = run_filter(linear_problem(), FilterConfig(n_members=20, seed=4))
+    bounded = run_filter(linear_problem(), FilterConfig(n_members=20, seed=4),
+                         health=HealthCheck(state_bounds=(-1e3, 1e3)))
+    np.testing.assert_array_equal(plain.state_ensemble, bounded.state_ensemble)
+    with pytest.raises(ValueError, match="^state_bounds"):
+        HealthCheck(state_bounds=(1.0, 0.0))
+
+
 @pytest.mark.parametrize(
     "kwargs, field",
     [

@@ -135,3 +135,17 @@ def test_the_forecast_is_accurate_in_time_at_the_readings_interval(tissue):
     peak = np.abs(ref).max()
     assert np.abs(trace() - ref).max() < 1e-3 * peak
     assert np.abs(trace(theta=1.0) - ref).max() > 3e-3 * peak
+
+
+def test_a_temperature_no_tissue_reaches_stops_the_run(tissue):
+    """The tissue filter's health check holds the mean temperatures to STATE_BOUNDS: a run
+    that starts (or runs away to) beyond them stops, diverged, where one at 40 deg C runs
+    to the end."""
+    from enkf.tissue.identify import STATE_BOUNDS
+
+    times, data = tissue.twin_data(tissue.setup(), 1.0, 100.0)
+    assert identify(tissue.setup(T_initial=40.0), times, data + 40.0).diverged is None
+    hot = STATE_BOUNDS[1] + 100.0
+    est = identify(tissue.setup(T_initial=hot), times, data + hot)
+    assert est.diverged is not None and "state column" in est.diverged
+    assert f"{STATE_BOUNDS[1]:.6g}" in est.diverged

@@ -33,8 +33,12 @@ from .forward import TissueForwardModel, observation_operator
 from .model_error import StructuredModelError
 from .setup import TissueFilterSetup
 
-__all__ = ["PERSISTENCE_ADVICE", "FilterPieces", "TissueEstimates", "assemble", "identify",
-           "laser_persistence", "persistence_summary"]
+__all__ = ["PERSISTENCE_ADVICE", "STATE_BOUNDS", "FilterPieces", "TissueEstimates", "assemble",
+           "identify", "laser_persistence", "persistence_summary"]
+
+#: deg C: the health check stops a run whose mean temperature anywhere leaves this range
+#: (below absolute zero, or far above anything tissue reaches before it vaporises)
+STATE_BOUNDS = (-273.15, 1.0e4)
 
 #: what a flagged persistence means (summary.json, the command line's warning)
 PERSISTENCE_ADVICE = (
@@ -275,11 +279,13 @@ def assemble(setup: TissueFilterSetup, param_bounds=None, warm_dt: float | None 
                           adaptive_inflation=adaptive, rtps=setup.rtps)
     if param_bounds is None:
         param_bounds = setup.default_param_bounds()
-    # stop on non-finite values, a parameter mean beyond the bounds, or a collapsed
-    # spread (below 1e-6 of the nominal value: the data can no longer move it)
+    # stop on non-finite values, a parameter mean beyond the bounds, a collapsed spread
+    # (below 1e-6 of the nominal value: the data can no longer move it), or a temperature
+    # no tissue reaches (a runaway state: adaptive inflation compounding on the deep
+    # temperatures with drifting optics reached 1e8 deg C, validation/reports/rtps_adaptive.md)
     min_std = np.concatenate([1e-6 * nominal, np.zeros(len(bounds_extra))])
     health = HealthCheck(param_bounds=np.vstack([param_bounds, bounds_extra]),
-                         min_param_std=min_std)
+                         min_param_std=min_std, state_bounds=STATE_BOUNDS)
     return FilterPieces(model, P_obs, noise_var, P_track, prior, rw, transforms, dynamics,
                    localization, None if setup.random_walk_when_off == 1.0 else walk_scale,
                    config, health, n, observation_offset, obs_error,
