@@ -284,7 +284,7 @@ class _Filter:
         """Relaxation to the ``forecast``'s spread (the state part, ``config.rtps``),
         inflation and rotation of an analysed augmented ensemble; (X, U) back."""
         if self.config.rtps > 0 and forecast is not None:
-            Z = Z.copy()
+            # Z is the analysis's own new array (or a concatenation): written in place
             Z[:, :self.n_state] = relax_to_prior_spread(forecast, Z[:, :self.n_state],
                                                         self.config.rtps)
         Z = self.inflate_by(Z, rho)
