@@ -360,10 +360,10 @@ def relax_to_prior_spread(Ef: np.ndarray, Ea: np.ndarray, alpha: float) -> np.nd
     if Ef.shape != Ea.shape:
         raise ValueError(f"Ef and Ea must have the same shape, got {Ef.shape} and {Ea.shape}")
     alpha = fraction(alpha, "alpha")
+    if alpha == 0.0 or Ea.shape[0] < 2:
+        return Ea.copy()
     x_mean = Ea.mean(axis=0)
     A = Ea - x_mean
-    if alpha == 0.0 or Ea.shape[0] < 2:
-        return A + x_mean
     sf = Ef.std(axis=0, ddof=1)
     sa = np.sqrt(np.einsum("ij,ij->j", A, A) / (A.shape[0] - 1))
     with np.errstate(divide="ignore", invalid="ignore"):
