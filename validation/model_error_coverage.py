@@ -14,10 +14,12 @@ steps whose +-2 sd band holds the truth, and whether it holds it at 15 s).
 ``--variant`` compares the filter's model error settings: ``default`` (structured model
 error, no adaptive inflation: the config's defaults), ``white`` (the 0.002 deg C white
 noise: the filter of the issue), ``adaptive`` (structured, adaptive inflation on),
-``adapt-only`` (white noise, adaptive inflation on), ``restarts`` (structured, and the
+``adapt-only`` (white noise, adaptive inflation on), ``rtps`` (structured, relaxation to
+prior spread 0.1 as the paper's drifting scenarios), ``restarts`` (structured, and the
 filter restarts from the smoother after the pulse: ``smoother_restarts = "laser_off"``,
 discrepancy 0.01; constant optics without a walk, at the pulse's end; drifting ones with
-3 knots, 2.5 s after it).
+3 knots, 2.5 s after it), ``restarts-linear`` (the same, drifting optics with 2 knots: a
+straight line in heated time).
 
     python validation/model_error_coverage.py --seeds 20 [--variant default white]
 """
@@ -45,13 +47,19 @@ VARIANTS = {
     "white": {"model_error": "white"},  # the 0.002 deg C white noise: the filter of the issue
     "adaptive": {"adaptive_inflation": True},  # structured error and adaptive inflation
     "adapt-only": {"model_error": "white", "adaptive_inflation": True},
+    # structured error and relaxation to prior spread (the paper's drifting scenarios' 0.1)
+    "rtps": {"rtps": 0.1},
     # structured error, and the filter restarts from the smoother after the pulse (with
     # the config's discrepancy; drifting: 3 knots, constant: no walk)
     "restarts": {"smoother_restarts": "laser_off", "smoother_restart_discrepancy": 0.01},
+    # the same, with drifting optics linear in heated time over the pulse (2 knots)
+    "restarts-linear": {"smoother_restarts": "laser_off", "smoother_restart_discrepancy": 0.01},
 }
 #: what the restarts need in each case
 RESTART_CASE = {"constant": {"random_walk_std": 0.0},
                 "time-varying": {"smoother_restart_knots": 3, "smoother_restart_delay": 2.5}}
+#: ``restarts-linear``: the drift a straight line in heated time (the knots at its ends)
+RESTART_LINEAR = {"smoother_restart_knots": 2}
 #: the walk for drifting optics that examples/own_data.toml documents
 DRIFT = {"random_walk_std": [0.03, 0.10], "random_walk_when_off": 0.0}
 
@@ -62,7 +70,9 @@ def run_one(cfg, emulator, model: str, case: str, seed: int, variant: str) -> di
     data = truth[1:, :1] + 0.1 * rng.standard_normal((len(TIMES) - 1, 1))
     setup = cfg.setup(emulator, seed=seed)
     for k, v in {**(DRIFT if case != "constant" else {}), **VARIANTS[variant],
-                 **(RESTART_CASE[case] if variant == "restarts" else {})}.items():
+                 **(RESTART_CASE[case] if variant.startswith("restarts") else {}),
+                 **(RESTART_LINEAR if variant == "restarts-linear" and case != "constant"
+                    else {})}.items():
         setattr(setup, k, v)
     setup.__post_init__()
     est = identify(setup, TIMES[1:], data, param_bounds=cfg.param_bounds)

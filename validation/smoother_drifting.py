@@ -9,6 +9,10 @@ readings (:mod:`enkf.tissue.smooth`): ``smooth_constant`` for the constant case 
 ``smooth_drifting`` (``--knots`` values per parameter, piecewise linear in heated time) for
 the drifting one, each with ``--discrepancy`` (the relative sd of the model's error of the
 temperature rise, correlated over ``--discrepancy-time`` s; 0: a perfect model's bands).
+``--until`` keeps the readings up to that time only (a restart's window: 7.5 s is 2.5 s
+after the pulse), ``--drift-log-std`` sets the drift prior's sd over the window (log
+units), ``--importance`` follows ES-MDA with that many samples of the exact posterior
+(adaptive importance sampling, ``enkf.amis``).
 
 Reported per truth: the issue's targets (constant: mua within 5%, mus within 25 cm^-1;
 drifting: mua RMSE over the readings <= 0.3 cm^-1, mus within 10% at 15 s; on at least 18
@@ -43,16 +47,20 @@ def run_one(cfg, emulator, model: str, case: str, seed: int, args, discrepancy: 
     rng = np.random.default_rng([seed, 18])  # the noise of model_error_coverage.py
     data = truth[1:, :1] + 0.1 * rng.standard_normal((len(TIMES) - 1, 1))
     setup = cfg.setup(emulator, seed=seed)
-    times = TIMES[1:]
-    kw = dict(seed=seed, discrepancy=discrepancy, discrepancy_time=args.discrepancy_time)
+    n = int(np.searchsorted(TIMES[1:], args.until + 1e-9))  # the readings up to --until
+    times, data = TIMES[1:n + 1], data[:n]
+    kw = dict(seed=seed, discrepancy=discrepancy, discrepancy_time=args.discrepancy_time,
+              importance=args.importance)
     if case == "constant":
         est = smooth_constant(setup, times, data, n_iter=args.iterations_constant, **kw)
     else:
-        est = smooth_drifting(setup, times, data, knots=args.knots,
-                              n_iter=args.iterations, **kw)
-    traj = est.at(heated_time(setup.power, np.r_[0.0, times])[1:]).mean(axis=1)  # per reading
+        est = smooth_drifting(setup, times, data, knots=args.knots, n_iter=args.iterations,
+                              drift_log_std=args.drift_log_std, **kw)
+    path = est.at(heated_time(setup.power, np.r_[0.0, times])[1:])  # (M, N, n_par)
+    traj = path.mean(axis=1) if est.weights is None else \
+        np.einsum("n,mnp->mp", est.weights, path)  # each reading's mean (weighted)
     true_traj = np.array([optics(case, float(t)) for t in times])
-    final, tfinal = est.theta.mean(0), true_traj[-1]
+    final, tfinal = est.mean, true_traj[-1]
     bands = [est.band(i) for i in range(2)]
     return {"model": model, "case": case, "seed": seed, "discrepancy": discrepancy,
             "final": final.tolist(), "final_sd": est.std.tolist(), "final_truth": tfinal.tolist(),
@@ -107,6 +115,12 @@ def main(argv=None):
                     help="ES-MDA updates, constant")
     ap.add_argument("--discrepancy", type=float, nargs="+", default=[0.0, 0.01])
     ap.add_argument("--discrepancy-time", type=float, default=2.0)
+    ap.add_argument("--until", type=float, default=float(TIMES[-1]),
+                    help="s, the last reading used (default all: 15 s)")
+    ap.add_argument("--drift-log-std", type=float, default=1.0,
+                    help="the drift prior's sd over the window, log units")
+    ap.add_argument("--importance", type=int, default=0,
+                    help="samples of the exact posterior after ES-MDA (0: none)")
     ap.add_argument("--out", default=str(ROOT / "validation" / "reports" / "smoother_drifting.md"))
     args = ap.parse_args(argv)
     cfg = load_identify(ROOT / "examples" / "own_data.toml")
