@@ -63,10 +63,11 @@ def main(argv=None) -> None:
     mid = 0.5 * (TIMES[:-1] + TIMES[1:])
     on = np.minimum(mid, T_ON)  # the ramps run while the laser is on
 
-    def surface(theta_t):  # (n_steps, 2) -> (n_steps,) deg C
+    def surface(theta_t, steps=None):  # (n_steps, 2) -> (steps,) deg C: the first steps
+        steps = len(mid) if steps is None else steps
         T = np.full((1, n), float(setup.T_initial))
-        y = np.empty(len(mid))
-        for k in range(len(mid)):
+        y = np.empty(steps)
+        for k in range(steps):
             T = fm(T, theta_t[k][None], TIMES[k], TIMES[k + 1])
             y[k] = (P @ T[0])[0]
         return y
@@ -112,10 +113,10 @@ def main(argv=None) -> None:
             y = surface(true_path) if model == "twin" else independent_truth(model, case)[1:, 0]
             L = weights(y[:m])
             fit = least_squares(lambda p, c=case, y=y, k=knots, L=L: solve_triangular(
-                L, surface(trajectory(p, c, k))[:m] - y[:m], lower=True), start(case, knots),
+                L, surface(trajectory(p, c, k), m) - y[:m], lower=True), start(case, knots),
                 diff_step=1e-3)
             th = trajectory(fit.x, case, knots)[-1]
-            rms = float(np.sqrt(np.mean((surface(trajectory(fit.x, case, knots))[:m] - y[:m]) ** 2)))
+            rms = float(np.sqrt(np.mean((L @ fit.fun) ** 2)))  # the residual, deg C
             # delta method: the end values' sd from the log-parameters' covariance
             cov = np.linalg.inv(fit.jac.T @ fit.jac)
             e = np.exp(fit.x)
