@@ -131,13 +131,16 @@ def main(argv=None):
     ap.add_argument("--truth-theta", type=float, default=0.5,
                     help="the fine truth's time scheme (TruthConfig.heat_theta; 1 before "
                          "session 21)")
+    ap.add_argument("--rtps", type=float, default=0.0,
+                    help="relaxation to prior spread of both filters' temperatures "
+                         "(TissueFilterSetup.rtps; 0 as the reports were written)")
     ap.add_argument("--out", default=DEFAULT_OUT)
     args = ap.parse_args(argv)
     frame = CAMERA if args.window is None else (
         -args.window, args.window, -args.window, args.window, *CAMERA[4:])
-    # rtps 0: as the reports were written (session 21); the paper's drifting scenario has
-    # relaxed its spread by 0.1 since session 22 (validation/rtps.py)
-    me = {"model_error": args.model_error, "theta": args.theta, "rtps": 0.0}
+    # rtps 0 by default: as the reports were written (session 21); the paper's drifting
+    # scenario has relaxed its spread by 0.1 since session 22 (validation/rtps.py)
+    me = {"model_error": args.model_error, "theta": args.theta, "rtps": args.rtps}
     if args.parameter_model == "trend":
         me.update(parameter_model="trend", random_walk_std=TREND_WALK)
     emu = emulator_for(progress=False)
@@ -151,6 +154,7 @@ def main(argv=None):
                + ("" if args.window is None else f" --window {args.window}")
                + ("" if args.theta == 0.5 else f" --theta {args.theta:g}")
                + ("" if args.truth_theta == 0.5 else f" --truth-theta {args.truth_theta:g}")
+               + ("" if args.rtps == 0 else f" --rtps {args.rtps:g}")
                + ("" if args.out == DEFAULT_OUT else f" --out {_shown(args.out)}"))
     truth_name = {"fine": "the paper's fine grid (our Monte Carlo and FEM on 100 x 100 x 50)",
                   "A": "independent model A (analog Monte Carlo, finite-difference box)",
