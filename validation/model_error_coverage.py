@@ -19,7 +19,7 @@ prior spread 0.1 as the paper's drifting scenarios), ``restarts`` (structured, a
 filter restarts from the smoother after the pulse: ``smoother_restarts = "laser_off"``,
 discrepancy 0.01; constant optics without a walk, at the pulse's end; drifting ones with
 3 knots, 2.5 s after it), ``restarts-linear`` (the same, drifting optics with 2 knots: a
-straight line in heated time).
+straight line in heated time), ``restarts-rtps`` (the restarts with ``rtps = 0.1``).
 
     python validation/model_error_coverage.py --seeds 20 [--variant default white]
 """
@@ -54,6 +54,10 @@ VARIANTS = {
     "restarts": {"smoother_restarts": "laser_off", "smoother_restart_discrepancy": 0.01},
     # the same, with drifting optics linear in heated time over the pulse (2 knots)
     "restarts-linear": {"smoother_restarts": "laser_off", "smoother_restart_discrepancy": 0.01},
+    # the restarts and relaxation to prior spread together (own_data.toml's advice for
+    # drifting optics)
+    "restarts-rtps": {"smoother_restarts": "laser_off", "smoother_restart_discrepancy": 0.01,
+                      "rtps": 0.1},
 }
 #: what the restarts need in each case
 RESTART_CASE = {"constant": {"random_walk_std": 0.0},
