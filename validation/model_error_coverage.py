@@ -42,6 +42,8 @@ from enkf.tissue import identify  # noqa: E402
 
 ROOT = Path(__file__).parents[1]
 CASES = ("constant", "time-varying")
+#: the filter restarts from the smoother after the pulse, with the config's discrepancy
+RESTARTS = {"smoother_restarts": "laser_off", "smoother_restart_discrepancy": 0.01}
 VARIANTS = {
     "default": {},  # examples/own_data.toml as shipped: structured model error, no adaptation
     "white": {"model_error": "white"},  # the 0.002 deg C white noise: the filter of the issue
@@ -49,15 +51,13 @@ VARIANTS = {
     "adapt-only": {"model_error": "white", "adaptive_inflation": True},
     # structured error and relaxation to prior spread (the paper's drifting scenarios' 0.1)
     "rtps": {"rtps": 0.1},
-    # structured error, and the filter restarts from the smoother after the pulse (with
-    # the config's discrepancy; drifting: 3 knots, constant: no walk)
-    "restarts": {"smoother_restarts": "laser_off", "smoother_restart_discrepancy": 0.01},
+    # structured error and the restarts (drifting: 3 knots, constant: no walk)
+    "restarts": RESTARTS,
     # the same, with drifting optics linear in heated time over the pulse (2 knots)
-    "restarts-linear": {"smoother_restarts": "laser_off", "smoother_restart_discrepancy": 0.01},
+    "restarts-linear": RESTARTS,
     # the restarts and relaxation to prior spread together (own_data.toml's advice for
     # drifting optics)
-    "restarts-rtps": {"smoother_restarts": "laser_off", "smoother_restart_discrepancy": 0.01,
-                      "rtps": 0.1},
+    "restarts-rtps": {**RESTARTS, "rtps": 0.1},
 }
 #: what the restarts need in each case
 RESTART_CASE = {"constant": {"random_walk_std": 0.0},
