@@ -66,7 +66,7 @@ def main(argv=None):
                 t0 = time.perf_counter()
                 parts = run_tasks(task, ranges, client=client)
                 wall = (time.perf_counter() - t0) / len(ranges)
-                kernel = sum(p[2] for p in parts) / len(ranges)
+                kernel = sum(p[1] for p in parts) / len(ranges)
                 print(f"smallest Monte Carlo task (1000 photons on 20 x 20 x 10): "
                       f"{1e3 * wall:.1f} ms per task on 2 workers, of which kernel "
                       f"{1e3 * kernel:.1f} ms")

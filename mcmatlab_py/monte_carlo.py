@@ -18,7 +18,10 @@ from .media_bins import optical_media_properties
 from .progress import Progress
 
 __all__ = [
+    "FLUSH_PHOTONS",
+    "HostRun",
     "MCResult",
+    "WideSums",
     "batch_range",
     "gpu_available",
     "optical_arrays",
@@ -47,6 +50,87 @@ class MCResult:
     ext: np.ndarray | None = None  #: (n_ext,) their fixed-point tallies, summed over workers
     paths: np.ndarray | None = None  #: example paths (n_paths, PATH_LEN, 4), local cm
     path_n: np.ndarray | None = None  #: vertices per example path
+
+
+#: packets between two moves of the kernels' int64 fixed-point sums into :class:`WideSums`.
+#: int64 holds 2^63 / W_ONE = 2^27 (1.3e8) launched packets of weight ``W_ONE = 2^36``;
+#: moving every 2^25 keeps what accumulates (at most twice that) 4x below the limit
+FLUSH_PHOTONS = 2**25
+_LOW = np.int64(2**32 - 1)
+
+
+class WideSums:
+    """Exact totals of int64 fixed-point arrays past int64's range (long runs: a GPU passes
+    2^27 packets in about a second), each kept as two int64 arrays, the high and the low
+    32 bits. :meth:`value` is the exact total rounded once to float64: the same bits as
+    converting an int64 total that did not overflow, so runs below the limit are unchanged.
+    """
+
+    def __init__(self):
+        self.hi: dict[str, np.ndarray] = {}
+        self.lo: dict[str, np.ndarray] = {}
+
+    def _put(self, name, hi, lo) -> None:
+        if name in self.hi:
+            hi, lo = self.hi[name] + hi, self.lo[name] + lo
+        self.hi[name] = hi + (lo >> 32)
+        self.lo[name] = lo & _LOW
+
+    def add(self, name: str, v: np.ndarray) -> None:
+        """Add an int64 array (a sum below 2^62 in magnitude)."""
+        v = np.asarray(v, dtype=np.int64)
+        self._put(name, v >> 32, v & _LOW)
+
+    def merge(self, other: WideSums) -> None:
+        for name in other.hi:
+            self._put(name, other.hi[name], other.lo[name])
+
+    def value(self, name: str) -> np.ndarray:
+        """The total, float64 (hi 2^32 is exact, one rounding in the addition)."""
+        return self.hi[name].astype(np.float64) * 4294967296.0 + self.lo[name]
+
+
+class HostRun:
+    """The per-worker int64 accumulators of a run on this machine's threads, moved into
+    :class:`WideSums` every :data:`FLUSH_PHOTONS` packets. ``args``: the kernel's
+    arguments (:func:`_kernel_args`); ``n_slots`` workers; ``bs`` packets per batch."""
+
+    def __init__(self, args: tuple, n_slots: int, spec: OutputSpec, bs: int):
+        self.args, self.bs = args, bs
+        self.acc = np.zeros((n_slots, args[0].size), dtype=np.int64)
+        # rows padded to 512 bytes so that threads do not share cache lines
+        self.tally = np.zeros((n_slots, 64), dtype=np.int64)
+        self.out = spec.arrays(n_slots)
+        self.sums = WideSums()
+        self.pending = 0  #: packets in the int64 accumulators since they were last moved
+        K.run_batches(*args, 0, 0, self.acc, self.tally, *self.out)  # compile or load first
+
+    def run(self, start: int, stop: int) -> None:
+        """Batches ``[start, stop)``, in chunks of at most FLUSH_PHOTONS packets."""
+        step = max(1, FLUSH_PHOTONS // self.bs)
+        for a in range(start, stop, step):
+            b = min(a + step, stop)
+            K.run_batches(*self.args, a, b, self.acc, self.tally, *self.out)
+            self.pending += (b - a) * self.bs
+            if self.pending >= FLUSH_PHOTONS:
+                self.flush()
+
+    def flush(self) -> None:
+        for name, arr in (("acc", self.acc), ("tally", self.tally), ("ext", self.out[3])):
+            self.sums.add(name, arr.sum(axis=0))
+            arr[:] = 0
+        self.pending = 0
+
+    def collected(self) -> int:
+        """Packets collected so far (MCmatlab's requestCollectedPhotons)."""
+        got = int(self.out[3][:, KO.EXT_COLLECTED].sum())
+        if "ext" in self.sums.hi:
+            got += int(self.sums.value("ext")[KO.EXT_COLLECTED])
+        return got
+
+    def totals(self) -> WideSums:
+        self.flush()
+        return self.sums
 
 
 def optical_arrays(media, wavelength: float | None = None
@@ -95,19 +179,14 @@ def simulate(G, MC, M: np.ndarray, mua, mus, g, nref, *, seed: int, n_photons: i
     n_total = n_photons if n_photons is not None else np.iinfo(np.int64).max // 4
     n_batches = -(-n_total // bs) if n_photons is not None else None
     args = _kernel_args(G, MC, M, mua, mus, g, nref, seed, n_total)
-    nx, ny, nz = M.shape
-    acc = np.zeros((n_slots, args[0].size), dtype=np.int64)
-    # rows padded to 512 bytes so that threads do not share cache lines
-    tally = np.zeros((n_slots, 64), dtype=np.int64)
-    out = spec.arrays(n_slots)
 
     old_threads = numba.get_num_threads()
     numba.set_num_threads(n_threads)
     try:
-        K.run_batches(*args, 0, 0, acc, tally, *out)  # compile (or load) outside timing
+        host = HostRun(args, n_slots, spec, bs)  # compiles (or loads) outside the timing
         if collect_target is not None:
-            done, kernel_s, kernel_cpu = _run_until_collected(
-                args, acc, tally, out, collect_target, time_limit_s, bs)
+            done, kernel_s, kernel_cpu = _run_until_collected(host, collect_target,
+                                                              time_limit_s)
             n_photons = done * bs
             n_batches = done
         total = n_batches if n_batches is not None else time_limit_s
@@ -121,7 +200,7 @@ def simulate(G, MC, M: np.ndarray, mua, mus, g, nref, *, seed: int, n_photons: i
             stop = done + per_round if n_batches is None else min(done + per_round, n_batches)
             t0 = time.perf_counter()
             c0 = time.process_time()
-            K.run_batches(*args, done, stop, acc, tally, *out)
+            host.run(done, stop)
             dt = time.perf_counter() - t0
             kernel_cpu += time.process_time() - c0
             kernel_s += dt
@@ -144,10 +223,11 @@ def simulate(G, MC, M: np.ndarray, mua, mus, g, nref, *, seed: int, n_photons: i
     finally:
         numba.set_num_threads(old_threads)
     n_done = n_photons if n_photons is not None else done * bs
-    absorbed = acc.sum(axis=0).reshape(nx, ny, nz) / K.W_ONE
-    return MCResult(absorbed=absorbed, tally=tally.sum(axis=0)[: K.N_TALLY], n_photons=int(n_done),
+    sums = host.totals()
+    return MCResult(absorbed=sums.value("acc").reshape(M.shape) / K.W_ONE,
+                    tally=sums.value("tally")[: K.N_TALLY], n_photons=int(n_done),
                     kernel_seconds=kernel_s, kernel_cpu_seconds=kernel_cpu, spec=spec,
-                    ext=out[3].sum(axis=0), paths=out[4], path_n=out[5])
+                    ext=sums.value("ext"), paths=host.out[4], path_n=host.out[5])
 
 
 def gpu_available() -> bool:
@@ -197,9 +277,23 @@ def _simulate_gpu(G, MC, M, mua, mus, g, nref, *, seed, n_photons, time_limit_s,
     tpb = KC.THREADS_PER_BLOCK
     bar = Progress(n_streams if n_streams is not None else time_limit_s, label,
                    enabled=MC.progress)
+    # compile outside the timed rounds (no streams: every thread returns at once); a
+    # time-limited run would otherwise spend its minutes on the JIT (about 15 s on an H200)
+    KC.transport_streams[1, tpb](*args, 0, 0, acc, tally)
+    cuda.synchronize()
+    sums, pending = WideSums(), 0
+    zeros = {"acc": np.zeros(nvox, dtype=np.int64), "tally": np.zeros(K.N_TALLY, dtype=np.int64)}
+
+    def flush():  # move the int64 sums into the wide ones before they can overflow
+        for name, arr in (("acc", acc), ("tally", tally)):
+            sums.add(name, arr.copy_to_host())
+            arr.copy_to_device(zeros[name])
+
+    max_streams = max(tpb, FLUSH_PHOTONS // per)
     done, per_round = 0, 64 * tpb
     kernel_s = kernel_cpu = 0.0
     while True:
+        per_round = min(per_round, max_streams)
         todo = per_round if n_streams is None else min(per_round, n_streams - done)
         t0, c0 = time.perf_counter(), time.process_time()
         KC.transport_streams[-(-todo // tpb), tpb](*args, done, todo, acc, tally)
@@ -208,23 +302,28 @@ def _simulate_gpu(G, MC, M, mua, mus, g, nref, *, seed, n_photons, time_limit_s,
         kernel_s += dt
         kernel_cpu += time.process_time() - c0
         done += todo
+        pending += todo * per
+        if pending >= FLUSH_PHOTONS:
+            flush()
+            pending = 0
         bar.update(done if n_streams is not None else kernel_s,
                    f"{min(done * per, n_total) / max(kernel_s, 1e-9):.3g} photons/s")
         if (n_streams is not None and done >= n_streams) or (
                 n_streams is None and kernel_s >= time_limit_s):
             break
-        # rounds of about half a second (the first one also compiles the kernel)
+        # rounds of about half a second
         per_round = int(min(max(tpb, 0.5 * todo / max(dt, 1e-6)), 16 * per_round))
         if n_streams is None:
             per_round = min(per_round, int((time_limit_s - kernel_s) * todo / max(dt, 1e-6)) + tpb)
     bar.close()
+    flush()
     n_done = n_photons if n_photons is not None else done * per
-    return MCResult(absorbed=acc.copy_to_host().reshape(M.shape) / K.W_ONE,
-                    tally=tally.copy_to_host(), n_photons=int(n_done), kernel_seconds=kernel_s,
+    return MCResult(absorbed=sums.value("acc").reshape(M.shape) / K.W_ONE,
+                    tally=sums.value("tally"), n_photons=int(n_done), kernel_seconds=kernel_s,
                     kernel_cpu_seconds=kernel_cpu, spec=spec)
 
 
-def _run_until_collected(args, acc, tally, out, target: int, time_limit_s, bs: int):
+def _run_until_collected(host: HostRun, target: int, time_limit_s):
     """MCmatlab's requestCollectedPhotons: run batches until ``target`` packets are collected.
 
     The size of each round depends only on the counts collected so far, never on the
@@ -235,20 +334,20 @@ def _run_until_collected(args, acc, tally, out, target: int, time_limit_s, bs: i
     kernel_s = kernel_cpu = 0.0
     while True:
         t0, c0 = time.perf_counter(), time.process_time()
-        K.run_batches(*args, done, done + per_round, acc, tally, *out)
+        host.run(done, done + per_round)
         kernel_s += time.perf_counter() - t0
         kernel_cpu += time.process_time() - c0
         done += per_round
-        got = int(out[3][:, KO.EXT_COLLECTED].sum())
+        got = host.collected()
         if got >= target or (time_limit_s is not None and kernel_s >= time_limit_s):
             return done, kernel_s, kernel_cpu
         # aim 10% past the target at the rate seen so far; at most 4x the batches done
         rate = got / done
         need = (target - got) / rate * 1.1 if got else 4 * done
         per_round = int(min(max(math.ceil(need), 1), 4 * done))
-        if done * bs > 10**12:
+        if done * host.bs > 10**12:
             raise RuntimeError(f"MC.request_collected_photons: {got} of {target} packets "
-                               f"collected after {done * bs} launched; check the collector")
+                               f"collected after {done * host.bs} launched; check the collector")
 
 
 def _kernel_args(G, MC, M, mua, mus, g, nref, seed, n_total):
@@ -290,20 +389,16 @@ def _parent_media(G, MC, n_sub: int) -> np.ndarray:
 
 
 def batch_range(args: tuple, batches: tuple[int, int], spec: OutputSpec | None = None) -> tuple:
-    """Batches ``[start, stop)`` of a run on this machine's threads: summed absorbed weights
-    (nvox,) and tallies (64,), int64 fixed point, the kernel seconds (a task body), and the
-    optional outputs' tallies (n_ext,) and example paths."""
-    n_threads = numba.get_num_threads()
-    acc = np.zeros((n_threads, args[0].size), dtype=np.int64)
-    tally = np.zeros((n_threads, 64), dtype=np.int64)
+    """Batches ``[start, stop)`` of a run on this machine's threads (a task body): the
+    :class:`WideSums` of the absorbed weights ``acc`` (nvox,), the tallies ``tally`` (64,)
+    and the optional outputs' tallies ``ext`` (n_ext,), fixed point; the kernel seconds;
+    the example paths and their lengths."""
     if spec is None:
         spec = OutputSpec(None, np.zeros(KO.OF_SIZE), np.zeros(1, dtype=np.bool_), 1, 0)
-    out = spec.arrays(n_threads)
-    K.run_batches(*args, 0, 0, acc, tally, *out)  # compile or load from the cache first
+    host = HostRun(args, numba.get_num_threads(), spec, int(args[27]))
     t0 = time.perf_counter()
-    K.run_batches(*args, batches[0], batches[1], acc, tally, *out)
-    return (acc.sum(axis=0), tally.sum(axis=0), time.perf_counter() - t0, out[3].sum(axis=0),
-            out[4], out[5])
+    host.run(batches[0], batches[1])
+    return host.totals(), time.perf_counter() - t0, host.out[4], host.out[5]
 
 
 def _simulate_distributed(G, MC, M, mua, mus, g, nref, *, seed, n_photons, client,
@@ -326,18 +421,19 @@ def _simulate_distributed(G, MC, M, mua, mus, g, nref, *, seed, n_photons, clien
     parts = run_tasks(functools.partial(batch_range, args, spec=spec), ranges, client=client,
                       progress=MC.progress, label=label)
     wall = time.perf_counter() - t0
-    acc = np.sum([p[0] for p in parts], axis=0)
-    tally = np.sum([p[1] for p in parts], axis=0)
+    sums = WideSums()
+    for p in parts:
+        sums.merge(p[0])
     # each example path was written by the one task that ran its packet
-    path_n = np.max([p[5] for p in parts], axis=0)
-    paths = parts[0][4].copy()
+    path_n = np.max([p[3] for p in parts], axis=0)
+    paths = parts[0][2].copy()
     for p in parts[1:]:
-        rows = p[5] > 0
-        paths[rows] = p[4][rows]
-    return MCResult(absorbed=acc.reshape(M.shape) / K.W_ONE, tally=tally[: K.N_TALLY],
-                    n_photons=int(n_photons), kernel_seconds=wall,
-                    kernel_cpu_seconds=float(sum(p[2] for p in parts)), spec=spec,
-                    ext=np.sum([p[3] for p in parts], axis=0), paths=paths, path_n=path_n)
+        rows = p[3] > 0
+        paths[rows] = p[2][rows]
+    return MCResult(absorbed=sums.value("acc").reshape(M.shape) / K.W_ONE,
+                    tally=sums.value("tally")[: K.N_TALLY], n_photons=int(n_photons),
+                    kernel_seconds=wall, kernel_cpu_seconds=float(sum(p[1] for p in parts)),
+                    spec=spec, ext=sums.value("ext"), paths=paths, path_n=path_n)
 
 
 def run_monte_carlo(model, client=None) -> None:

@@ -118,6 +118,51 @@ def test_simulated_gpu_agrees_with_cpu(simulated, case):
     assert gpu["NA_sum"] * dV == pytest.approx(gpu["absorbed"], rel=1e-12)
 
 
+def _real_gpu() -> bool:
+    """A CUDA GPU, not the simulator (whose runs are the test above)."""
+    import numba
+
+    return not numba.config.ENABLE_CUDASIM and gpu_available()
+
+
+@pytest.mark.skipif(not _real_gpu(), reason="no CUDA GPU here (the simulator's runs are above)")
+@pytest.mark.parametrize("case", CASES)
+def test_real_gpu_agrees_with_cpu(case):
+    """On a real GPU, 100 times the simulator's packets: the same bounds, 10 times tighter."""
+    n = 100 * N_PHOTONS
+    ns = _namespace()
+    gpu = ns["totals"](ns["build"](case, True, seed=3, n=n).run_monte_carlo().MC)
+    model = ns["build"](case, False, seed=4, n=n).run_monte_carlo()
+    cpu = ns["totals"](model.MC)
+    assert gpu["n"] == n
+    assert gpu["balance"] == pytest.approx(1.0, abs=1e-12)
+    for key in ("absorbed", "top", "bottom", "sides"):
+        f = 0.5 * (gpu[key] + cpu[key])
+        se = math.sqrt(max(2.0 * f * (1.0 - f), 1e-12) / n)
+        assert abs(gpu[key] - cpu[key]) < 4.0 * se, (key, gpu[key], cpu[key], se)
+    dV = model.G.dx * model.G.dy * model.G.dz
+    assert gpu["NA_sum"] * dV == pytest.approx(gpu["absorbed"], rel=1e-12)
+
+
+@pytest.mark.skipif(not _real_gpu(), reason="no CUDA GPU here")
+def test_real_gpu_run_past_int64_fixed_point():
+    """2^28 packets (twice what int64 holds at weight W_ONE = 2^36; under a second on an
+    H200) through a thin absorbing slab with mus = 0: absorbed with chance 1 - exp(-mua d)."""
+    n, mua, d = 2**28, 69.3, 0.01
+    m = Model()
+    m.G.nx = m.G.ny = m.G.nz = 1
+    m.G.Lx = m.G.Ly = 1.0
+    m.G.Lz = d
+    m.G.media = [Medium("slab", mua=mua, mus=0.0, g=0.0)]
+    m.G.geom_func = lambda X, Y, Z: np.zeros(X.shape, dtype=int)
+    m.MC.n_photons_requested, m.MC.progress, m.MC.use_gpu = n, False, True
+    m.MC.light_source.source_type = 0
+    MC = m.run_monte_carlo().MC
+    f = 1.0 - math.exp(-mua * d)
+    assert MC.energy_balance == pytest.approx(1.0, abs=1e-12)
+    assert abs(MC.absorbed_fraction - f) < 4.0 * math.sqrt(f * (1 - f) / n)
+
+
 def _tiny(gpu=True) -> Model:
     m = Model()
     m.G.nx = m.G.ny = m.G.nz = 4

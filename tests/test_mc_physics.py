@@ -70,6 +70,60 @@ def test_beer_lambert_depth_profile_is_exact():
     np.testing.assert_allclose(MC.NFR, MC.NA / mua)
 
 
+def test_wide_sums_are_exact_past_int64():
+    """The fixed-point totals of a long run: exact integers past 2^63, rounded once."""
+    from mcmatlab_py.monte_carlo import WideSums
+
+    rng = np.random.default_rng(5)
+    parts = [rng.integers(-2**61, 2**62, size=7, dtype=np.int64) for _ in range(40)]
+    exact = [sum(int(p[i]) for p in parts) for i in range(7)]
+    assert max(abs(e) for e in exact) > 2**63  # past what int64 holds
+    a, b = WideSums(), WideSums()
+    for k, p in enumerate(parts):
+        (a if k % 2 else b).add("x", p)
+    a.merge(b)
+    assert a.value("x").tolist() == [float(e) for e in exact]
+    small = WideSums()
+    small.add("x", parts[0])
+    assert small.value("x").tolist() == parts[0].astype(np.float64).tolist()
+
+
+def test_moving_the_sums_often_changes_no_bit(monkeypatch):
+    """Where a run moves its int64 sums into the wide ones does not change any number."""
+    import mcmatlab_py.monte_carlo as mc
+
+    def run(flush, threads):
+        monkeypatch.setattr(mc, "FLUSH_PHOTONS", flush)
+        model = slab_model(2.0, 50.0, 0.8, 0.1, 20_000, nz=5)
+        model.MC.n_threads = threads
+        MC = model.run_monte_carlo().MC
+        return MC.NA.copy(), MC.escaped["top"], MC.absorbed_fraction
+
+    ref = run(2**25, 2)
+    for flush, threads in ((1000, 1), (3000, 2)):
+        other = run(flush, threads)
+        np.testing.assert_array_equal(other[0], ref[0])
+        assert other[1:] == ref[1:]
+
+
+@pytest.mark.slow
+def test_a_run_past_int64_fixed_point_keeps_its_energy():
+    """2^27 packets of weight W_ONE = 2^36 fill int64: a longer run (a GPU's second, two
+    minutes on two cores of a slow kernel) must still balance. A thin absorbing slab with
+    mus = 0 (about 8 s on two cores): a packet is absorbed with chance 1 - exp(-mua d)."""
+    N, mua, d = 2**27 + 2**24, 69.3, 0.01
+    model = slab_model(mua, 0.0, 0.0, d, N, nz=1)
+    model.MC.boundary_type = 1
+    MC = model.run_monte_carlo().MC
+    f = 1.0 - math.exp(-mua * d)
+    assert MC.n_photons == N
+    assert MC.energy_balance == pytest.approx(1.0, abs=1e-12)
+    assert abs(MC.absorbed_fraction - f) < 4 * se_bound(f, N)
+    assert abs(MC.escaped["bottom"] - (1 - f)) < 4 * se_bound(f, N)
+    G = model.G
+    assert MC.NA.sum() * G.dx * G.dy * G.dz == pytest.approx(MC.absorbed_fraction, rel=1e-12)
+
+
 def test_fresnel_lossless_slab_total_reflectance():
     """Non-absorbing, non-scattering slab (n = 1.5) in air: R_total = 2 R / (1 + R) at normal incidence."""
     N, n = 100_000, 1.5
