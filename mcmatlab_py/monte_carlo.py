@@ -275,12 +275,12 @@ def _simulate_gpu(G, MC, M, mua, mus, g, nref, *, seed, n_photons, time_limit_s,
     tally = cuda.to_device(np.zeros(K.N_TALLY, dtype=np.int64))
     n_streams = -(-n_total // per) if n_photons is not None else None
     tpb = KC.THREADS_PER_BLOCK
-    bar = Progress(n_streams if n_streams is not None else time_limit_s, label,
-                   enabled=MC.progress)
     # compile outside the timed rounds (no streams: every thread returns at once); a
     # time-limited run would otherwise spend its minutes on the JIT (about 15 s on an H200)
     KC.transport_streams[1, tpb](*args, 0, 0, acc, tally)
     cuda.synchronize()
+    bar = Progress(n_streams if n_streams is not None else time_limit_s, label,
+                   enabled=MC.progress)
     sums, pending = WideSums(), 0
     zeros = {"acc": np.zeros(nvox, dtype=np.int64), "tally": np.zeros(K.N_TALLY, dtype=np.int64)}
 
