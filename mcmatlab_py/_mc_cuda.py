@@ -26,6 +26,7 @@ import numpy as np
 from numba import cuda
 
 from ._mc_kernel import (
+    FLU_ONE,
     KILLRANGE,
     N_TALLY,
     T_BOTTOM,
@@ -80,11 +81,12 @@ def transport_streams(
     M, mua, mus, g, nref, uniform_medium, nx, ny, nz, dx, dy, dz,
     boundary_type, n_out, matched, roulette, weight_threshold, chance,
     si, sf, stab, svox, phase_idx, phase_tab, normals, use_normals,
-    seed, per_thread, n_total, stream_start, n_streams, acc, tally,
+    seed, per_thread, n_total, stream_start, n_streams, acc, tally, track, flu,
 ):  # fmt: skip
     """Thread ``t`` runs the packets of stream ``stream_start + t``, adding into ``acc`` and
     ``tally`` (int64 fixed point, atomically). Arguments as
-    :func:`mcmatlab_py._mc_kernel.transport_batch`, with ``phase_idx`` an array (-1: HG)."""
+    :func:`mcmatlab_py._mc_kernel.transport_batch`, with ``phase_idx`` an array (-1: HG) and
+    ``track`` an array (all False: no track-length tally; ``flu`` then unused)."""
     t = cuda.grid(1)
     if t >= n_streams:
         return
@@ -93,6 +95,7 @@ def transport_streams(
     Ly = ny * dy
     Lz = nz * dz
     w_thr = np.int64(weight_threshold * W_ONE)
+    fscale = FLU_ONE / (W_ONE * math.sqrt(dx * dx + dy * dy + dz * dz))
     s0, s1, s2, s3 = seed_stream(seed, b)
     st = cuda.local.array(4, numba.uint64)
     tl = cuda.local.array(N_TALLY, numba.int64)  # this thread's tallies
@@ -175,6 +178,9 @@ def transport_streams(
                     dmin = d2
                 if tau < mut * dmin:  # interaction before the plane
                     s = tau / mut
+                    if inside and track[m]:
+                        cuda.atomic.add(flu, (ix * ny + iy) * nz + iz,
+                                        np.int64(w * (s * fscale) + 0.5))
                     px += s * ux
                     py += s * uy
                     pz += s * uz
@@ -188,6 +194,9 @@ def transport_streams(
                     alive = False
                     break
                 tau -= mut * dmin
+                if inside and track[m]:
+                    cuda.atomic.add(flu, (ix * ny + iy) * nz + iz,
+                                    np.int64(w * (dmin * fscale) + 0.5))
                 px += dmin * ux
                 py += dmin * uy
                 pz += dmin * uz

@@ -67,6 +67,7 @@ from ._mc_steps import (
     _spin,
 )
 from ._mc_tally import (  # noqa: F401 (re-exported: the Python layer reads them here)
+    FLU_ONE,
     N_TALLY,
     T_ABSORBED_EXCLUDED,
     T_BOTTOM,
@@ -79,6 +80,7 @@ from ._mc_tally import (  # noqa: F401 (re-exported: the Python layer reads them
     T_SPECULAR,
     T_TOP,
     W_ONE,
+    fluence_scale,
 )
 from ._mc_uniform import transport_uniform_batch, uniform_path_applies
 from ._rng import next_double, seed_stream
@@ -96,6 +98,7 @@ def transport_batch(
     boundary_type, n_out, matched, roulette, weight_threshold, chance,
     si, sf, stab, svox, phase_idx, phase_tab, normals, use_normals,
     seed, batch_size, n_total, acc, tally, oi, of, consider, ext, paths, path_n,
+    track=None, flu=None,
 ):  # fmt: skip
     """Run the photons of batch ``b`` and add their weights into ``acc`` and ``tally``.
 
@@ -114,6 +117,10 @@ def transport_batch(
     tally : (N_TALLY,) int64, updated in place.
     oi, of, consider, ext, paths, path_n : the optional outputs (:mod:`mcmatlab_py._mc_outputs`);
         ``oi = None`` compiles them out.
+    track : (n_media,) bool, media whose fluence is tallied along the path (track length),
+        or None (compiled out). Needs ``uniform_medium = -1``: a path is cut at every voxel face.
+    flu : (nx*ny*nz,) int64, the track-length tally: weight times length, ``FLU_ONE`` per
+        launched packet crossing a voxel's diagonal (:func:`fluence_scale`).
     """
     Lx = nx * dx
     Ly = ny * dy
@@ -125,6 +132,7 @@ def transport_batch(
     n_table = phase_tab.shape[1] // 2
     first = b * batch_size
     last = min(first + batch_size, n_total)
+    fscale = fluence_scale(dx, dy, dz)
     # per-packet state of the optional outputs (unused, and optimised away, when oi is None)
     cnt = np.zeros(4, dtype=np.int64)  # scatterings, reflections, refractions, transitions
     rec = np.empty((1, 2), dtype=np.int64)  # deposits awaiting the end-of-life criteria
@@ -212,6 +220,9 @@ def transport_batch(
                     dmin = d2
                 if tau < mut * dmin:  # interaction before the plane
                     s = tau / mut
+                    if track is not None:
+                        if inside and track[m]:
+                            flu[(ixc * ny + iyc) * nz + izc] += np.int64(w * (s * fscale) + 0.5)
                     if oi is not None:
                         t_opl += s * (1.0 if matched else npk)
                     px += s * ux
@@ -227,6 +238,9 @@ def transport_batch(
                     alive = False
                     break
                 tau -= mut * dmin
+                if track is not None:
+                    if inside and track[m]:
+                        flu[(ixc * ny + iyc) * nz + izc] += np.int64(w * (dmin * fscale) + 0.5)
                 if oi is not None:
                     t_opl += dmin * (1.0 if matched else npk)
                 px += dmin * ux
@@ -480,7 +494,7 @@ def run_batches(
     boundary_type, n_out, matched, roulette, weight_threshold, chance,
     si, sf, stab, svox, phase_idx, phase_tab, normals, use_normals,
     seed, batch_size, n_total, batch_start, batch_stop, acc, tally,
-    oi, of, consider, ext, paths, path_n,
+    oi, of, consider, ext, paths, path_n, track=None, flu=None,
 ):  # fmt: skip
     """Run batches ``[batch_start, batch_stop)`` on ``acc.shape[0]`` workers in parallel.
 
@@ -494,7 +508,8 @@ def run_batches(
     n_workers = acc.shape[0]
     counter = np.zeros(1, dtype=np.int64)
     uniform = False  # the one-medium kernel (mcmatlab_py._mc_uniform) runs a plain run
-    if oi is None:  # the optional outputs need the general kernel (pruned at compile time)
+    if oi is None and track is None:  # the optional outputs and the track-length tally
+        # need the general kernel (pruned at compile time)
         uniform = uniform_path_applies(uniform_medium, boundary_type, nref, mua, mus, phase_idx)
     for k in numba.prange(n_workers):
         while True:
@@ -508,10 +523,19 @@ def run_batches(
                     batch_size, n_total, acc[k], tally[k],
                 )  # fmt: skip
                 continue
-            transport_batch(
-                b, M, mua, mus, g, nref, uniform_medium, nx, ny, nz, dx, dy, dz,
-                boundary_type, n_out, matched, roulette, weight_threshold, chance,
-                si, sf, stab, svox, phase_idx, phase_tab, normals, use_normals,
-                seed, batch_size, n_total, acc[k], tally[k],
-                oi, of, consider, ext[k], paths, path_n,
-            )  # fmt: skip
+            if track is None:
+                transport_batch(
+                    b, M, mua, mus, g, nref, uniform_medium, nx, ny, nz, dx, dy, dz,
+                    boundary_type, n_out, matched, roulette, weight_threshold, chance,
+                    si, sf, stab, svox, phase_idx, phase_tab, normals, use_normals,
+                    seed, batch_size, n_total, acc[k], tally[k],
+                    oi, of, consider, ext[k], paths, path_n,
+                )  # fmt: skip
+            else:
+                transport_batch(
+                    b, M, mua, mus, g, nref, -1, nx, ny, nz, dx, dy, dz,
+                    boundary_type, n_out, matched, roulette, weight_threshold, chance,
+                    si, sf, stab, svox, phase_idx, phase_tab, normals, use_normals,
+                    seed, batch_size, n_total, acc[k], tally[k],
+                    oi, of, consider, ext[k], paths, path_n, track, flu[k],
+                )  # fmt: skip

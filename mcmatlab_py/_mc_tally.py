@@ -1,6 +1,19 @@
 """Fixed-point weights and the tally slots shared by the Monte Carlo kernels."""
 
+import math
+
+import numba
+
 W_ONE = 2**36  # fixed-point weight of a launched packet (about 1.5e-11 resolution)
+#: the track-length tally: a launched packet crossing a voxel's diagonal adds FLU_ONE
+FLU_ONE = 2**24
+
+
+@numba.njit(cache=True)
+def fluence_scale(dx: float, dy: float, dz: float) -> float:
+    """The track-length tally's units per (fixed-point weight x cm): ``FLU_ONE`` per
+    ``W_ONE`` weight over a voxel's diagonal (the longest path one voxel holds)."""
+    return FLU_ONE / (W_ONE * math.sqrt(dx * dx + dy * dy + dz * dz))
 
 # tally slots (per thread slot, int64 fixed-point weights)
 T_LAUNCHED = 0

@@ -11,6 +11,7 @@ import numpy as np
 
 from . import _mc_kernel as K
 from . import _mc_outputs as KO
+from ._mc_tally import fluence_scale
 from ._strict import NotBuiltError
 from .broadband import is_broadband, run_broadband
 from .mc_outputs import OutputSpec, output_spec, store_outputs
@@ -21,6 +22,7 @@ __all__ = [
     "FLUSH_PHOTONS",
     "HostRun",
     "MCResult",
+    "THIN",
     "WideSums",
     "batch_range",
     "gpu_available",
@@ -30,6 +32,7 @@ __all__ = [
     "run_validated",
     "simulate",
     "store_results",
+    "track_media",
 ]
 
 
@@ -50,6 +53,10 @@ class MCResult:
     ext: np.ndarray | None = None  #: (n_ext,) their fixed-point tallies, summed over workers
     paths: np.ndarray | None = None  #: example paths (n_paths, PATH_LEN, 4), local cm
     path_n: np.ndarray | None = None  #: vertices per example path
+    #: (n_media,) bool: the media whose fluence rate comes from the track length, or None
+    track: np.ndarray | None = None
+    #: (nx, ny, nz) weight x cm (launched-packet units) travelled in each voxel of those media
+    track_length: np.ndarray | None = None
 
 
 #: packets between two moves of the kernels' int64 fixed-point sums into :class:`WideSums`.
@@ -90,6 +97,34 @@ class WideSums:
         return self.hi[name].astype(np.float64) * 4294967296.0 + self.lo[name]
 
 
+#: media in which a packet crossing a voxel (its shortest side) interacts with a chance of
+#: about THIN or less, and media that do not absorb, get their fluence rate from the track
+#: length, as MCmatlab's continuous absorption gives it; NA / mua there would rest on a few
+#: interactions (in air on none: a map of zeros). Elsewhere NFR = NA / mua, as before
+THIN = 0.1
+
+
+def track_media(args: tuple, spec: OutputSpec | None = None) -> np.ndarray | None:
+    """(n_media,) bool: the media present in the grid of the kernel arguments ``args`` whose
+    fluence is tallied along the path; None if none is (or deposition criteria apply: they
+    filter ``NA`` packet by packet, and the track-length tally does not follow them)."""
+    if spec is not None and spec.active and spec.oi[KO.OI_DC] == 1:
+        return None
+    M, mua, mus = args[0], args[1], args[2]
+    dmin = min(args[9], args[10], args[11])
+    present = np.bincount(np.asarray(M).ravel(), minlength=len(mua)) > 0
+    thin = present & ((mua <= 0.0) | ((mua + mus) * dmin < THIN))
+    return thin if thin.any() else None
+
+
+def track_length(sums: WideSums, track, d: tuple, shape: tuple) -> np.ndarray | None:
+    """(shape) weight x cm (launched-packet units) travelled in each voxel of the tracked
+    media, from the ``"flu"`` total of ``sums``; ``d`` the voxel sides (dx, dy, dz) in cm."""
+    if track is None:
+        return None
+    return sums.value("flu").reshape(shape) / (fluence_scale(*d) * K.W_ONE)
+
+
 class HostRun:
     """The per-worker int64 accumulators of a run on this machine's threads, moved into
     :class:`WideSums` every :data:`FLUSH_PHOTONS` packets. ``args``: the kernel's
@@ -101,22 +136,35 @@ class HostRun:
         # rows padded to 512 bytes so that threads do not share cache lines
         self.tally = np.zeros((n_slots, 64), dtype=np.int64)
         self.out = spec.arrays(n_slots)
+        self.track = track_media(args, spec)
+        self.flu = (np.zeros((n_slots, args[0].size), dtype=np.int64)
+                    if self.track is not None else None)
         self.sums = WideSums()
         self.pending = 0  #: packets in the int64 accumulators since they were last moved
-        K.run_batches(*args, 0, 0, self.acc, self.tally, *self.out)  # compile or load first
+        self._run(0, 0)  # compile or load first
+
+    def _run(self, a: int, b: int) -> None:
+        if self.track is None:
+            K.run_batches(*self.args, a, b, self.acc, self.tally, *self.out)
+        else:
+            K.run_batches(*self.args, a, b, self.acc, self.tally, *self.out, self.track,
+                          self.flu)
 
     def run(self, start: int, stop: int) -> None:
         """Batches ``[start, stop)``, in chunks of at most FLUSH_PHOTONS packets."""
         step = max(1, FLUSH_PHOTONS // self.bs)
         for a in range(start, stop, step):
             b = min(a + step, stop)
-            K.run_batches(*self.args, a, b, self.acc, self.tally, *self.out)
+            self._run(a, b)
             self.pending += (b - a) * self.bs
             if self.pending >= FLUSH_PHOTONS:
                 self.flush()
 
     def flush(self) -> None:
-        for name, arr in (("acc", self.acc), ("tally", self.tally), ("ext", self.out[3])):
+        named = [("acc", self.acc), ("tally", self.tally), ("ext", self.out[3])]
+        if self.flu is not None:
+            named.append(("flu", self.flu))
+        for name, arr in named:
             self.sums.add(name, arr.sum(axis=0))
             arr[:] = 0
         self.pending = 0
@@ -131,6 +179,7 @@ class HostRun:
     def totals(self) -> WideSums:
         self.flush()
         return self.sums
+
 
 
 def optical_arrays(media, wavelength: float | None = None
@@ -227,7 +276,9 @@ def simulate(G, MC, M: np.ndarray, mua, mus, g, nref, *, seed: int, n_photons: i
     return MCResult(absorbed=sums.value("acc").reshape(M.shape) / K.W_ONE,
                     tally=sums.value("tally")[: K.N_TALLY], n_photons=int(n_done),
                     kernel_seconds=kernel_s, kernel_cpu_seconds=kernel_cpu, spec=spec,
-                    ext=sums.value("ext"), paths=host.out[4], path_n=host.out[5])
+                    ext=sums.value("ext"), paths=host.out[4], path_n=host.out[5],
+                    track=host.track,
+                    track_length=track_length(sums, host.track, (G.dx, G.dy, G.dz), M.shape))
 
 
 def gpu_available() -> bool:
@@ -269,23 +320,29 @@ def _simulate_gpu(G, MC, M, mua, mus, g, nref, *, seed, n_photons, time_limit_s,
         args[22] = np.full(len(mua), -1, dtype=np.int32)
     per = KC.PHOTONS_PER_THREAD
     args[27] = per
+    track = track_media(args, spec)
+    if track is not None:
+        args[5] = -1  # uniform_medium: the track-length tally cuts paths at voxel faces
     args = [cuda.to_device(a) if isinstance(a, np.ndarray) else a for a in args]
     nvox = M.size
     acc = cuda.to_device(np.zeros(nvox, dtype=np.int64))
     tally = cuda.to_device(np.zeros(K.N_TALLY, dtype=np.int64))
+    flu = cuda.to_device(np.zeros(nvox if track is not None else 1, dtype=np.int64))
+    tracked = cuda.to_device(track if track is not None else np.zeros(len(mua), dtype=np.bool_))
     n_streams = -(-n_total // per) if n_photons is not None else None
     tpb = KC.THREADS_PER_BLOCK
     # compile outside the timed rounds (no streams: every thread returns at once); a
     # time-limited run would otherwise spend its minutes on the JIT (about 15 s on an H200)
-    KC.transport_streams[1, tpb](*args, 0, 0, acc, tally)
+    KC.transport_streams[1, tpb](*args, 0, 0, acc, tally, tracked, flu)
     cuda.synchronize()
     bar = Progress(n_streams if n_streams is not None else time_limit_s, label,
                    enabled=MC.progress)
     sums, pending = WideSums(), 0
-    zeros = {"acc": np.zeros(nvox, dtype=np.int64), "tally": np.zeros(K.N_TALLY, dtype=np.int64)}
+    named = [("acc", acc), ("tally", tally)] + ([("flu", flu)] if track is not None else [])
+    zeros = {name: np.zeros(arr.shape, dtype=np.int64) for name, arr in named}
 
     def flush():  # move the int64 sums into the wide ones before they can overflow
-        for name, arr in (("acc", acc), ("tally", tally)):
+        for name, arr in named:
             sums.add(name, arr.copy_to_host())
             arr.copy_to_device(zeros[name])
 
@@ -296,7 +353,7 @@ def _simulate_gpu(G, MC, M, mua, mus, g, nref, *, seed, n_photons, time_limit_s,
         per_round = min(per_round, max_streams)
         todo = per_round if n_streams is None else min(per_round, n_streams - done)
         t0, c0 = time.perf_counter(), time.process_time()
-        KC.transport_streams[-(-todo // tpb), tpb](*args, done, todo, acc, tally)
+        KC.transport_streams[-(-todo // tpb), tpb](*args, done, todo, acc, tally, tracked, flu)
         cuda.synchronize()
         dt = time.perf_counter() - t0
         kernel_s += dt
@@ -318,9 +375,10 @@ def _simulate_gpu(G, MC, M, mua, mus, g, nref, *, seed, n_photons, time_limit_s,
     bar.close()
     flush()
     n_done = n_photons if n_photons is not None else done * per
+    length = track_length(sums, track, (G.dx, G.dy, G.dz), M.shape)
     return MCResult(absorbed=sums.value("acc").reshape(M.shape) / K.W_ONE,
                     tally=sums.value("tally"), n_photons=int(n_done), kernel_seconds=kernel_s,
-                    kernel_cpu_seconds=kernel_cpu, spec=spec)
+                    kernel_cpu_seconds=kernel_cpu, spec=spec, track=track, track_length=length)
 
 
 def _run_until_collected(host: HostRun, target: int, time_limit_s):
@@ -430,10 +488,13 @@ def _simulate_distributed(G, MC, M, mua, mus, g, nref, *, seed, n_photons, clien
     for p in parts[1:]:
         rows = p[3] > 0
         paths[rows] = p[2][rows]
+    track = track_media(args, spec)
+    length = track_length(sums, track, (G.dx, G.dy, G.dz), M.shape)
     return MCResult(absorbed=sums.value("acc").reshape(M.shape) / K.W_ONE,
                     tally=sums.value("tally")[: K.N_TALLY], n_photons=int(n_photons),
                     kernel_seconds=wall, kernel_cpu_seconds=float(sum(p[1] for p in parts)),
-                    spec=spec, ext=sums.value("ext"), paths=paths, path_n=path_n)
+                    spec=spec, ext=sums.value("ext"), paths=paths, path_n=path_n,
+                    track=track, track_length=length)
 
 
 def run_monte_carlo(model, client=None) -> None:
@@ -497,6 +558,8 @@ def store_results(MC, res: MCResult, M: np.ndarray, mua: np.ndarray, dV: float) 
     mua_map = mua[M]
     with np.errstate(divide="ignore", invalid="ignore"):
         MC.NFR = np.where(mua_map > 0, MC.NA / mua_map, 0.0)
+    if res.track is not None:  # thin media: the fluence rate from the track length
+        MC.NFR = np.where(res.track[M], res.track_length / (launched * dV), MC.NFR)
     # with deposition criteria NA holds only what met them; the balance counts all
     MC.absorbed_fraction = float((res.absorbed.sum() + frac(K.T_ABSORBED_EXCLUDED) * launched)
                                  / launched)

@@ -46,6 +46,10 @@ MODELS = textwrap.dedent("""
             G.media = [Medium("t", mua=10.0, mus=50.0, g=0.8)]
             G.geom_func = lambda X, Y, Z: np.zeros(X.shape, dtype=int)
             MC.light_source.source_type = 0
+        elif case == "air":  # MCmatlab's air: the fluence rate from the track length
+            G.media = [Medium("air", mua=1e-8, mus=1e-8, g=1.0)]
+            G.geom_func = lambda X, Y, Z: np.zeros(X.shape, dtype=int)
+            MC.light_source.source_type = 0
         elif case == "curved":  # Example 17's droplet: smoothed normals, and reflections
             G.nx = G.ny = 21  # that travel on through the droplet's voxels
             G.nz = 11
@@ -74,10 +78,11 @@ MODELS = textwrap.dedent("""
                 "bottom": MC.escaped["bottom"], "sides": MC.escaped["sides"],
                 "outside": MC.absorbed_outside_fraction, "specular": MC.specular_reflectance,
                 "balance": MC.energy_balance, "NA_sum": float(MC.NA.sum()),
-                "n": MC.n_photons}
+                "n": MC.n_photons, "NFR_max": float(MC.NFR.max()),
+                "NFR_sum": float(MC.NFR.sum())}
 """)
 
-CASES = ("matched", "mismatched", "curved")
+CASES = ("matched", "mismatched", "curved", "air")
 
 
 def _namespace():
@@ -118,6 +123,15 @@ def test_simulated_gpu_agrees_with_cpu(simulated, case):
     assert gpu["NA_sum"] * dV == pytest.approx(gpu["absorbed"], rel=1e-12)
 
 
+def test_simulated_gpu_tallies_the_track_length_in_air(simulated):
+    """In air no packet interacts: the pencil beam's fluence rate is 1 / (dx dy) in each
+    of the column's 8 voxels (0.1 / 8 cm on a side), zero elsewhere, on the GPU as on the CPU."""
+    air = simulated["air"]
+    beam = 1.0 / (0.1 / 8) ** 2
+    assert air["NFR_max"] == pytest.approx(beam, rel=1e-6)
+    assert air["NFR_sum"] == pytest.approx(8 * beam, rel=1e-6)
+
+
 def _real_gpu() -> bool:
     """A CUDA GPU, not the simulator (whose runs are the test above)."""
     import numba
@@ -142,6 +156,9 @@ def test_real_gpu_agrees_with_cpu(case):
         assert abs(gpu[key] - cpu[key]) < 4.0 * se, (key, gpu[key], cpu[key], se)
     dV = model.G.dx * model.G.dy * model.G.dz
     assert gpu["NA_sum"] * dV == pytest.approx(gpu["absorbed"], rel=1e-12)
+    if case == "air":  # the track length: every packet down the same column
+        assert gpu["NFR_sum"] == pytest.approx(cpu["NFR_sum"], rel=1e-6)
+        assert gpu["NFR_max"] == pytest.approx(cpu["NFR_max"], rel=1e-6)
 
 
 @pytest.mark.skipif(not _real_gpu(), reason="no CUDA GPU here")
@@ -209,7 +226,7 @@ PTX = textwrap.dedent("""
 
     sig = (A(i32), A(f64), A(f64), A(f64), A(f64), i64, i64, i64, i64, f64, f64, f64,
            i64, f64, b, b, f64, f64, A(i64), A(f64), A(f64), A(i64), A(i32), A(f64, 2),
-           A(T.float32), b, T.uint64, i64, i64, i64, i64, A(i64), A(i64))
+           A(T.float32), b, T.uint64, i64, i64, i64, i64, A(i64), A(i64), A(b), A(i64))
     try:
         ptx, _ = cuda.compile_ptx(KC.transport_streams.py_func, sig, cc=(8, 0), fastmath=True)
     except Exception as e:
