@@ -180,8 +180,7 @@ def layers_figure(model, k: int = 8):
     """The first ``k`` segments of the example paths seen along y, and NFR on the xz
     plane through the source (log scale), with the interfaces."""
     import matplotlib.pyplot as plt
-
-    from mcmatlab_py.plotting.figures import positive_log_norm
+    from matplotlib.colors import LogNorm
 
     G, MC = model.G, model.MC
     fig, (ax0, ax1) = plt.subplots(1, 2, figsize=(8.4, 3.6), layout="constrained")
@@ -192,9 +191,14 @@ def layers_figure(model, k: int = 8):
             title=f"{MC.n_example_paths} example paths, first {k} segments")
     ax0.set_aspect("equal")
     F = MC.NFR[:, G.ny // 2, :]
+    # the colours span the water's values (the trapped light, 1st to 99th percentile: the
+    # source's voxel is brighter); the rays leaving through the air (NFR from the track
+    # length in thin media) are darker, below the scale
+    water = F[:, G.z > Z_WATER]
+    lo, hi = np.percentile(water[water > 0], [1, 99])
     im = ax1.imshow(np.where(F > 0, F, np.nan).T, origin="upper", cmap="inferno",
-                    norm=positive_log_norm(F), extent=[-G.Lx / 2, G.Lx / 2, G.Lz, 0])
-    fig.colorbar(im, ax=ax1, label="NFR [W/cm$^2$/W]")
+                    norm=LogNorm(vmin=lo, vmax=hi), extent=[-G.Lx / 2, G.Lx / 2, G.Lz, 0])
+    fig.colorbar(im, ax=ax1, label="NFR [W/cm$^2$/W]", extend="both")
     ax1.set(title="fluence rate at y = 0 (trapped light)", xlabel="x [cm]", ylabel="z [cm]")
     for ax in (ax0, ax1):
         for z, label in ((Z_WATER, "air / water"), (Z_REFLECTOR, "water / reflector")):
