@@ -181,7 +181,6 @@ class HostRun:
         return self.sums
 
 
-
 def optical_arrays(media, wavelength: float | None = None
                    ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """(mua, mus, g, n) arrays of a list of media at ``wavelength`` (nm), float64.

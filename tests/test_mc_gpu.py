@@ -111,16 +111,19 @@ def test_simulated_gpu_agrees_with_cpu(simulated, case):
     gpu = simulated[case]
     ns = _namespace()
     model = ns["build"](case, False, seed=2, n=N_PHOTONS).run_monte_carlo()
-    cpu = ns["totals"](model.MC)
-    assert gpu["n"] == N_PHOTONS
-    assert gpu["balance"] == pytest.approx(1.0, abs=1e-12)  # exact in fixed point
+    _assert_totals_agree(gpu, ns["totals"](model.MC), N_PHOTONS, model.G)
+
+
+def _assert_totals_agree(gpu: dict, cpu: dict, n: int, G) -> None:
+    """Both runs' fractions within 4 standard errors of their difference; the GPU's energy
+    balance exact in fixed point, and NA * dV summed over the voxels its absorbed fraction."""
+    assert gpu["n"] == n
+    assert gpu["balance"] == pytest.approx(1.0, abs=1e-12)
     for key in ("absorbed", "top", "bottom", "sides"):
         f = 0.5 * (gpu[key] + cpu[key])
-        se = math.sqrt(max(2.0 * f * (1.0 - f), 1e-12) / N_PHOTONS)
+        se = math.sqrt(max(2.0 * f * (1.0 - f), 1e-12) / n)
         assert abs(gpu[key] - cpu[key]) < 4.0 * se, (key, gpu[key], cpu[key], se)
-    # NA holds the absorbed fraction: NA * dV summed over the voxels
-    dV = model.G.dx * model.G.dy * model.G.dz
-    assert gpu["NA_sum"] * dV == pytest.approx(gpu["absorbed"], rel=1e-12)
+    assert gpu["NA_sum"] * G.dx * G.dy * G.dz == pytest.approx(gpu["absorbed"], rel=1e-12)
 
 
 def test_simulated_gpu_tallies_the_track_length_in_air(simulated):
@@ -148,14 +151,7 @@ def test_real_gpu_agrees_with_cpu(case):
     gpu = ns["totals"](ns["build"](case, True, seed=3, n=n).run_monte_carlo().MC)
     model = ns["build"](case, False, seed=4, n=n).run_monte_carlo()
     cpu = ns["totals"](model.MC)
-    assert gpu["n"] == n
-    assert gpu["balance"] == pytest.approx(1.0, abs=1e-12)
-    for key in ("absorbed", "top", "bottom", "sides"):
-        f = 0.5 * (gpu[key] + cpu[key])
-        se = math.sqrt(max(2.0 * f * (1.0 - f), 1e-12) / n)
-        assert abs(gpu[key] - cpu[key]) < 4.0 * se, (key, gpu[key], cpu[key], se)
-    dV = model.G.dx * model.G.dy * model.G.dz
-    assert gpu["NA_sum"] * dV == pytest.approx(gpu["absorbed"], rel=1e-12)
+    _assert_totals_agree(gpu, cpu, n, model.G)
     if case == "air":  # the track length: every packet down the same column
         assert gpu["NFR_sum"] == pytest.approx(cpu["NFR_sum"], rel=1e-6)
         assert gpu["NFR_max"] == pytest.approx(cpu["NFR_max"], rel=1e-6)
