@@ -68,7 +68,7 @@ _MC_KEYS = {
     # tallies) and their tables
     "use_light_collector", "light_collector", "request_collected_photons", "far_field_res",
     "n_example_paths", "calc_normalized_irradiance", "n_radial_bins", "radial_bin_size",
-    "n_angle_bins", "deposition_criteria",
+    "n_angle_bins", "deposition_criteria", "calc_normalized_fluence_rate",
 }
 #: [MC.light_collector]: a lens (f finite) or a fiber (f = inf)
 _COLLECTOR_KEYS = {"x", "y", "z", "theta", "phi", "f", "diam", "field_size", "NA", "res",

@@ -104,11 +104,13 @@ class WideSums:
 THIN = 0.1
 
 
-def track_media(args: tuple, spec: OutputSpec | None = None) -> np.ndarray | None:
+def track_media(args: tuple, spec: OutputSpec | None = None, enabled: bool = True
+                ) -> np.ndarray | None:
     """(n_media,) bool: the media present in the grid of the kernel arguments ``args`` whose
-    fluence is tallied along the path; None if none is (or deposition criteria apply: they
-    filter ``NA`` packet by packet, and the track-length tally does not follow them)."""
-    if spec is not None and spec.active and spec.oi[KO.OI_DC] == 1:
+    fluence is tallied along the path; None if none is, if not ``enabled``
+    (``MC.calc_normalized_fluence_rate``), or if deposition criteria apply (they filter
+    ``NA`` packet by packet, and the track-length tally does not follow them)."""
+    if not enabled or (spec is not None and spec.active and spec.oi[KO.OI_DC] == 1):
         return None
     M, mua, mus = args[0], args[1], args[2]
     dmin = min(args[9], args[10], args[11])
@@ -128,15 +130,16 @@ def track_length(sums: WideSums, track, d: tuple, shape: tuple) -> np.ndarray | 
 class HostRun:
     """The per-worker int64 accumulators of a run on this machine's threads, moved into
     :class:`WideSums` every :data:`FLUSH_PHOTONS` packets. ``args``: the kernel's
-    arguments (:func:`_kernel_args`); ``n_slots`` workers; ``bs`` packets per batch."""
+    arguments (:func:`_kernel_args`); ``n_slots`` workers; ``bs`` packets per batch;
+    ``track``: tally the track length in thin media (:func:`track_media`)."""
 
-    def __init__(self, args: tuple, n_slots: int, spec: OutputSpec, bs: int):
+    def __init__(self, args: tuple, n_slots: int, spec: OutputSpec, bs: int, track: bool = True):
         self.args, self.bs = args, bs
         self.acc = np.zeros((n_slots, args[0].size), dtype=np.int64)
         # rows padded to 512 bytes so that threads do not share cache lines
         self.tally = np.zeros((n_slots, 64), dtype=np.int64)
         self.out = spec.arrays(n_slots)
-        self.track = track_media(args, spec)
+        self.track = track_media(args, spec, track)
         self.flu = (np.zeros((n_slots, args[0].size), dtype=np.int64)
                     if self.track is not None else None)
         self.sums = WideSums()
@@ -231,7 +234,8 @@ def simulate(G, MC, M: np.ndarray, mua, mus, g, nref, *, seed: int, n_photons: i
     old_threads = numba.get_num_threads()
     numba.set_num_threads(n_threads)
     try:
-        host = HostRun(args, n_slots, spec, bs)  # compiles (or loads) outside the timing
+        # compiles (or loads) outside the timing
+        host = HostRun(args, n_slots, spec, bs, MC.calc_normalized_fluence_rate)
         if collect_target is not None:
             done, kernel_s, kernel_cpu = _run_until_collected(host, collect_target,
                                                               time_limit_s)
@@ -319,7 +323,7 @@ def _simulate_gpu(G, MC, M, mua, mus, g, nref, *, seed, n_photons, time_limit_s,
         args[22] = np.full(len(mua), -1, dtype=np.int32)
     per = KC.PHOTONS_PER_THREAD
     args[27] = per
-    track = track_media(args, spec)
+    track = track_media(args, spec, MC.calc_normalized_fluence_rate)
     if track is not None:
         args[5] = -1  # uniform_medium: the track-length tally cuts paths at voxel faces
     args = [cuda.to_device(a) if isinstance(a, np.ndarray) else a for a in args]
@@ -445,14 +449,15 @@ def _parent_media(G, MC, n_sub: int) -> np.ndarray:
     return np.zeros(n_sub, dtype=np.int64)  # Henyey-Greenstein everywhere: parents unused
 
 
-def batch_range(args: tuple, batches: tuple[int, int], spec: OutputSpec | None = None) -> tuple:
+def batch_range(args: tuple, batches: tuple[int, int], spec: OutputSpec | None = None,
+                track: bool = True) -> tuple:
     """Batches ``[start, stop)`` of a run on this machine's threads (a task body): the
     :class:`WideSums` of the absorbed weights ``acc`` (nvox,), the tallies ``tally`` (64,)
     and the optional outputs' tallies ``ext`` (n_ext,), fixed point; the kernel seconds;
     the example paths and their lengths."""
     if spec is None:
         spec = OutputSpec(None, np.zeros(KO.OF_SIZE), np.zeros(1, dtype=np.bool_), 1, 0)
-    host = HostRun(args, numba.get_num_threads(), spec, int(args[27]))
+    host = HostRun(args, numba.get_num_threads(), spec, int(args[27]), track)
     t0 = time.perf_counter()
     host.run(batches[0], batches[1])
     return host.totals(), time.perf_counter() - t0, host.out[4], host.out[5]
@@ -475,7 +480,9 @@ def _simulate_distributed(G, MC, M, mua, mus, g, nref, *, seed, n_photons, clien
     args = _kernel_args(G, MC, M, mua, mus, g, nref, seed, n_photons)
     spec = output_spec(G, MC, len(mua), _parent_media(G, MC, len(mua)))
     t0 = time.perf_counter()
-    parts = run_tasks(functools.partial(batch_range, args, spec=spec), ranges, client=client,
+    parts = run_tasks(functools.partial(batch_range, args, spec=spec,
+                                        track=MC.calc_normalized_fluence_rate),
+                      ranges, client=client,
                       progress=MC.progress, label=label)
     wall = time.perf_counter() - t0
     sums = WideSums()
@@ -487,7 +494,7 @@ def _simulate_distributed(G, MC, M, mua, mus, g, nref, *, seed, n_photons, clien
     for p in parts[1:]:
         rows = p[3] > 0
         paths[rows] = p[2][rows]
-    track = track_media(args, spec)
+    track = track_media(args, spec, MC.calc_normalized_fluence_rate)
     length = track_length(sums, track, (G.dx, G.dy, G.dz), M.shape)
     return MCResult(absorbed=sums.value("acc").reshape(M.shape) / K.W_ONE,
                     tally=sums.value("tally")[: K.N_TALLY], n_photons=int(n_photons),

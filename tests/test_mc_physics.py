@@ -124,6 +124,21 @@ def test_fluence_rate_in_air_is_the_beam():
             np.testing.assert_allclose(MC.NFR[:, :, 5:], MC.NA[:, :, 5:] / absorber)
 
 
+def test_calc_normalized_fluence_rate_false_skips_the_track_length():
+    """MCmatlab's calcNormalizedFluenceRate = false: no track-length tally, NFR = NA / mua
+    (the air empty again), NA the same to the bit."""
+    model = _air_column(50.0)
+    ref = model.MC.NA.copy()
+    model.MC.calc_normalized_fluence_rate = False
+    MC = model.run_monte_carlo().MC
+    np.testing.assert_array_equal(MC.NA, ref)
+    np.testing.assert_allclose(MC.NFR, MC.NA / np.where(model.G.medium_map() == 1, 50.0, 1e-8))
+    assert np.all(MC.NFR[:, :, :5] == 0.0)
+    model.MC.calc_normalized_fluence_rate = "no"
+    with pytest.raises(ValueError, match="calc_normalized_fluence_rate must be True or False"):
+        model.run_monte_carlo()
+
+
 def test_track_length_fluence_same_for_any_thread_count():
     a = _air_column(50.0, threads=1).MC
     b = _air_column(50.0, threads=2).MC
