@@ -24,12 +24,12 @@ drawn with the run's own sampler (:func:`mcmatlab_py.light_source.sample_light_s
 and one of the angles, from the run's far field where a bin edge allows it.
 
 Differences from MCmatlab: a fixed photon count per source instead of 0.1 min, and
-no key press between the runs. MCmatlab's fluence-rate plots show the beams in the air;
-here ``NA`` and ``NFR`` stay zero in air (the kernel deposits weight only where a
-packet interacts, and with mua + mus = 2e-8 cm^-1 none does in the cuboid), so the
-figures show the light leaving the faces (``NI_*``, computed here on request) and the
-far field (drawn over (theta, phi), not on MCmatlab's 3-D hemisphere); one figure
-gathers all five sources.
+no key press between the runs. As MCmatlab's, the fluence-rate plots
+(``ex02_<source>_NFR.png``) show the beams in the air: ``NFR`` in thin media is the track
+length per voxel; ``NA`` stays zero (with mua + mus = 2e-8 cm^-1 no packet interacts in the
+cuboid). The figures also show the light leaving the faces (``NI_*``, computed here on
+request) and the far field (drawn over (theta, phi), not on MCmatlab's 3-D hemisphere);
+one figure gathers all five sources.
 """
 
 from __future__ import annotations
@@ -328,9 +328,8 @@ if __name__ == "__main__":
 
     models["line"].plot("G", args.out / "ex02")
     for name, model in models.items():
-        # MCmatlab's plot(model, 'MC') shows the fluence rate in the air; here NA and NFR
-        # are zero in air (deposits only at interactions, see the docstring): the faces
-        # and the far field show the beams instead
+        # MCmatlab's plot(model, 'MC'): the fluence rate in the air (the track length)
+        model.plot("MC")["NFR"].savefig(args.out / f"ex02_{name}_NFR.png", dpi=110)
         plot_boundary_irradiance(model).savefig(args.out / f"ex02_{name}_NI.png", dpi=110)
         plot_far_field(model).savefig(args.out / f"ex02_{name}_far_field.png", dpi=110)
         plt.close("all")
