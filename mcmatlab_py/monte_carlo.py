@@ -336,7 +336,15 @@ def _simulate_gpu(G, MC, M, mua, mus, g, nref, *, seed, n_photons, time_limit_s,
     tpb = KC.THREADS_PER_BLOCK
     # compile outside the timed rounds (no streams: every thread returns at once); a
     # time-limited run would otherwise spend its minutes on the JIT (about 15 s on an H200)
-    KC.transport_streams[1, tpb](*args, 0, 0, acc, tally, tracked, flu)
+    try:
+        KC.transport_streams[1, tpb](*args, 0, 0, acc, tally, tracked, flu)
+    except AttributeError as e:  # numba-cuda 0.30 compiles against numpy's np.row_stack
+        if "row_stack" not in str(e):
+            raise
+        raise RuntimeError(
+            f"MC.use_gpu: numba-cuda cannot compile the kernel with numpy {np.__version__} "
+            f"({e}; numpy 2.5 removed np.row_stack): install numpy < 2.5 "
+            "(pip install 'tissue-enkf[gpu]' pins it) or a numba-cuda that supports it") from e
     cuda.synchronize()
     bar = Progress(n_streams if n_streams is not None else time_limit_s, label,
                    enabled=MC.progress)
