@@ -1,5 +1,5 @@
-"""The anisotropy g as a nuisance input (issue #18): what the filter identifies when the
-tissue's g is not the model's.
+"""The anisotropy g and the beam radius as nuisance inputs (issue #18): what the filter
+identifies when the tissue's g, or the beam's radius, is not the model's.
 
 The filter's model has g = 0.9 (Table 1). The truths come from the independent forward
 models of ``validation/independent_models.py`` (no code shared with the filter), run with
@@ -10,6 +10,12 @@ same mua and ``mus (1 - 0.9)`` whatever the truth's g, and its temperature bands
 mus is then the truth's mus times (1 - g) / (1 - 0.9), not the truth's mus.
 
     python validation/nuisance_g.py [--g 0.8 0.85 0.9 0.95] [--models B A] [--seeds 10]
+    python validation/nuisance_g.py --beam-radius 0.09 0.095 0.105 0.11 \
+        --out validation/reports/nuisance_beam_radius.md
+
+With ``--beam-radius`` the truths keep g = 0.9 and mus = 100 and their top-hat beam has
+the radius given (cm; the filter's model: 0.1 cm, the same power), to measure how well
+the radius must be known.
 
 The filter: ``examples/own_data.toml`` (the config a user starts from), the default variant
 of ``validation/model_error_coverage.py``. Each g's truths are cached beside the standard
@@ -36,37 +42,43 @@ import model_error_coverage as mec  # noqa: E402
 from enkf.app.config import load_identify  # noqa: E402
 
 MODEL_G = 0.9  #: the filter's g (Table 1)
+MODEL_RADIUS = 0.1  #: cm, the filter's beam radius
 MUS_REDUCED = 10.0  #: cm^-1, Table 1's mus (1 - g)
 
 
 @contextlib.contextmanager
-def truth_tissue(g: float):
-    """The independent models with anisotropy ``g`` and mus = 10 / (1 - g), constant mua 1;
-    their cache in a folder of its own (the standard one for g = 0.9)."""
-    saved = (im.G_ANISO, im.optics, mec.optics, im.CACHE)
+def truth_tissue(g: float, radius: float = MODEL_RADIUS):
+    """The independent models with anisotropy ``g`` and mus = 10 / (1 - g), constant mua 1,
+    lit by a top-hat of ``radius`` (cm); their cache in a folder of its own (the standard
+    one for g = 0.9 and radius 0.1)."""
+    saved = (im.G_ANISO, im.optics, mec.optics, im.CACHE, im.BEAM_RADIUS)
     mus = MUS_REDUCED / (1.0 - g)
 
     def optics(case: str, t: float) -> tuple[float, float]:
         return 1.0, mus
 
     im.G_ANISO = g
+    im.BEAM_RADIUS = radius
     im.optics = mec.optics = optics
     if g != MODEL_G:
         im.CACHE = saved[3] / f"g{g:g}"
+    if radius != MODEL_RADIUS:
+        im.CACHE = saved[3] / f"g{g:g}-r{radius:g}"
     try:
         yield mus
     finally:
-        im.G_ANISO, im.optics, mec.optics, im.CACHE = saved
+        im.G_ANISO, im.optics, mec.optics, im.CACHE, im.BEAM_RADIUS = saved
 
 
-def study(gs, models, seeds: int) -> list[dict]:
+def study(tissues, models, seeds: int) -> list[dict]:
+    """``tissues``: (g, beam radius) pairs of the truths."""
     cfg = load_identify(ROOT / "examples" / "own_data.toml")
     emulator = cfg.emulator(progress=False)
     rows = []
     for model in models:
-        for g in gs:
+        for g, radius in tissues:
             t0 = time.perf_counter()
-            with truth_tissue(g) as mus:
+            with truth_tissue(g, radius) as mus:
                 runs = [mec.run_one(cfg, emulator, model, "constant", s, "default")
                         for s in range(seeds)]
             fin = np.array([r["final"] for r in runs])
@@ -74,7 +86,7 @@ def study(gs, models, seeds: int) -> list[dict]:
             cool = np.array([r["cov_cool"] for r in runs])
             heat = np.array([r["cov_heat"] for r in runs])
             reduced = fin[:, 1] * (1.0 - MODEL_G)
-            row = {"model": model, "g": g, "mus": mus, "seeds": seeds,
+            row = {"model": model, "g": g, "radius": radius, "mus": mus, "seeds": seeds,
                    "mua": fin[:, 0].mean(), "mua_sd": sd[:, 0].mean(),
                    "mus_est": fin[:, 1].mean(), "mus_sd": sd[:, 1].mean(),
                    "reduced": reduced.mean(),
@@ -84,9 +96,10 @@ def study(gs, models, seeds: int) -> list[dict]:
                    "heat": heat.mean(0), "cool": cool.mean(0), "cool_worst": cool.min(0),
                    "seconds": time.perf_counter() - t0}
             rows.append(row)
-            print(f"{model} g {g:g}: mua {row['mua']:.3f}, mus {row['mus_est']:.1f} (truth "
-                  f"{mus:.1f}), mus (1 - 0.9) {row['reduced']:.2f}; cooling coverage "
-                  f"{np.round(row['cool'], 2)} ({row['seconds']:.0f} s)", flush=True)
+            print(f"{model} g {g:g}, beam radius {radius:g}: mua {row['mua']:.3f}, mus "
+                  f"{row['mus_est']:.1f} (truth {mus:.1f}), mus (1 - 0.9) {row['reduced']:.2f}; "
+                  f"cooling coverage {np.round(row['cool'], 2)} ({row['seconds']:.0f} s)",
+                  flush=True)
     return rows
 
 
@@ -94,21 +107,23 @@ def report(rows: list[dict], command: str) -> str:
     def triple(v):
         return ", ".join(f"{x:.2f}" for x in v)
 
-    lines = ["# The anisotropy g as a nuisance input (issue #18)", "",
+    lines = ["# Nuisance inputs: the anisotropy g and the beam radius (issue #18)", "",
              f"Command: `{command}`", "",
-             "Truths from the independent models with the tissue's g below and mus = 10 / (1 - g) "
-             "(reduced scattering 10 cm^-1, mua 1 cm^-1, constant); the filter's model has g = 0.9 "
-             "(`examples/own_data.toml`). Means over seeds; coverage: fraction of steps whose "
-             "+-2 sd band holds the temperature at z = 0, 0.1, 0.2 cm (mean, and the worst seed "
-             "while cooling).", "",
-             "| truth | g | truth mus | filter mua (sd) | filter mus (sd) | filter mus (1 - 0.9) | "
+             "Truths from the independent models with the tissue's g and the beam's radius below, "
+             "mus = 10 / (1 - g) (reduced scattering 10 cm^-1, mua 1 cm^-1, constant); the "
+             "filter's model has g = 0.9 and a radius of 0.1 cm (`examples/own_data.toml`). Means "
+             "over seeds; coverage: fraction of steps whose +-2 sd band holds the temperature at "
+             "z = 0, 0.1, 0.2 cm (mean, and the worst seed while cooling).", "",
+             "| truth | g | beam radius (cm) | truth mus | filter mua (sd) | filter mus (sd) | "
+             "filter mus (1 - 0.9) | "
              "mua within 5% | filter mus (1 - 0.9) within 25% of 10 | mus within 25 cm^-1 | "
              "coverage heating | coverage cooling (worst) |",
-             "|---|---|---|---|---|---|---|---|---|---|---|"]
+             "|---|---|---|---|---|---|---|---|---|---|---|---|"]
     for r in rows:
         n = r["seeds"]
         lines.append(
-            f"| {r['model']} | {r['g']:g} | {r['mus']:.1f} | {r['mua']:.3f} ({r['mua_sd']:.3f}) | "
+            f"| {r['model']} | {r['g']:g} | {r['radius']:g} | {r['mus']:.1f} | "
+            f"{r['mua']:.3f} ({r['mua_sd']:.3f}) | "
             f"{r['mus_est']:.1f} ({r['mus_sd']:.1f}) | {r['reduced']:.2f} | {r['mua_ok']}/{n} | "
             f"{r['reduced_ok']}/{n} | {r['mus_ok']}/{n} | {triple(r['heat'])} | "
             f"{triple(r['cool'])} ({triple(r['cool_worst'])}) |")
@@ -118,6 +133,8 @@ def report(rows: list[dict], command: str) -> str:
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--g", type=float, nargs="+", default=[0.8, 0.85, 0.9, 0.95])
+    ap.add_argument("--beam-radius", type=float, nargs="+", default=None,
+                    help="truths with these beam radii (cm) and g = 0.9 instead of --g")
     ap.add_argument("--models", nargs="+", default=["B", "A"], choices=list(im.MODELS))
     ap.add_argument("--seeds", type=int, default=10)
     ap.add_argument("--out", type=Path, default=ROOT / "validation" / "reports" / "nuisance_g.md")
@@ -127,7 +144,12 @@ def main(argv=None) -> int:
             ap.error(f"--g must lie in [0, 1) (got {g})")
     if a.seeds < 1:
         ap.error(f"--seeds must be >= 1 (got {a.seeds})")
-    rows = study(a.g, a.models, a.seeds)
+    for r in a.beam_radius or []:
+        if not 0.0 < r < 0.25:
+            ap.error(f"--beam-radius must lie in (0, 0.25) cm (got {r})")
+    tissues = ([(MODEL_G, r) for r in a.beam_radius] if a.beam_radius
+               else [(g, MODEL_RADIUS) for g in a.g])
+    rows = study(tissues, a.models, a.seeds)
     command = "python validation/nuisance_g.py " + " ".join(argv or sys.argv[1:])
     a.out.write_text(report(rows, command.strip()))
     a.out.with_suffix(".json").write_text(json.dumps(
