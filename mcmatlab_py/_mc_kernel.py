@@ -494,9 +494,12 @@ def run_batches(
     boundary_type, n_out, matched, roulette, weight_threshold, chance,
     si, sf, stab, svox, phase_idx, phase_tab, normals, use_normals,
     seed, batch_size, n_total, batch_start, batch_stop, acc, tally,
-    oi, of, consider, ext, paths, path_n, track=None, flu=None,
+    oi, of, consider, ext, paths, path_n, track, flu,
 ):  # fmt: skip
     """Run batches ``[batch_start, batch_stop)`` on ``acc.shape[0]`` workers in parallel.
+
+    ``track`` (n_media,) bool or None and ``flu`` (n_workers, nvox or 1): the track-length
+    tally (:func:`transport_batch`; the Python layer sets ``uniform_medium = -1`` with it).
 
     ``acc`` is (n_workers, nvox), ``tally`` (n_workers, N_TALLY or more) and ``ext``
     (n_workers, n_ext), one row per worker; the workers (one per thread) claim batches one at a time from a
@@ -508,8 +511,7 @@ def run_batches(
     n_workers = acc.shape[0]
     counter = np.zeros(1, dtype=np.int64)
     uniform = False  # the one-medium kernel (mcmatlab_py._mc_uniform) runs a plain run
-    if oi is None and track is None:  # the optional outputs and the track-length tally
-        # need the general kernel (pruned at compile time)
+    if oi is None:  # the optional outputs need the general kernel (pruned at compile time)
         uniform = uniform_path_applies(uniform_medium, boundary_type, nref, mua, mus, phase_idx)
     for k in numba.prange(n_workers):
         while True:
@@ -523,19 +525,10 @@ def run_batches(
                     batch_size, n_total, acc[k], tally[k],
                 )  # fmt: skip
                 continue
-            if track is None:
-                transport_batch(
-                    b, M, mua, mus, g, nref, uniform_medium, nx, ny, nz, dx, dy, dz,
-                    boundary_type, n_out, matched, roulette, weight_threshold, chance,
-                    si, sf, stab, svox, phase_idx, phase_tab, normals, use_normals,
-                    seed, batch_size, n_total, acc[k], tally[k],
-                    oi, of, consider, ext[k], paths, path_n,
-                )  # fmt: skip
-            else:
-                transport_batch(
-                    b, M, mua, mus, g, nref, -1, nx, ny, nz, dx, dy, dz,
-                    boundary_type, n_out, matched, roulette, weight_threshold, chance,
-                    si, sf, stab, svox, phase_idx, phase_tab, normals, use_normals,
-                    seed, batch_size, n_total, acc[k], tally[k],
-                    oi, of, consider, ext[k], paths, path_n, track, flu[k],
-                )  # fmt: skip
+            transport_batch(
+                b, M, mua, mus, g, nref, uniform_medium, nx, ny, nz, dx, dy, dz,
+                boundary_type, n_out, matched, roulette, weight_threshold, chance,
+                si, sf, stab, svox, phase_idx, phase_tab, normals, use_normals,
+                seed, batch_size, n_total, acc[k], tally[k],
+                oi, of, consider, ext[k], paths, path_n, track, flu[k],
+            )  # fmt: skip

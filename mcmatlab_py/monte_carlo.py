@@ -140,18 +140,16 @@ class HostRun:
         self.tally = np.zeros((n_slots, 64), dtype=np.int64)
         self.out = spec.arrays(n_slots)
         self.track = track_media(args, spec, track)
-        self.flu = (np.zeros((n_slots, args[0].size), dtype=np.int64)
-                    if self.track is not None else None)
+        if self.track is not None:  # the tally cuts every path at the voxel faces
+            self.args = args = (*args[:5], -1, *args[6:])
+        self.flu = np.zeros((n_slots, args[0].size if self.track is not None else 1),
+                            dtype=np.int64)
         self.sums = WideSums()
         self.pending = 0  #: packets in the int64 accumulators since they were last moved
         self._run(0, 0)  # compile or load first
 
     def _run(self, a: int, b: int) -> None:
-        if self.track is None:
-            K.run_batches(*self.args, a, b, self.acc, self.tally, *self.out)
-        else:
-            K.run_batches(*self.args, a, b, self.acc, self.tally, *self.out, self.track,
-                          self.flu)
+        K.run_batches(*self.args, a, b, self.acc, self.tally, *self.out, self.track, self.flu)
 
     def run(self, start: int, stop: int) -> None:
         """Batches ``[start, stop)``, in chunks of at most FLUSH_PHOTONS packets."""
@@ -164,9 +162,8 @@ class HostRun:
                 self.flush()
 
     def flush(self) -> None:
-        named = [("acc", self.acc), ("tally", self.tally), ("ext", self.out[3])]
-        if self.flu is not None:
-            named.append(("flu", self.flu))
+        named = [("acc", self.acc), ("tally", self.tally), ("ext", self.out[3]),
+                 ("flu", self.flu)]
         for name, arr in named:
             self.sums.add(name, arr.sum(axis=0))
             arr[:] = 0

@@ -60,10 +60,8 @@ def truth_tissue(g: float, radius: float = MODEL_RADIUS):
     im.G_ANISO = g
     im.BEAM_RADIUS = radius
     im.optics = mec.optics = optics
-    if g != MODEL_G:
-        im.CACHE = saved[3] / f"g{g:g}"
-    if radius != MODEL_RADIUS:
-        im.CACHE = saved[3] / f"g{g:g}-r{radius:g}"
+    if (g, radius) != (MODEL_G, MODEL_RADIUS):
+        im.CACHE = saved[3] / (f"g{g:g}" + (f"-r{radius:g}" if radius != MODEL_RADIUS else ""))
     try:
         yield mus
     finally:
