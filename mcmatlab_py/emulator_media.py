@@ -1,4 +1,9 @@
-"""The emulator of two estimated media: a grid of one-medium tables (issue #19, both layers).
+"""Emulators over more inputs than one medium's optics: a grid of one-medium tables.
+
+:class:`NodeGridEmulator` holds one one-medium table per node of a small grid over extra
+inputs. Two kinds: the optics of a second estimated medium (:class:`TwoMediaEmulator`,
+issue #19, both layers) and the beam's radius (:class:`BeamRadiusEmulator`, issue #18: a
+nuisance input the ensemble carries).
 
 :class:`TwoMediaEmulator` gives the absorbed power as a function of four optical
 coefficients: ``mua``, ``mus`` of the first estimated medium (e.g. the dermis) and
@@ -30,7 +35,8 @@ import numpy as np
 
 from .emulator import AbsorptionEmulator, EmulatorSpec, check_range
 
-__all__ = ["TwoMediaEmulator", "lagrange_weights", "node_specs"]
+__all__ = ["BeamRadiusEmulator", "NodeGridEmulator", "TwoMediaEmulator", "lagrange_weights",
+           "node_specs"]
 
 
 def node_specs(spec: EmulatorSpec, second: int, mua2: np.ndarray, mus2: np.ndarray) -> list:
@@ -67,32 +73,38 @@ def lagrange_weights(x: np.ndarray, nodes: np.ndarray) -> np.ndarray:
 
 
 @dataclass
-class TwoMediaEmulator:
-    """NA (or nodal loads) as a function of ``(mua, mus, mua2, mus2)`` cm^-1.
+class NodeGridEmulator:
+    """NA (or nodal loads) as a function of ``(mua, mus, *extra)``: one
+    :class:`~mcmatlab_py.emulator.AbsorptionEmulator` (a table over ``mua`` x ``mus``) per
+    node of a small grid over the extra inputs, ``log(NA + offset)`` interpolated between
+    the nodes by Lagrange polynomials (in the log of each extra input).
 
-    Build with :meth:`build`. ``unique(mua, mus, mua2, mus2)`` and ``__call__`` take (N,)
-    arrays, as :class:`~mcmatlab_py.emulator.AbsorptionEmulator` does for two. Values of
-    ``mua2``, ``mus2`` outside the nodes' range are clamped (a ``RuntimeWarning`` that says
-    "clamped", which the filter counts) or refused (``out_of_range="error"``).
+    ``unique(mua, mus, *extra)`` and ``__call__`` take (N,) arrays, as
+    :class:`~mcmatlab_py.emulator.AbsorptionEmulator` does for two. Extra inputs outside the
+    nodes' range are clamped (a ``RuntimeWarning`` that says "clamped", which the filter
+    counts) or refused (``out_of_range="error"``). Subclasses name the inputs:
+    :class:`TwoMediaEmulator` (``mua2``, ``mus2``), :class:`BeamRadiusEmulator`
+    (``beam_radius``).
     """
 
-    tables: list  #: (n_nodes**2,) AbsorptionEmulator, C order over (mua2, mus2)
-    second: int  #: index of the second estimated medium in spec.media
-    mua2_nodes: np.ndarray  #: (n,) cm^-1
-    mus2_nodes: np.ndarray  #: (n,) cm^-1
+    tables: list  #: AbsorptionEmulator per node, C order over the extra inputs
+    nodes: dict  #: {name: (n,) node values} of each extra input, in the call's order
     out_of_range: str = "error"
     exact = False
-    n_media_estimated = 2  #: the filter passes (mua, mus, mua2, mus2)
-    _lmua2: np.ndarray = field(init=False, repr=False)
-    _lmus2: np.ndarray = field(init=False, repr=False)
+    _lnodes: list = field(init=False, repr=False)
 
     def __post_init__(self):
-        self.mua2_nodes = np.asarray(self.mua2_nodes, float)
-        self.mus2_nodes = np.asarray(self.mus2_nodes, float)
-        self._lmua2, self._lmus2 = np.log(self.mua2_nodes), np.log(self.mus2_nodes)
-        if len(self.tables) != self.mua2_nodes.size * self.mus2_nodes.size:
-            raise ValueError(f"{len(self.tables)} tables for {self.mua2_nodes.size} x "
-                             f"{self.mus2_nodes.size} nodes")
+        self.nodes = {k: np.asarray(v, float) for k, v in self.nodes.items()}
+        self._lnodes = [np.log(v) for v in self.nodes.values()]
+        n = int(np.prod([v.size for v in self.nodes.values()]))
+        if len(self.tables) != n:
+            sizes = " x ".join(str(v.size) for v in self.nodes.values())
+            raise ValueError(f"{len(self.tables)} tables for {sizes} nodes")
+
+    @property
+    def extra_names(self) -> tuple:
+        """The inputs the filter passes after ``mua``, ``mus``."""
+        return tuple(self.nodes)
 
     # the one-medium interface, from the first node (all nodes share grid and orbits)
     @property
@@ -113,7 +125,7 @@ class TwoMediaEmulator:
 
     @property
     def have(self) -> np.ndarray:
-        """(n_nodes**2, n_mua, n_mus) bool: the table points built so far, per node."""
+        """(n_tables, n_mua, n_mus) bool: the table points built so far, per node."""
         return np.stack([t.have for t in self.tables])
 
     @property
@@ -126,55 +138,36 @@ class TwoMediaEmulator:
 
     @property
     def ranges(self) -> dict:
-        """``{"mua": .., "mus": .., "mua2": .., "mus2": ..}`` (lo, hi) cm^-1 covered."""
-        return {"mua": self.spec.mua_range, "mus": self.spec.mus_range,
-                "mua2": (float(self.mua2_nodes[0]), float(self.mua2_nodes[-1])),
-                "mus2": (float(self.mus2_nodes[0]), float(self.mus2_nodes[-1]))}
+        """``{"mua": .., "mus": .., name: ..}`` (lo, hi) covered, in each input's units."""
+        out = {"mua": self.spec.mua_range, "mus": self.spec.mus_range}
+        out.update({k: (float(v[0]), float(v[-1])) for k, v in self.nodes.items()})
+        return out
 
-    @classmethod
-    def build(cls, spec: EmulatorSpec, second: int, mua2_range, mus2_range, *,
-              n_nodes: int = 4, **build_kw) -> TwoMediaEmulator:
-        """One :meth:`AbsorptionEmulator.build` of ``spec`` per node of ``n_nodes``
-        log-spaced values over ``mua2_range`` x ``mus2_range`` (cm^-1) of medium
-        ``second`` (``build_kw``: ``cache_dir``, ``method``, ``on_demand``, ...)."""
-        n_nodes = int(n_nodes)
-        if n_nodes < 2:
-            raise ValueError(f"n_nodes must be >= 2, got {n_nodes}")
-        for name, rng in (("mua2_range", mua2_range), ("mus2_range", mus2_range)):
-            lo, hi = (float(v) for v in rng)
-            if not (np.isfinite(hi) and 0 < lo < hi):
-                raise ValueError(f"{name} must be (lo, hi) with 0 < lo < hi (cm^-1), got "
-                                 f"{rng!r}")
-        mua2, mus2 = np.geomspace(*mua2_range, n_nodes), np.geomspace(*mus2_range, n_nodes)
-        out_of_range = build_kw.get("out_of_range", "error")
-        tables = [AbsorptionEmulator.build(s, **build_kw)
-                  for s in node_specs(spec, second, mua2, mus2)]
-        return cls(tables=tables, second=int(second), mua2_nodes=mua2, mus2_nodes=mus2,
-                   out_of_range=out_of_range)
+    def weights(self, *extra) -> np.ndarray:
+        """(N, n_tables) interpolation weights of the node tables (C order)."""
+        W = None
+        for (name, nodes), lnodes, x in zip(self.nodes.items(), self._lnodes, extra, strict=True):
+            x = check_range(name, x, float(nodes[0]), float(nodes[-1]), self.out_of_range,
+                            "the emulator's nodes")
+            w = lagrange_weights(np.log(x), lnodes)
+            W = w if W is None else (W[:, :, None] * w[:, None, :]).reshape(w.shape[0], -1)
+        return W
 
-    def weights(self, mua2, mus2) -> np.ndarray:
-        """(N, n_nodes**2) interpolation weights of the node tables (C order)."""
-        mua2 = check_range("mua2", mua2, *self.ranges["mua2"], self.out_of_range,
-                           "the emulator's nodes")
-        mus2 = check_range("mus2", mus2, *self.ranges["mus2"], self.out_of_range,
-                           "the emulator's nodes")
-        wa = lagrange_weights(np.log(mua2), self._lmua2)
-        wb = lagrange_weights(np.log(mus2), self._lmus2)
-        return (wa[:, :, None] * wb[:, None, :]).reshape(wa.shape[0], -1)
-
-    def unique(self, mua, mus, mua2, mus2) -> np.ndarray:
+    def unique(self, mua, mus, *extra) -> np.ndarray:
         """(N, n_unique) values at the orbit representatives (see
         :meth:`AbsorptionEmulator.unique`)."""
-        W = self.weights(mua2, mus2)
+        W = self.weights(*extra)
         off = self.spec.offset
         acc = None
         for k, table in enumerate(self.tables):
+            if not W[:, k].any():  # a node no member reads (e.g. all at a node's value)
+                continue
             term = W[:, k:k + 1] * np.log(table.unique(mua, mus) + off)
             acc = term if acc is None else acc + term
         return np.exp(acc) - off
 
-    def __call__(self, mua, mus, mua2, mus2) -> np.ndarray:
-        vals = self.unique(mua, mus, mua2, mus2)
+    def __call__(self, mua, mus, *extra) -> np.ndarray:
+        vals = self.unique(mua, mus, *extra)
         return vals[:, self.inverse].reshape((vals.shape[0], *self.shape))
 
     # on demand: the same calls as one table, applied to every node's table
@@ -186,3 +179,92 @@ class TwoMediaEmulator:
         """Build the points of :meth:`needed_box` in every node's table."""
         for t, p in zip(self.tables, points, strict=True):
             t.fill(p)
+
+
+def _check_node_range(name: str, rng, unit: str) -> tuple[float, float]:
+    lo, hi = (float(v) for v in rng)
+    if not (np.isfinite(hi) and 0 < lo < hi):
+        raise ValueError(f"{name} must be (lo, hi) with 0 < lo < hi ({unit}), got {rng!r}")
+    return lo, hi
+
+
+def _check_n_nodes(n_nodes, least: int = 2) -> int:
+    n_nodes = int(n_nodes)
+    if n_nodes < least:
+        raise ValueError(f"n_nodes must be >= {least}, got {n_nodes}")
+    return n_nodes
+
+
+class TwoMediaEmulator(NodeGridEmulator):
+    """NA (or nodal loads) as a function of ``(mua, mus, mua2, mus2)`` cm^-1: a node grid
+    over the second estimated medium's optics (``n_nodes`` x ``n_nodes``)."""
+
+    n_media_estimated = 2  #: the filter passes (mua, mus, mua2, mus2)
+
+    def __init__(self, tables, second: int, mua2_nodes, mus2_nodes, out_of_range="error"):
+        self.second = int(second)  #: index of the second estimated medium in spec.media
+        super().__init__(tables=tables, nodes={"mua2": mua2_nodes, "mus2": mus2_nodes},
+                         out_of_range=out_of_range)
+
+    @property
+    def mua2_nodes(self) -> np.ndarray:
+        return self.nodes["mua2"]
+
+    @property
+    def mus2_nodes(self) -> np.ndarray:
+        return self.nodes["mus2"]
+
+    @classmethod
+    def build(cls, spec: EmulatorSpec, second: int, mua2_range, mus2_range, *,
+              n_nodes: int = 4, **build_kw) -> TwoMediaEmulator:
+        """One :meth:`AbsorptionEmulator.build` of ``spec`` per node of ``n_nodes``
+        log-spaced values over ``mua2_range`` x ``mus2_range`` (cm^-1) of medium
+        ``second`` (``build_kw``: ``cache_dir``, ``method``, ``on_demand``, ...)."""
+        n_nodes = _check_n_nodes(n_nodes)
+        mua2 = np.geomspace(*_check_node_range("mua2_range", mua2_range, "cm^-1"), n_nodes)
+        mus2 = np.geomspace(*_check_node_range("mus2_range", mus2_range, "cm^-1"), n_nodes)
+        out_of_range = build_kw.get("out_of_range", "error")
+        tables = [AbsorptionEmulator.build(s, **build_kw)
+                  for s in node_specs(spec, second, mua2, mus2)]
+        return cls(tables, second, mua2, mus2, out_of_range=out_of_range)
+
+
+class BeamRadiusEmulator(NodeGridEmulator):
+    """NA (or nodal loads) as a function of ``(mua, mus, beam_radius)`` (cm^-1, cm): a
+    node per beam radius, for a beam whose radius is known only to some percent (the
+    filter then carries it as an uncertain input, ``estimate = ["mua", "mus",
+    "beam_radius"]``; ``docs/enkf.md``).
+
+    Each node is the spec with ``radius`` set to the node's value: the same photons, seed,
+    cache and on-demand fill as one table. ``log(NA + offset)`` is interpolated by a
+    Lagrange polynomial in ``log radius`` through all nodes (``validation/beam_radius.py``
+    measures it against direct Monte Carlo between the nodes).
+    """
+
+    n_media_estimated = 1
+
+    def __init__(self, tables, radius_nodes, out_of_range="error"):
+        super().__init__(tables=tables, nodes={"beam_radius": radius_nodes},
+                         out_of_range=out_of_range)
+
+    @property
+    def radius_nodes(self) -> np.ndarray:
+        """(n,) cm."""
+        return self.nodes["beam_radius"]
+
+    @classmethod
+    def build(cls, spec: EmulatorSpec, radius_range, *, n_nodes: int = 4,
+              **build_kw) -> BeamRadiusEmulator:
+        """One :meth:`AbsorptionEmulator.build` of ``spec`` per node of ``n_nodes``
+        log-spaced radii over ``radius_range`` (cm) (``build_kw``: ``cache_dir``,
+        ``method``, ``on_demand``, ...)."""
+        n_nodes = _check_n_nodes(n_nodes)
+        if spec.source_type not in ("tophat", "gaussian"):
+            raise ValueError(f"the beam radius is an input of a 'tophat' or 'gaussian' beam, "
+                             f"not of spec.source_type = {spec.source_type!r}")
+        radii = np.geomspace(*_check_node_range("radius_range", radius_range, "cm"), n_nodes)
+        out_of_range = build_kw.get("out_of_range", "error")
+        tables = [AbsorptionEmulator.build(dataclasses.replace(spec, radius=float(r),
+                                                               medium_map=spec.medium_map),
+                                           **build_kw) for r in radii]
+        return cls(tables, radii, out_of_range=out_of_range)

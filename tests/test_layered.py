@@ -303,8 +303,14 @@ def test_identify_both_layers_end_to_end(tmp_path):
     assert est.diverged is None and est.names == ("mua", "mus", "mua2", "mus2")
     assert all(t.have.any() for t in emu.tables)  # every node's table was read
     assert est.param_std[-1, 0] < est.param_std[0, 0]  # the data told something about mua
-    with pytest.raises(ValueError, match="takes one medium's"):
+    with pytest.raises(ValueError, match=r"but it \(AbsorptionEmulator\) takes \('mua', 'mus'\): "
+                       "use mcmatlab_py.emulator_media.TwoMediaEmulator"):
         setup.absorption = emu.tables[0]
+        TissueForwardModel(setup)
+    setup.estimate = ("mua", "mus")  # and the other way round: a one-medium estimate
+    setup.absorption = emu
+    with pytest.raises(ValueError, match=r"takes \('mua', 'mus', 'mua2', 'mus2'\): use a "
+                       "one-medium absorption model"):
         TissueForwardModel(setup)
 
 

@@ -68,7 +68,10 @@ RESTART_LINEAR = {"smoother_restart_knots": 2}
 DRIFT = {"random_walk_std": [0.03, 0.10], "random_walk_when_off": 0.0}
 
 
-def run_one(cfg, emulator, model: str, case: str, seed: int, variant: str) -> dict:
+def run_one(cfg, emulator, model: str, case: str, seed: int, variant: str,
+            extra_truth: tuple = ()) -> dict:
+    """One filter run on one truth; ``extra_truth``: the true values of parameters
+    estimated after mua and mus (e.g. the beam radius), constant."""
     truth = independent_truth(model, case)
     rng = np.random.default_rng([seed, 18])
     data = truth[1:, :1] + 0.1 * rng.standard_normal((len(TIMES) - 1, 1))
@@ -84,7 +87,7 @@ def run_one(cfg, emulator, model: str, case: str, seed: int, variant: str) -> di
     heat = (est.times[1:] <= 5.0 + 1e-9)
     err = np.abs(est.tracked_mean[1:] - truth[1:k])
     cov = err <= 2 * est.tracked_std[1:]
-    true_p = np.array([optics(case, float(t)) for t in est.times])
+    true_p = np.array([optics(case, float(t)) + tuple(extra_truth) for t in est.times])
     p_cov = np.abs(est.param_mean - true_p) <= 2 * est.param_std
     out = {
         "model": model, "case": case, "seed": seed, "variant": variant,

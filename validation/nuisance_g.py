@@ -15,7 +15,12 @@ mus is then the truth's mus times (1 - g) / (1 - 0.9), not the truth's mus.
 
 With ``--beam-radius`` the truths keep g = 0.9 and mus = 100 and their top-hat beam has
 the radius given (cm; the filter's model: 0.1 cm, the same power), to measure how well
-the radius must be known.
+the radius must be known. With ``--estimate-radius`` too, the filter carries the radius
+as an uncertain input (``filter.estimate = ["mua", "mus", "beam_radius"]``, its prior
+0.09-0.11 cm; ``validation/beam_radius.py``):
+
+    python validation/nuisance_g.py --beam-radius 0.09 0.095 0.1 0.105 0.11 \
+        --estimate-radius --out validation/reports/nuisance_beam_radius_estimated.md
 
 The filter: ``examples/own_data.toml`` (the config a user starts from), the default variant
 of ``validation/model_error_coverage.py``. Each g's truths are cached beside the standard
@@ -68,16 +73,23 @@ def truth_tissue(g: float, radius: float = MODEL_RADIUS):
         im.G_ANISO, im.optics, mec.optics, im.CACHE, im.BEAM_RADIUS = saved
 
 
-def study(tissues, models, seeds: int) -> list[dict]:
-    """``tissues``: (g, beam radius) pairs of the truths."""
-    cfg = load_identify(ROOT / "examples" / "own_data.toml")
+def study(tissues, models, seeds: int, estimate_radius: bool = False) -> list[dict]:
+    """``tissues``: (g, beam radius) pairs of the truths; ``estimate_radius``: the filter
+    carries the radius (``validation/beam_radius.radius_config``)."""
+    if estimate_radius:
+        from beam_radius import radius_config
+
+        cfg = radius_config()
+    else:
+        cfg = load_identify(ROOT / "examples" / "own_data.toml")
     emulator = cfg.emulator(progress=False)
     rows = []
     for model in models:
         for g, radius in tissues:
             t0 = time.perf_counter()
             with truth_tissue(g, radius) as mus:
-                runs = [mec.run_one(cfg, emulator, model, "constant", s, "default")
+                runs = [mec.run_one(cfg, emulator, model, "constant", s, "default",
+                                    extra_truth=(radius,) if estimate_radius else ())
                         for s in range(seeds)]
             fin = np.array([r["final"] for r in runs])
             sd = np.array([r["final_sd"] for r in runs])
@@ -93,6 +105,11 @@ def study(tissues, models, seeds: int) -> list[dict]:
                    "mus_ok": int((np.abs(fin[:, 1] - mus) <= 25.0).sum()),
                    "heat": heat.mean(0), "cool": cool.mean(0), "cool_worst": cool.min(0),
                    "seconds": time.perf_counter() - t0}
+            if estimate_radius:
+                row.update(radius_est=fin[:, 2].mean(), radius_sd=sd[:, 2].mean(),
+                           radius_covered=int(sum(r["param_cov_final"][2] for r in runs)),
+                           mua_covered=int(sum(r["param_cov_final"][0] for r in runs)),
+                           mus_covered=int(sum(r["param_cov_final"][1] for r in runs)))
             rows.append(row)
             print(f"{model} g {g:g}, beam radius {radius:g}: mua {row['mua']:.3f}, mus "
                   f"{row['mus_est']:.1f} (truth {mus:.1f}), mus (1 - 0.9) {row['reduced']:.2f}; "
@@ -125,6 +142,16 @@ def report(rows: list[dict], command: str) -> str:
             f"{r['mus_est']:.1f} ({r['mus_sd']:.1f}) | {r['reduced']:.2f} | {r['mua_ok']}/{n} | "
             f"{r['reduced_ok']}/{n} | {r['mus_ok']}/{n} | {triple(r['heat'])} | "
             f"{triple(r['cool'])} ({triple(r['cool_worst'])}) |")
+    est = [r for r in rows if "radius_est" in r]
+    if est:
+        lines += ["", "The filter with the radius estimated (prior 0.09-0.11 cm, uniform): its "
+                  "estimate at 15 s (mean over seeds, mean sd), and the seeds whose +-2 sd band "
+                  "holds each truth at 15 s.", "",
+                  "| truth | beam radius (cm) | filter radius (sd) | radius covered | mua covered "
+                  "| mus covered |", "|---|---|---|---|---|---|"]
+        lines += [f"| {r['model']} | {r['radius']:g} | {r['radius_est']:.4f} ({r['radius_sd']:.4f})"
+                  f" | {r['radius_covered']}/{r['seeds']} | {r['mua_covered']}/{r['seeds']} | "
+                  f"{r['mus_covered']}/{r['seeds']} |" for r in est]
     return "\n".join(lines) + "\n"
 
 
@@ -133,6 +160,8 @@ def main(argv=None) -> int:
     ap.add_argument("--g", type=float, nargs="+", default=[0.8, 0.85, 0.9, 0.95])
     ap.add_argument("--beam-radius", type=float, nargs="+", default=None,
                     help="truths with these beam radii (cm) and g = 0.9 instead of --g")
+    ap.add_argument("--estimate-radius", action="store_true",
+                    help="the filter carries the beam radius (estimate = mua, mus, beam_radius)")
     ap.add_argument("--models", nargs="+", default=["B", "A"], choices=list(im.MODELS))
     ap.add_argument("--seeds", type=int, default=10)
     ap.add_argument("--out", type=Path, default=ROOT / "validation" / "reports" / "nuisance_g.md")
@@ -147,7 +176,9 @@ def main(argv=None) -> int:
             ap.error(f"--beam-radius must lie in (0, 0.25) cm (got {r})")
     tissues = ([(MODEL_G, r) for r in a.beam_radius] if a.beam_radius
                else [(g, MODEL_RADIUS) for g in a.g])
-    rows = study(tissues, a.models, a.seeds)
+    if a.estimate_radius and not a.beam_radius:
+        ap.error("--estimate-radius needs --beam-radius")
+    rows = study(tissues, a.models, a.seeds, a.estimate_radius)
     command = "python validation/nuisance_g.py " + " ".join(argv or sys.argv[1:])
     a.out.write_text(report(rows, command.strip()))
     a.out.with_suffix(".json").write_text(json.dumps(

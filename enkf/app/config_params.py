@@ -15,7 +15,10 @@ from ..tissue.parameters import (
     COAGULATION_NAMES,
     ESTIMATES,
     PARAMETER_NAMES,
+    BEAM_NAMES,
+    PRIOR_FACTORS,
     SECOND_MEDIUM_NAMES,
+    default_prior,
     parameter_names,
 )
 from . import config as _cfg
@@ -28,7 +31,7 @@ __all__ = ["COAGULATION_KEYS", "bounds_settings", "coagulation_settings", "filte
 
 
 #: every name [filter.prior] and [filter.bounds] may hold
-_KNOWN = set(PARAMETER_NAMES) | set(COAGULATION_NAMES) | set(SECOND_MEDIUM_NAMES)
+_KNOWN = set(PARAMETER_NAMES) | set(COAGULATION_NAMES) | set(SECOND_MEDIUM_NAMES) | set(BEAM_NAMES)
 
 
 def filtered_names(setup_kw: dict) -> tuple:
@@ -90,6 +93,9 @@ def prior_of(name: str, setup_kw: dict, medium, where: str = "G.media[0]"
     v = nominal_of(name, setup_kw, medium)
     if name in SECOND_MEDIUM_NAMES:  # the second estimated medium's mua or mus
         return (lo_f * v, hi_f * v), f"filter.prior_range times {medium.where2}.{name[:3]}"
+    if name in PRIOR_FACTORS:  # an input known to some percent (the beam's radius)
+        return (default_prior(name, v, (lo_f, hi_f)),
+                f"{list(PRIOR_FACTORS[name])} times MC.light_source.radius")
     if name in COAGULATION_NAMES:
         return (lo_f * v, hi_f * v), (f"filter.prior_range times filter.coagulation."
                                       f"nominal_factor times {where}.{name[:3]}")

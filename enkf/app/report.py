@@ -10,7 +10,7 @@ from pathlib import Path
 import numpy as np
 
 from ..tissue.identify import persistence_summary
-from ..tissue.parameters import OPTICS_NAMES, PARAMETER_LABELS
+from ..tissue.parameters import ABSORPTION_INPUTS, PARAMETER_LABELS
 from .rundir import write_json
 
 __all__ = ["manifest", "plot_identification", "write_identify_outputs"]
@@ -224,7 +224,7 @@ def write_identify_outputs(out: Path, setup, est, times, data, *, absorption=Non
         point_data["T_mean"] = res.state_ensemble.mean(axis=0)
         point_data["T_std"] = res.state_ensemble.std(axis=0, ddof=1)
     if absorption is not None and getattr(absorption, "kind", "") == "load":
-        optics = [n for n in OPTICS_NAMES if n in est.names]
+        optics = [n for n in ABSORPTION_INPUTS if n in est.names]
         vals = absorption.unique(*(est.param_mean[k, [est.names.index(n)]] for n in optics))
         vals = vals[0][absorption.inverse]
         point_data["absorbed_power_per_W"] = vals

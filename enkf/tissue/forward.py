@@ -11,7 +11,7 @@ import scipy.sparse as sp
 import fem
 
 from .absorption import as_absorption
-from .parameters import OPTICS_NAMES, SECOND_MEDIUM_NAMES, column
+from .parameters import ABSORPTION_INPUTS, PARAMETER_UNITS, SECOND_MEDIUM_NAMES, column
 from .setup import TissueFilterSetup
 
 __all__ = ["TissueForwardModel", "observation_operator"]
@@ -40,15 +40,20 @@ class TissueForwardModel:
             self.L = (L @ expand).tocsr()  # (npoints, n_unique)
         self.steppers: dict[float, fem.HeatStepper] = {}
         self.col = {name: column(setup.estimate, name) for name in setup.estimate}
-        #: the second estimated medium's optics, passed to the absorption model after mua, mus
-        self._second = tuple(n for n in SECOND_MEDIUM_NAMES if n in self.col)
-        if self._second and getattr(absorption, "n_media_estimated", 1) != 2:
-            raise ValueError(f"estimate = {setup.estimate} names a second medium's optics, but "
-                             f"the absorption model ({type(absorption).__name__}) takes one "
-                             "medium's: use mcmatlab_py.emulator_media.TwoMediaEmulator")
-        if not self._second and getattr(absorption, "n_media_estimated", 1) != 1:
-            raise ValueError("the absorption model takes two media's optics: estimate must "
-                             "name mua2 and mus2")
+        #: the inputs passed to the absorption model after mua, mus: a second estimated
+        #: medium's optics, the beam's radius
+        self._extra = tuple(n for n in ABSORPTION_INPUTS[2:] if n in self.col)
+        takes = tuple(getattr(absorption, "extra_names", ()))
+        if self._extra != takes:
+            if any(n in SECOND_MEDIUM_NAMES for n in self._extra + takes):
+                use = ("mcmatlab_py.emulator_media.TwoMediaEmulator" if "mua2" in self._extra
+                       else "a one-medium absorption model")
+            else:
+                use = ("mcmatlab_py.emulator_media.BeamRadiusEmulator" if self._extra
+                       else "an absorption model of a known beam")
+            raise ValueError(f"estimate = {setup.estimate} passes {('mua', 'mus') + self._extra} "
+                             f"to the absorption model, but it ({type(absorption).__name__}) "
+                             f"takes {('mua', 'mus') + takes}: use {use}")
         self._clamp = {"calls": 0, "member_calls": 0, "lo": {}, "hi": {}}
         #: (optics (N, n), the absorption model's values, clamped?) of the last call
         self._last_optics = None
@@ -98,13 +103,15 @@ class TissueForwardModel:
             return None
         rng = self.table_ranges()
         advice = []
-        for name in OPTICS_NAMES:
+        for name in ABSORPTION_INPUTS:
             lo, hi = c["lo"].get(name), c["hi"].get(name)
             if lo is None and hi is None:
                 continue
             want = [v for v in (lo, hi) if v is not None]
-            advice.append(f"widen filter.emulator.{name}_range (now {list(rng.get(name, ()))}) to "
-                          f"cover {', '.join(f'{v:.4g}' for v in want)} cm^-1, or narrow the "
+            key = "radius_range" if name == "beam_radius" else f"{name}_range"
+            advice.append(f"widen filter.emulator.{key} (now {list(rng.get(name, ()))}) to "
+                          f"cover {', '.join(f'{v:.4g}' for v in want)} "
+                          f"{PARAMETER_UNITS[name]}, or narrow the "
                           f"prior and filter.bounds of {name}")
         return {"forecast_steps": int(c["calls"]), "member_steps": int(c["member_calls"]),
                 "below_table": {k: float(v) for k, v in c["lo"].items()},
@@ -130,7 +137,7 @@ class TissueForwardModel:
 
         Members whose optics lie outside the emulator's table are clamped to its edge;
         they are counted (:meth:`clamp_report`) instead of warned about one by one."""
-        optics = {n: theta[:, self.col[n]] for n in ("mua", "mus") + self._second}
+        optics = {n: theta[:, self.col[n]] for n in ("mua", "mus") + self._extra}
         key = np.column_stack(list(optics.values()))
         last = self._last_optics
         if last is not None and last[0].shape == key.shape and np.array_equal(last[0], key):

@@ -9,6 +9,8 @@ import numpy as np
 
 __all__ = [
     "COAGULATION_NAMES",
+    "ABSORPTION_INPUTS",
+    "BEAM_NAMES",
     "ESTIMATES",
     "PARAMETER_LABELS",
     "PARAMETER_NAMES",
@@ -18,6 +20,7 @@ __all__ = [
     "TRACKED_DEPTHS",
     "column",
     "default_bounds",
+    "default_prior",
     "parameter_names",
     "tracked_points",
 ]
@@ -30,19 +33,31 @@ COAGULATION_NAMES = ("mua_coag", "mus_coag")
 #: the optics of a second estimated medium of a layered block (e.g. the epidermis over the
 #: dermis whose optics are ``mua``, ``mus``; :class:`mcmatlab_py.emulator_media.TwoMediaEmulator`)
 SECOND_MEDIUM_NAMES = ("mua2", "mus2")
+#: the beam's radius as an uncertain input the ensemble carries beside the optics
+#: (:class:`mcmatlab_py.emulator_media.BeamRadiusEmulator`; issue #18)
+BEAM_NAMES = ("beam_radius",)
 #: the optical parameters an absorption model takes, in its call's order
 OPTICS_NAMES = PARAMETER_NAMES[:2] + SECOND_MEDIUM_NAMES
+#: every input an absorption model may take, in its call's order
+ABSORPTION_INPUTS = OPTICS_NAMES + BEAM_NAMES
 #: units of each parameter (MCmatlab's and the paper's)
 PARAMETER_UNITS = {"mua": "cm^-1", "mus": "cm^-1", "VHC": "J cm^-3 K^-1", "TC": "W cm^-1 K^-1",
-                   "mua_coag": "cm^-1", "mus_coag": "cm^-1", "mua2": "cm^-1", "mus2": "cm^-1"}
+                   "mua_coag": "cm^-1", "mus_coag": "cm^-1", "mua2": "cm^-1", "mus2": "cm^-1",
+                   "beam_radius": "cm"}
 #: the same units for matplotlib labels
 PARAMETER_LABELS = {"mua": "cm$^{-1}$", "mus": "cm$^{-1}$", "VHC": "J cm$^{-3}$ K$^{-1}$",
                     "TC": "W cm$^{-1}$ K$^{-1}$", "mua_coag": "cm$^{-1}$",
-                    "mus_coag": "cm$^{-1}$", "mua2": "cm$^{-1}$", "mus2": "cm$^{-1}$"}
+                    "mus_coag": "cm$^{-1}$", "mua2": "cm$^{-1}$", "mus2": "cm$^{-1}$",
+                    "beam_radius": "cm"}
 #: the parameter sets that can be estimated: the optics, or the optics and thermal properties;
-#: with a second estimated medium, its optics after the first's
+#: with a second estimated medium, its optics after the first's; or the optics with the
+#: beam's radius carried as an uncertain input
 ESTIMATES = (PARAMETER_NAMES[:2], PARAMETER_NAMES, PARAMETER_NAMES[:2] + SECOND_MEDIUM_NAMES,
-             PARAMETER_NAMES[:2] + SECOND_MEDIUM_NAMES + PARAMETER_NAMES[2:])
+             PARAMETER_NAMES[:2] + SECOND_MEDIUM_NAMES + PARAMETER_NAMES[2:],
+             PARAMETER_NAMES[:2] + BEAM_NAMES)
+#: the default prior of an input known to some percent, as factors of its nominal value
+#: (in place of ``prior_range``): a beam radius measured to +-10%
+PRIOR_FACTORS = {"beam_radius": (0.9, 1.1)}
 #: cm, depths below the sensor whose temperature the paper reports (and the tool by default)
 TRACKED_DEPTHS = (0.0, 0.1, 0.2)
 
@@ -77,3 +92,10 @@ def default_bounds(nominal, prior_lo, prior_hi) -> np.ndarray:
     nominal, prior_lo, prior_hi = (np.asarray(a, float) for a in (nominal, prior_lo, prior_hi))
     return np.column_stack([np.minimum(nominal / 20, prior_lo / 10),
                             np.maximum(nominal * 20, prior_hi * 10)])
+
+
+def default_prior(name: str, nominal: float, prior_range) -> tuple[float, float]:
+    """(lo, hi) of ``name``'s uniform prior when none is given: :data:`PRIOR_FACTORS` times
+    ``nominal`` for the inputs known to some percent, else ``prior_range`` times it."""
+    lo_f, hi_f = PRIOR_FACTORS.get(name, prior_range)
+    return lo_f * nominal, hi_f * nominal

@@ -17,6 +17,7 @@ from .parameters import (
     PARAMETER_NAMES,
     PARAMETER_UNITS,
     default_bounds,
+    default_prior,
     parameter_names,
     tracked_points,
 )
@@ -207,9 +208,11 @@ class TissueFilterSetup:
         if self.parameter_model not in ("random_walk", "trend", "coagulation"):
             raise ValueError(f"parameter_model must be 'random_walk', 'trend' or 'coagulation', "
                              f"got {self.parameter_model!r}")
-        if "mua2" in est and self.parameter_model != "random_walk":
-            raise ValueError(f"parameter_model = {self.parameter_model!r} is not built for a "
-                             "second estimated medium (mua2, mus2): use 'random_walk'")
+        for extra, what in (("mua2", "a second estimated medium (mua2, mus2)"),
+                            ("beam_radius", "the beam's radius")):
+            if extra in est and self.parameter_model != "random_walk":
+                raise ValueError(f"parameter_model = {self.parameter_model!r} is not built for "
+                                 f"{what}: use 'random_walk'")
         if self.parameter_model == "coagulation":
             from .coagulation import Coagulation
 
@@ -371,8 +374,7 @@ class TissueFilterSetup:
 
     def prior_bounds(self) -> tuple[np.ndarray, np.ndarray]:
         """(lo, hi) of the uniform prior of each filtered parameter (:attr:`parameter_names`)."""
-        lo_f, hi_f = self.prior_range
-        pairs = [self.prior.get(n, (lo_f * v, hi_f * v))
+        pairs = [self.prior.get(n, default_prior(n, v, self.prior_range))
                  for n, v in zip(self.parameter_names, self.nominal_values(), strict=True)]
         return np.array([p[0] for p in pairs]), np.array([p[1] for p in pairs])
 
