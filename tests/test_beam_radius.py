@@ -4,6 +4,7 @@ radius, the config, the forward model's checks, and a twin that recovers the rad
 from __future__ import annotations
 
 import copy
+import json
 import tomllib
 import warnings
 from pathlib import Path
@@ -159,3 +160,22 @@ def test_twin_recovers_a_wider_beam(tmp_path, tiny):
     mean, sd = est.param_mean[-1], est.param_std[-1]
     assert np.all(np.abs(mean - truth[0]) <= 2 * sd), (mean, sd)
     assert sd[2] < 0.5 * 0.02 / np.sqrt(12), sd  # the frames narrowed the radius's prior
+
+
+def test_the_command_line_carries_the_beam_radius(tmp_path):
+    """``tissue-enkf identify`` with ``estimate = ["mua", "mus", "beam_radius"]``: the
+    radius in summary.json, estimates.csv and the figure of the estimates."""
+    from enkf.app.cli import main
+
+    cfg = tmp_path / "beam.toml"
+    cfg.write_text((EX / "tiny.toml").read_text().replace(
+        "[filter]\n", '[filter]\nestimate = ["mua", "mus", "beam_radius"]\n', 1))
+    out = tmp_path / "id"
+    assert main(["identify", str(cfg), "--data", str(EX / "tiny_data.csv"), "--out", str(out),
+                 "--quiet", "--cache-dir", str(tmp_path / "cache")]) == 0
+    s = json.loads((out / "summary.json").read_text())
+    r = s["parameters"]["beam_radius"]
+    assert 0.09 / 1.1 <= r["estimate_final"] <= 0.11 * 1.1 and 0 < r["std_final"] < 0.006
+    header = (out / "estimates.csv").read_text().splitlines()[0].split(",")
+    assert "beam_radius_mean" in header and "beam_radius_std" in header
+    assert (out / "figures" / "estimates.png").stat().st_size > 0

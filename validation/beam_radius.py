@@ -44,10 +44,15 @@ RADII = (0.085, 0.09, 0.095, 0.1, 0.105, 0.11, 0.115)
 OPTICS = ((1.0, 100.0), (0.7, 60.0), (1.6, 180.0))
 
 
-def radius_config(path: Path = ROOT / "examples" / "own_data.toml"):
-    """``examples/own_data.toml`` with the beam radius estimated."""
+def radius_config(path: Path = ROOT / "examples" / "own_data.toml",
+                  estimate=("mua", "mus", "beam_radius"), sensors: dict | None = None):
+    """``examples/own_data.toml`` with the beam radius estimated (``estimate``), and
+    ``sensors`` in place of its ``[sensors]`` table if given."""
     cfg = read_toml(path)
-    cfg["filter"]["estimate"] = ["mua", "mus", "beam_radius"]
+    cfg["filter"]["estimate"] = list(estimate)
+    if sensors is not None:
+        cfg["sensors"] = {**sensors, "tracked": cfg["sensors"]["tracked"]}
+        cfg["data"].pop("columns", None)  # the frames are not the sensor's column
     cfg.setdefault("data", {})["file"] = str(path.parent / cfg["data"]["file"])
     return identify_config_from_dict(cfg)
 

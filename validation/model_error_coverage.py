@@ -69,13 +69,22 @@ DRIFT = {"random_walk_std": [0.03, 0.10], "random_walk_when_off": 0.0}
 
 
 def run_one(cfg, emulator, model: str, case: str, seed: int, variant: str,
-            extra_truth: tuple = ()) -> dict:
+            extra_truth: tuple = (), camera: bool = False) -> dict:
     """One filter run on one truth; ``extra_truth``: the true values of parameters
-    estimated after mua and mus (e.g. the beam radius), constant."""
+    estimated after mua and mus (e.g. the beam radius), constant; ``camera``: the data
+    are the frames of ``cfg``'s camera (no point sensor), each pixel the mean of its
+    probes of the truth's top face, with the same noise."""
     truth = independent_truth(model, case)
     rng = np.random.default_rng([seed, 18])
-    data = truth[1:, :1] + 0.1 * rng.standard_normal((len(TIMES) - 1, 1))
     setup = cfg.setup(emulator, seed=seed)
+    if camera:
+        from independent_models import independent_surface
+
+        image = setup.image
+        clean = image.average(independent_surface(model, case, image.sample_points()[:, :2]))
+        data = clean[1:] + 0.1 * rng.standard_normal(clean[1:].shape)
+    else:
+        data = truth[1:, :1] + 0.1 * rng.standard_normal((len(TIMES) - 1, 1))
     for k, v in {**(DRIFT if case != "constant" else {}), **VARIANTS[variant],
                  **(RESTART_CASE[case] if variant.startswith("restarts") else {}),
                  **(RESTART_LINEAR if variant == "restarts-linear" and case != "constant"

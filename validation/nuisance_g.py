@@ -44,8 +44,6 @@ sys.path.insert(0, str(ROOT / "validation"))
 import independent_models as im  # noqa: E402
 import model_error_coverage as mec  # noqa: E402
 
-from enkf.app.config import load_identify  # noqa: E402
-
 MODEL_G = 0.9  #: the filter's g (Table 1)
 MODEL_RADIUS = 0.1  #: cm, the filter's beam radius
 MUS_REDUCED = 10.0  #: cm^-1, Table 1's mus (1 - g)
@@ -73,15 +71,20 @@ def truth_tissue(g: float, radius: float = MODEL_RADIUS):
         im.G_ANISO, im.optics, mec.optics, im.CACHE, im.BEAM_RADIUS = saved
 
 
-def study(tissues, models, seeds: int, estimate_radius: bool = False) -> list[dict]:
-    """``tissues``: (g, beam radius) pairs of the truths; ``estimate_radius``: the filter
-    carries the radius (``validation/beam_radius.radius_config``)."""
-    if estimate_radius:
-        from beam_radius import radius_config
+#: ``--camera``: the commented camera of ``examples/own_data.toml`` in place of the sensor
+CAMERA = {"x_range": [-0.2, 0.2], "y_range": [-0.2, 0.2], "shape": [16, 16], "noise_var": 0.01}
 
-        cfg = radius_config()
-    else:
-        cfg = load_identify(ROOT / "examples" / "own_data.toml")
+
+def study(tissues, models, seeds: int, estimate_radius: bool = False,
+          camera: bool = False) -> list[dict]:
+    """``tissues``: (g, beam radius) pairs of the truths; ``estimate_radius``: the filter
+    carries the radius (``validation/beam_radius.radius_config``); ``camera``: it reads a
+    16 x 16 camera's frames instead of the point sensor."""
+    from beam_radius import radius_config
+
+    sensors = {"positions": [], "camera": CAMERA} if camera else None
+    cfg = radius_config(estimate=("mua", "mus", "beam_radius") if estimate_radius
+                        else ("mua", "mus"), sensors=sensors)
     emulator = cfg.emulator(progress=False)
     rows = []
     for model in models:
@@ -89,7 +92,8 @@ def study(tissues, models, seeds: int, estimate_radius: bool = False) -> list[di
             t0 = time.perf_counter()
             with truth_tissue(g, radius) as mus:
                 runs = [mec.run_one(cfg, emulator, model, "constant", s, "default",
-                                    extra_truth=(radius,) if estimate_radius else ())
+                                    extra_truth=(radius,) if estimate_radius else (),
+                                    camera=camera)
                         for s in range(seeds)]
             fin = np.array([r["final"] for r in runs])
             sd = np.array([r["final_sd"] for r in runs])
@@ -126,7 +130,10 @@ def report(rows: list[dict], command: str) -> str:
              f"Command: `{command}`", "",
              "Truths from the independent models with the tissue's g and the beam's radius below, "
              "mus = 10 / (1 - g) (reduced scattering 10 cm^-1, mua 1 cm^-1, constant); the "
-             "filter's model has g = 0.9 and a radius of 0.1 cm (`examples/own_data.toml`). Means "
+             "filter's model has g = 0.9 and a radius of 0.1 cm (`examples/own_data.toml`"
+             + (", with `filter.estimate = [\"mua\", \"mus\", \"beam_radius\"]`: the radius "
+                "carried by the ensemble, its prior uniform over 0.09-0.11 cm"
+                if any("radius_est" in r for r in rows) else "") + "). Means "
              "over seeds; coverage: fraction of steps whose +-2 sd band holds the temperature at "
              "z = 0, 0.1, 0.2 cm (mean, and the worst seed while cooling).", "",
              "| truth | g | beam radius (cm) | truth mus | filter mua (sd) | filter mus (sd) | "
@@ -162,6 +169,8 @@ def main(argv=None) -> int:
                     help="truths with these beam radii (cm) and g = 0.9 instead of --g")
     ap.add_argument("--estimate-radius", action="store_true",
                     help="the filter carries the beam radius (estimate = mua, mus, beam_radius)")
+    ap.add_argument("--camera", action="store_true",
+                    help="the filter reads a 16 x 16 camera over +-0.2 cm instead of the sensor")
     ap.add_argument("--models", nargs="+", default=["B", "A"], choices=list(im.MODELS))
     ap.add_argument("--seeds", type=int, default=10)
     ap.add_argument("--out", type=Path, default=ROOT / "validation" / "reports" / "nuisance_g.md")
@@ -178,7 +187,7 @@ def main(argv=None) -> int:
                else [(g, MODEL_RADIUS) for g in a.g])
     if a.estimate_radius and not a.beam_radius:
         ap.error("--estimate-radius needs --beam-radius")
-    rows = study(tissues, a.models, a.seeds, a.estimate_radius)
+    rows = study(tissues, a.models, a.seeds, a.estimate_radius, a.camera)
     command = "python validation/nuisance_g.py " + " ".join(argv or sys.argv[1:])
     a.out.write_text(report(rows, command.strip()))
     a.out.with_suffix(".json").write_text(json.dumps(

@@ -12,10 +12,10 @@ from fem.checks import shorten
 from mcmatlab_py.config import ConfigError, check_keys
 
 from ..tissue.parameters import (
+    BEAM_NAMES,
     COAGULATION_NAMES,
     ESTIMATES,
     PARAMETER_NAMES,
-    BEAM_NAMES,
     PRIOR_FACTORS,
     SECOND_MEDIUM_NAMES,
     default_prior,

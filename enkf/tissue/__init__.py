@@ -41,6 +41,7 @@ from .image import ThermalImage
 from .model_error import StructuredModelError
 from .online import OnlineEstimate, OnlineIdentifier
 from .parameters import (
+    BEAM_NAMES,
     COAGULATION_NAMES,
     ESTIMATES,
     PARAMETER_LABELS,
@@ -59,6 +60,7 @@ from .smooth import SmootherEstimates, heated_time, smooth_constant, smooth_drif
 
 __all__ = [
     "Absorption",
+    "BEAM_NAMES",
     "SmootherEstimates",
     "COAGULATION_NAMES",
     "Coagulation",

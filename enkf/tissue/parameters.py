@@ -16,6 +16,7 @@ __all__ = [
     "PARAMETER_NAMES",
     "OPTICS_NAMES",
     "PARAMETER_UNITS",
+    "PRIOR_FACTORS",
     "SECOND_MEDIUM_NAMES",
     "TRACKED_DEPTHS",
     "column",
