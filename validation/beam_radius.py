@@ -92,6 +92,7 @@ def study(node_counts, cache_dir=None) -> tuple[list[str], dict]:
                        seconds=time.perf_counter() - t0, photons=spec.n_photons, range=rng)
 
 
+
 def report(lines, info, node_counts, command: str) -> str:
     nodes = "; ".join(f"{n} nodes: {', '.join(f'{v:.4f}' for v in info['nodes'][n])} cm"
                       for n in node_counts)
@@ -108,9 +109,10 @@ def report(lines, info, node_counts, command: str) -> str:
            "Worst inside the nodes' range: " + ", ".join(
                f"{n} nodes {100 * info['worst'][n]:.3f}%" for n in node_counts)
            + f". The Monte Carlo noise of one table (radius 0.1 cm, mua 1, mus 100, two other "
-           f"seeds): {100 * info['noise']:.3f}%. Radii beyond the nodes (0.085 cm with 3 nodes "
-           "starts at 0.0818) are clamped to the last node by the filter and counted "
-           "(`summary.json`'s `emulator_clamped`).", ""]
+           f"seeds): {100 * info['noise']:.3f}%. Every radius above lies inside the nodes' range; "
+           "the filter clamps a member beyond it to the last node and counts it "
+           "(`summary.json`'s `emulator_clamped`, with the advice to widen "
+           "`filter.emulator.radius_range`).", ""]
     return "\n".join(out)
 
 
@@ -125,7 +127,7 @@ def main(argv=None) -> int:
     lines, info = study(a.nodes, a.cache_dir)
     command = "python validation/beam_radius.py " + " ".join(argv or sys.argv[1:])
     a.out.write_text(report(lines, info, a.nodes, command.strip()))
-    print(f"report written to {a.out} ({info['seconds']:.0f} s)")
+    print(f"report written to {a.out} ({info['seconds']:.0f} s with the tables cached or built)")
     return 0
 
 
