@@ -23,7 +23,15 @@ numpy and scipy, importing nothing from ``mcmatlab_py``, ``fem`` or ``enkf``:
     cross-section area (radius 0.282 cm, 40 x 40 cells, Crank-Nicolson, 0.1 s). The
     cylinder for the box is itself a model error, as a real tissue's shape would be.
 
-Both: top-hat beam of radius 0.1 cm, collimated along +z, matched interfaces (no
+``"C"``
+    **Model B's Monte Carlo** (the same absorbed-power maps) with a **spectral heat
+    solution on the box**: the insulated box's cosine eigenmodes on a 64 x 64 x 32 cell
+    grid (the source cell-averaged from 4 x 4 x 2 points per cell, projected by a DCT),
+    each mode integrated exactly in time over steps of 0.025 s with the source held at
+    its mid-step value; temperatures evaluated from the series at the probe points. B and
+    C differ only in the heat model, so C tells what B's cylinder costs.
+
+All three: top-hat beam of radius 0.1 cm, collimated along +z, matched interfaces (no
 reflection), every face of the 0.5 x 0.5 x 0.25 cm block escapes light, Table 1's
 tissue (g 0.9, VHC 3.76, TC 0.0037), 0.5 W for 5 s then 10 s off. The drifting case
 (the paper's ramps, mua 1 -> 4, mus 100 -> 500 over the pulse) runs the Monte Carlo at
@@ -51,10 +59,12 @@ DEPTHS = (0.0, 0.1, 0.2)  # cm, the tracked points below the beam centre
 TIMES = np.round(0.1 * np.arange(151), 10)  # s, the 10 Hz sensor
 KNOTS = np.round(0.5 * np.arange(11), 10)  # s, Monte Carlo instants of the drifting case
 CACHE = Path.home() / ".cache" / "tissue-enkf" / "independent"
-MODELS = ("A", "B")
+MODELS = ("A", "B")  #: the two truths of the issue's studies (#18)
+#: every model here: C (B's Monte Carlo, a spectral solution on the box) added in session 25
+ALL_MODELS = ("A", "B", "C")
 DT_A = 0.00625  #: s, model A's backward-Euler step (16 per reading; 0.05 before session 21)
 #: the cache keys' versions: A's truths of steps of 0.05 s were "v1"
-VERSIONS = {"A": "v2", "B": "v1"}
+VERSIONS = {"A": "v2", "B": "v1", "C": "v1"}
 
 
 def optics(case: str, t: float) -> tuple[float, float]:
@@ -163,6 +173,7 @@ def annulus_area_in_box(r_edges: np.ndarray, n: int = 2000) -> np.ndarray:
 def absorbed_maps(model: str, case: str, n_photons: int) -> tuple[np.ndarray, list, tuple]:
     """The Monte Carlo maps of ``model`` for ``case``: (times of the maps, [density (nr, nz)],
     (r edges, z edges)); cached."""
+    model = "B" if model == "C" else model  # C's light is B's: the same maps
     estimator, dr, dz, seed = {"A": ("analog", 0.0125, 0.00625, 11),
                                "B": ("attenuation", 0.01, 0.005, 22)}[model]
     knots = np.array([0.0]) if case == "constant" else KNOTS
@@ -316,6 +327,86 @@ class AxisymmetricFV:
         return self.solve(self.rhs @ T + dt * q / VHC)
 
 
+class SpectralBox:
+    """The insulated box's heat equation in its cosine eigenmodes (model C).
+
+    A cell-centred grid of ``shape`` cells; the state is the modes' coefficients (the
+    orthonormal DCT-II of the cell values). Mode ``k`` decays at ``kappa (pi k / L)^2``
+    (kappa = TC / VHC, the continuous box's eigenvalue), and a step of ``dt`` with a
+    constant source is exact for it. The source is the Monte Carlo's density averaged
+    over ``sub`` points per cell and axis, rescaled to the absorbed total; temperatures
+    at points come from the cosine series itself (no interpolation between cells)."""
+
+    def __init__(self, shape=(64, 64, 32), dt: float = 0.025, sub=(4, 4, 2)):
+        from scipy.fft import dctn
+
+        self._dctn = dctn
+        self.shape, self.dt = shape, dt
+        lengths = (L_XY, L_XY, L_Z)
+        self.h = tuple(L / n for L, n in zip(lengths, shape, strict=True))
+        kappa = TC / VHC
+        lam = sum(np.meshgrid(*[(np.pi * np.arange(n) / L) ** 2
+                                for n, L in zip(shape, lengths, strict=True)], indexing="ij"))
+        self.decay = np.exp(-kappa * lam * dt)
+        with np.errstate(divide="ignore", invalid="ignore"):  # the mean mode: no decay
+            self.gain = np.where(lam > 0, (1 - self.decay) / (kappa * lam), dt) / VHC
+        # the sub-cell points of every cell, (x, y) from the box's centre and z down
+        offs = [(np.arange(k) + 0.5) / k for k in sub]
+        cx, cy, cz = [(np.arange(n)[:, None] + o[None, :]).ravel() * h - (L_XY / 2 if i < 2 else 0)
+                      for i, (n, o, h) in enumerate(zip(shape, offs, self.h, strict=True))]
+        X, Y, Z = np.meshgrid(cx, cy, cz, indexing="ij")
+        self._sub = sub
+        self.r, self.z = np.hypot(X, Y).ravel(), Z.ravel()  # the source's sample points
+        self.vol = float(np.prod(self.h))
+        self._lengths = lengths
+
+    def _basis(self, axis: int, x: np.ndarray) -> np.ndarray:
+        """(m, n) values of the orthonormal DCT-II basis of ``axis`` at ``x`` (m,) cm from
+        the box's low face."""
+        n, L = self.shape[axis], self._lengths[axis]
+        f = np.full(n, np.sqrt(2.0 / n))
+        f[0] = np.sqrt(1.0 / n)
+        return f[None, :] * np.cos(np.pi * np.outer(x, np.arange(n)) / L)
+
+    def source(self, density, edges, total):
+        """The modes' coefficients of the power density per W (rescaled to ``total``)."""
+        s = _lookup(density, edges, self.r, self.z)
+        nx, ny, nz = self.shape
+        sx, sy, sz = self._sub
+        cells = s.reshape(nx, sx, ny, sy, nz, sz).mean(axis=(1, 3, 5))
+        cells *= total / max(cells.sum() * self.vol, 1e-300)
+        return self._dctn(cells, type=2, norm="ortho")
+
+    @property
+    def size(self) -> int:
+        return int(np.prod(self.shape))
+
+    def values(self, T, xyz: np.ndarray) -> np.ndarray:
+        """T at points ``xyz`` (m, 3) cm (x, y from the box's centre, z down)."""
+        Bx = self._basis(0, xyz[:, 0] + L_XY / 2)
+        By = self._basis(1, xyz[:, 1] + L_XY / 2)
+        Bz = self._basis(2, xyz[:, 2])
+        C = T.reshape(self.shape)
+        return np.einsum("pi,pj,pk,ijk->p", Bx, By, Bz, C, optimize=True)
+
+    def probes(self, T):
+        return self.values(T, np.array([[0.0, 0.0, d] for d in DEPTHS]))
+
+    def surface(self, T, xy):
+        """T on the top face at the points ``xy`` (m, 2) cm."""
+        top = T.reshape(self.shape) @ self._basis(2, np.zeros(1))[0]  # the series at z = 0
+        Bx = self._basis(0, xy[:, 0] + L_XY / 2)
+        By = self._basis(1, xy[:, 1] + L_XY / 2)
+        return np.einsum("pi,ij,pj->p", Bx, top, By, optimize=True)
+
+    def step(self, T, q, dt):
+        assert abs(dt - self.dt) < 1e-12
+        T = T.reshape(self.shape) * self.decay
+        if not np.isscalar(q):
+            T = T + self.gain * q
+        return T.ravel()
+
+
 def independent_truth(model: str, case: str, n_photons: int = 200_000) -> np.ndarray:
     """Temperatures (151, 3) deg C at z = 0, 0.1, 0.2 cm below the beam centre, every 0.1 s
     from 0 to 15 s (cached)."""
@@ -351,11 +442,11 @@ def _run(model: str, case: str, n_photons: int, xy: np.ndarray | None = None):
     """The truth of ``model`` for ``case``: temperatures (151, 3) at the tracked depths
     (written to the cache), and (151, m) on the top face at ``xy`` (None without points)."""
     knots, maps, edges = absorbed_maps(model, case, n_photons)
-    solver = CartesianFD() if model == "A" else AxisymmetricFV()
+    solver = {"A": CartesianFD, "B": AxisymmetricFV, "C": SpectralBox}[model]()
     # the heat each map puts into the block: its integral over the annuli inside the box
     totals = [float((m * np.outer(annulus_area_in_box(edges[0]), np.diff(edges[1]))).sum())
               for m in maps]
-    T = np.zeros(solver.r.size)
+    T = np.zeros(getattr(solver, "size", solver.r.size))
     out = [solver.probes(T)]
     surf = None if xy is None else [solver.surface(T, xy)]
     dt = solver.dt
@@ -386,7 +477,7 @@ if __name__ == "__main__":
     import time
 
     for case in ("constant", "time-varying"):
-        for model in MODELS:
+        for model in ALL_MODELS:
             t0 = time.perf_counter()
             T = independent_truth(model, case)
             print(case, model, f"{time.perf_counter() - t0:.1f} s", "T(5 s) =",

@@ -661,7 +661,7 @@ def _beam_nodes(emu: dict, setup_kw: dict, m, model) -> dict:
     """``filter.emulator.radius_range`` (default: the radius's prior widened by
     :data:`BEAM_NODES_ROOM` each way) and ``radius_nodes`` (default 4: against tables built
     directly at radii between the nodes the filter's loads were 0.93% off at worst, 2.6%
-    with 3 nodes, 0.70% with 5, with a table's own Monte Carlo noise 0.53%;
+    with 3 nodes, 0.66% with 5, with a table's own Monte Carlo noise 0.53%;
     ``validation/reports/beam_radius.md``): the node grid of the beam's radius."""
     from .config_params import prior_of
 
