@@ -114,8 +114,8 @@ def main(argv=None):
     ap.add_argument("--scenarios", nargs="+", default=["constant", "time-varying"])
     ap.add_argument("--model-error", choices=["white", "structured"], default="white",
                     help="the filters' model error (white: the paper's C; structured: issue #18)")
-    ap.add_argument("--truth", choices=["fine", "A", "B"], default="fine",
-                    help="fine: the paper's fine grid; A, B: independent_models.py")
+    ap.add_argument("--truth", choices=["fine", "A", "B", "C"], default="fine",
+                    help="fine: the paper's fine grid; A, B, C: independent_models.py")
     ap.add_argument("--parameter-model", choices=["random_walk", "trend"], default="random_walk",
                     help="the image filter's parameter model (trend: levels walk by "
                          f"{TREND_WALK}, rates as TissueFilterSetup's defaults); the point "
@@ -158,7 +158,9 @@ def main(argv=None):
                + ("" if args.out == DEFAULT_OUT else f" --out {_shown(args.out)}"))
     truth_name = {"fine": "the paper's fine grid (our Monte Carlo and FEM on 100 x 100 x 50)",
                   "A": "independent model A (analog Monte Carlo, finite-difference box)",
-                  "B": "independent model B (attenuation Monte Carlo, finite-volume cylinder)"}
+                  "B": "independent model B (attenuation Monte Carlo, finite-volume cylinder)",
+                  "C": "independent model C (B's attenuation Monte Carlo, spectral solution on "
+                       "the box)"}
     lines = ["# The whole thermal image against one surface point", "",
              f"Command: `{command}`", "",
              f"Truth: {truth_name[args.truth]}. Camera: {camera.shape[0]} x {camera.shape[1]} "

@@ -35,7 +35,7 @@ from pathlib import Path
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).parent))
-from independent_models import MODELS, TIMES, independent_truth, optics  # noqa: E402
+from independent_models import ALL_MODELS, MODELS, TIMES, independent_truth, optics  # noqa: E402
 
 from enkf.app.config import load_identify  # noqa: E402
 from enkf.tissue import identify  # noqa: E402
@@ -179,7 +179,7 @@ def main(argv=None):
     ap.add_argument("--seeds", type=int, default=20)
     ap.add_argument("--variant", nargs="+", default=["default", "white"], choices=list(VARIANTS))
     ap.add_argument("--case", nargs="+", default=list(CASES), choices=list(CASES))
-    ap.add_argument("--model", nargs="+", default=list(MODELS), choices=list(MODELS))
+    ap.add_argument("--model", nargs="+", default=list(MODELS), choices=list(ALL_MODELS))
     ap.add_argument("--out", default=str(ROOT / "validation" / "reports" / "model_error_coverage.md"))
     args = ap.parse_args(argv)
     cfg = load_identify(ROOT / "examples" / "own_data.toml")
