@@ -493,9 +493,9 @@ class AbsorptionEmulator:
 
 
 def check_range(name: str, values, lo: float, hi: float, out_of_range: str,
-                what: str) -> np.ndarray:
-    """``values`` (cm^-1) as a float array inside ``[lo, hi]`` (``what``: the table or grid,
-    for the messages): non-finite values are refused; values outside are refused
+                what: str, unit: str = "cm^-1") -> np.ndarray:
+    """``values`` (``unit``) as a float array inside ``[lo, hi]`` (``what``: the table or
+    grid, for the messages): non-finite values are refused; values outside are refused
     (``out_of_range="error"``) or clamped with a ``RuntimeWarning`` that says "clamped"
     (the filter counts those)."""
     values = np.atleast_1d(np.asarray(values, dtype=np.float64))
@@ -504,7 +504,7 @@ def check_range(name: str, values, lo: float, hi: float, out_of_range: str,
     bad = (values < lo * (1 - 1e-12)) | (values > hi * (1 + 1e-12))
     if bad.any():
         if out_of_range == "error":
-            raise ValueError(f"{name} = {float(values[bad][0])!r} cm^-1 is outside {what} "
+            raise ValueError(f"{name} = {float(values[bad][0])!r} {unit} is outside {what} "
                              f"[{lo}, {hi}]")
         warnings.warn(f"{name} = {float(values[bad][0])!r} clamped to {what} [{lo}, {hi}]",
                       RuntimeWarning, stacklevel=4)

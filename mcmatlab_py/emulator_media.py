@@ -91,6 +91,7 @@ class NodeGridEmulator:
     nodes: dict  #: {name: (n,) node values} of each extra input, in the call's order
     out_of_range: str = "error"
     exact = False
+    units = {"mua2": "cm^-1", "mus2": "cm^-1", "beam_radius": "cm"}  #: of the extra inputs
     _lnodes: list = field(init=False, repr=False)
 
     def __post_init__(self):
@@ -148,7 +149,7 @@ class NodeGridEmulator:
         W = None
         for (name, nodes), lnodes, x in zip(self.nodes.items(), self._lnodes, extra, strict=True):
             x = check_range(name, x, float(nodes[0]), float(nodes[-1]), self.out_of_range,
-                            "the emulator's nodes")
+                            "the emulator's nodes", self.units.get(name, ""))
             w = lagrange_weights(np.log(x), lnodes)
             W = w if W is None else (W[:, :, None] * w[:, None, :]).reshape(w.shape[0], -1)
         return W

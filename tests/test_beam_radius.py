@@ -53,8 +53,7 @@ def test_beam_radius_emulator_is_each_node_table_at_its_node(tmp_path):
     na = emu(np.ones(3), np.full(3, 100.0), [0.085, 0.1, 0.12]).reshape(3, 6, 6, 6)
     centre, rim = na[:, 2:4, 2:4, 0].sum(axis=(1, 2)), na[:, 0, :, 0].sum(axis=1)
     assert np.all(np.diff(centre) < 0) and np.all(np.diff(rim) > 0)
-    with pytest.raises(ValueError, match=r"beam_radius = 0.13 cm\^-1 is outside|beam_radius = "
-                       r"0.13 .*outside the emulator's nodes"):
+    with pytest.raises(ValueError, match=r"beam_radius = 0.13 cm is outside the emulator's nodes"):
         emu.unique(mua[:1], mus[:1], [0.13])
     emu.out_of_range = "clamp"
     with warnings.catch_warnings(record=True) as caught:

@@ -58,12 +58,15 @@ VARIANTS = {
     # the restarts and relaxation to prior spread together (own_data.toml's advice for
     # drifting optics)
     "restarts-rtps": {**RESTARTS, "rtps": 0.1},
+    # the same with the drift through 2 or 4 knots (session 25: which form on A and C)
+    "restarts-rtps-k2": {**RESTARTS, "rtps": 0.1},
+    "restarts-rtps-k4": {**RESTARTS, "rtps": 0.1},
 }
+#: the knots of the drifting restarts of the variants that set them
+RESTART_KNOTS = {"restarts-linear": 2, "restarts-rtps-k2": 2, "restarts-rtps-k4": 4}
 #: what the restarts need in each case
 RESTART_CASE = {"constant": {"random_walk_std": 0.0},
                 "time-varying": {"smoother_restart_knots": 3, "smoother_restart_delay": 2.5}}
-#: ``restarts-linear``: the drift a straight line in heated time (the knots at its ends)
-RESTART_LINEAR = {"smoother_restart_knots": 2}
 #: the walk for drifting optics that examples/own_data.toml documents
 DRIFT = {"random_walk_std": [0.03, 0.10], "random_walk_when_off": 0.0}
 
@@ -87,8 +90,8 @@ def run_one(cfg, emulator, model: str, case: str, seed: int, variant: str,
         data = truth[1:, :1] + 0.1 * rng.standard_normal((len(TIMES) - 1, 1))
     for k, v in {**(DRIFT if case != "constant" else {}), **VARIANTS[variant],
                  **(RESTART_CASE[case] if variant.startswith("restarts") else {}),
-                 **(RESTART_LINEAR if variant == "restarts-linear" and case != "constant"
-                    else {})}.items():
+                 **({"smoother_restart_knots": RESTART_KNOTS[variant]}
+                    if variant in RESTART_KNOTS and case != "constant" else {})}.items():
         setattr(setup, k, v)
     setup.__post_init__()
     est = identify(setup, TIMES[1:], data, param_bounds=cfg.param_bounds)
