@@ -159,7 +159,7 @@ def plot(path: Path, rows) -> None:
     import matplotlib.pyplot as plt
 
     fig, ax = plt.subplots(figsize=(6.4, 4.4), constrained_layout=True)
-    marks = {"fine": "o", "A": "s", "B": "^"}
+    marks = {"fine": "o", "A": "s", "B": "^", "C": "D"}
     colours = {("image", "constant"): "C0", ("image", "time-varying"): "C1",
                ("point", "constant"): "C2", ("point", "time-varying"): "C3"}
     for tn, sc, kind, runs in rows:
