@@ -429,7 +429,18 @@ def test_identify_with_restarts_from_the_smoother(tmp_path, cache):
                "--quiet", "--cache-dir", cache) == 0
     (r,) = json.loads((tmp_path / "f" / "run.json").read_text())["smoother_restarts"]
     assert r == {"time_s": pytest.approx(1.0), "readings": 10}
-    for bad in ("random_walk_std = 0.0\nsmoother_restarts = \"often\"\n",
+    # drifting optics, the restart an equal mixture of two forms of the drift
+    (tmp_path / "mix").mkdir()
+    cfg, out, s = _identify_tiny(tmp_path / "mix", cache, "random_walk_std = [0.03, 0.1]\n"
+                                 "smoother_restarts = \"laser_off\"\n"
+                                 "smoother_restart_iterations = 2\n"
+                                 "smoother_restart_knots = [2, 3]\n")
+    assert load_identify(cfg).setup_kw["smoother_restart_knots"] == (2, 3)
+    assert len(s["smoother_restarts"]) == 1
+    for bad in ("random_walk_std = [0.03, 0.1]\nsmoother_restarts = \"laser_off\"\n"
+                "smoother_restart_knots = [1, 3]\n",
+                "random_walk_std = [0.03, 0.1]\nsmoother_restarts = \"laser_off\"\n"
+                "smoother_restart_knots = [3, 3]\n","random_walk_std = 0.0\nsmoother_restarts = \"often\"\n",
                 "random_walk_std = 0.0\nsmoother_restarts = [1.0, -2.0]\n",
                 "random_walk_std = 0.0\nsmoother_restarts = 3\n",
                 "smoother_restarts = \"laser_off\"\n",  # the default walk: not constant

@@ -171,6 +171,28 @@ def test_drifting_restarts_take_the_smoothers_optics_at_the_reading(tissue):
         tissue.setup(smoother_restarts="laser_off", smoother_restart_knots=0)
 
 
+def test_a_mixture_of_drift_forms_gives_a_block_of_members_each(tissue):
+    """``smoother_restart_knots = (2, 3)``: the first half of the restarted members are the
+    2-knot smoother's (the same members as a 2-knot restart gives them), the second half the
+    3-knot smoother's; the counts must differ and be >= 2."""
+    kw = dict(random_walk_std=0.03, smoother_restarts="laser_off", smoother_restart_iterations=2,
+              smoother_restart_gaussian=False)
+    s = tissue.setup(smoother_restart_knots=(2, 3), **kw)
+    assert s.restart_knot_forms == (2, 3) and s.restart_drifts
+    times, data = tissue.twin_data(s, 1.3, 80.0)
+    X, theta, _ = restart_ensemble(s, assemble(s, warm_dt=0.1), times[:10], data[:10])
+    h = theta.shape[0] // 2
+    for k, block in ((2, slice(0, h)), (3, slice(h, None))):
+        one = tissue.setup(smoother_restart_knots=k, **kw)
+        X1, theta1, _ = restart_ensemble(one, assemble(one, warm_dt=0.1), times[:10], data[:10])
+        np.testing.assert_allclose(theta[block], theta1[block], rtol=1e-12)
+        np.testing.assert_allclose(X[block], X1[block], rtol=1e-9, atol=1e-12)
+    assert len(identify(s, times, data).restarts) == 1
+    for bad in ((1, 3), (3, 3), ()):
+        with pytest.raises(ValueError, match="smoother_restart_knots"):
+            tissue.setup(**{**kw, "smoother_restart_knots": bad})
+
+
 def test_the_restarted_members_carry_the_model_error(tissue):
     """The re-run after a restart draws the filter's model error: the structured error
     spreads the members' temperatures beyond their optics' spread (the same optics, the

@@ -61,9 +61,12 @@ VARIANTS = {
     # the same with the drift through 2 or 4 knots (session 25: which form on A and C)
     "restarts-rtps-k2": {**RESTARTS, "rtps": 0.1},
     "restarts-rtps-k4": {**RESTARTS, "rtps": 0.1},
+    # the drift's form not known: an equal mixture of the 2- and 3-knot smoothers
+    "restarts-rtps-mix": {**RESTARTS, "rtps": 0.1},
 }
 #: the knots of the drifting restarts of the variants that set them
-RESTART_KNOTS = {"restarts-linear": 2, "restarts-rtps-k2": 2, "restarts-rtps-k4": 4}
+RESTART_KNOTS = {"restarts-linear": 2, "restarts-rtps-k2": 2, "restarts-rtps-k4": 4,
+                 "restarts-rtps-mix": (2, 3)}
 #: what the restarts need in each case
 RESTART_CASE = {"constant": {"random_walk_std": 0.0},
                 "time-varying": {"smoother_restart_knots": 3, "smoother_restart_delay": 2.5}}

@@ -322,9 +322,16 @@ def _restart_settings(flt: dict, setup_kw: dict, options: dict) -> None:
     else:
         raise ConfigError(f"filter.smoother_restarts must be a list of times (s) or "
                           f"\"laser_off\", got {shorten(repr(r))}")
-    for k in ("smoother_restart_iterations", "smoother_restart_knots"):
-        if k in flt:
-            setup_kw[k] = int(_num(f"filter.{k}", flt[k], integer=True, lo=1))
+    if "smoother_restart_iterations" in flt:
+        setup_kw["smoother_restart_iterations"] = int(_num(
+            "filter.smoother_restart_iterations", flt["smoother_restart_iterations"],
+            integer=True, lo=1))
+    if "smoother_restart_knots" in flt:  # a count, or several: a mixture of drift forms
+        k = flt["smoother_restart_knots"]
+        setup_kw["smoother_restart_knots"] = (
+            tuple(int(_num(f"filter.smoother_restart_knots[{i}]", v, integer=True, lo=2))
+                  for i, v in enumerate(k)) if isinstance(k, list)
+            else int(_num("filter.smoother_restart_knots", k, integer=True, lo=1)))
     if "smoother_restart_delay" in flt:
         setup_kw["smoother_restart_delay"] = float(_num("filter.smoother_restart_delay",
                                                         flt["smoother_restart_delay"], lo=0))

@@ -352,7 +352,7 @@ def restart_points(setup: TissueFilterSetup, times, data=None) -> list[int]:
     finite = np.ones(t.size, bool) if data is None else \
         np.isfinite(np.asarray(data, float)).reshape(t.size, -1).any(axis=1)
     seen = np.cumsum(finite) > 0  # a finite reading at or before reading k
-    if setup.smoother_restart_knots > 1:  # drifting: and a heated step (the knots' clock)
+    if setup.restart_drifts:  # drifting: and a heated step (the knots' clock)
         seen &= heated_time(setup.power, np.r_[0.0, t])[1:] > 0
     return [k + 1 for k in range(t.size) if seen[k]
             and setup.restart_after(float(t[k - 1]) if k else 0.0, float(t[k]))]
@@ -363,7 +363,8 @@ def restart_ensemble(setup: TissueFilterSetup, pieces: FilterPieces, times, data
     """The ensemble a restart gives after the readings ``data`` at ``times`` (all of them
     so far): the parameters of the ES-MDA smoother over them
     (:func:`enkf.tissue.smooth.smooth_constant`, or with ``smoother_restart_knots >= 2``
-    :func:`~enkf.tissue.smooth.smooth_drifting`'s at the last reading;
+    :func:`~enkf.tissue.smooth.smooth_drifting`'s at the last reading; with several counts
+    of knots, an equal mixture of those smoothers, a block of members from each;
     ``setup.smoother_restart_iterations`` updates from the prior; with
     ``setup.smoother_restart_gaussian`` a log-normal ensemble of their moments,
     :func:`gaussian_ensemble`) and each member's temperatures re-run from ``T_initial``
@@ -389,16 +390,21 @@ def restart_ensemble(setup: TissueFilterSetup, pieces: FilterPieces, times, data
               discrepancy_time=setup.smoother_restart_discrepancy_time)
     edges = np.r_[0.0, np.asarray(times, float)]
     rng = np.random.default_rng([setup.seed, len(times), 7])
-    if setup.smoother_restart_knots > 1:  # drifting: each member's path, then its end
-        sm = smooth_drifting(setup, times, data, knots=setup.smoother_restart_knots,
-                             drifting=setup.restart_drifting, **kw)
+    if setup.restart_drifts:  # drifting: each member's path, then its end
+        parts = [smooth_drifting(setup, times, data, knots=k, drifting=setup.restart_drifting,
+                                 **kw) for k in setup.restart_knot_forms]
     else:
-        sm = smooth_constant(setup, times, data, **kw)
+        parts = [smooth_constant(setup, times, data, **kw)]
     if setup.smoother_restart_gaussian:
-        sm = _redrawn(sm, rng)
+        parts = [_redrawn(sm, rng) for sm in parts]
     heated = heated_time(setup.power, edges)
-    path = sm.at(0.5 * (heated[:-1] + heated[1:]))  # each step's optics, (M, N, n_par)
-    theta = np.ascontiguousarray(sm.theta)
+    mid = 0.5 * (heated[:-1] + heated[1:])
+    # each step's optics, (M, N, n_par); several forms of the drift: a block of members each
+    blocks = np.array_split(np.arange(parts[0].theta.shape[0]), len(parts))
+    path = np.concatenate([sm.at(mid)[:, b] for sm, b in zip(parts, blocks, strict=True)],
+                          axis=1)
+    theta = np.ascontiguousarray(np.concatenate(
+        [sm.theta[b] for sm, b in zip(parts, blocks, strict=True)]))
     noise = pieces.model_noise()
     X = np.full((theta.shape[0], pieces.model.mesh.p.shape[1]), float(setup.T_initial))
     if on_step is not None:

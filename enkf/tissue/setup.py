@@ -179,8 +179,11 @@ class TissueFilterSetup:
     #: 1 (default): constant optics (smooth_constant; needs random_walk_std = 0). 2 or more:
     #: optics drifting while heated, piecewise linear in heated time through that many
     #: values (smooth_drifting); the restart takes their value at its reading, and the
-    #: filter's walk goes on from there
-    smoother_restart_knots: int = 1
+    #: filter's walk goes on from there. Several counts, e.g. (2, 3): the restarted
+    #: ensemble is an equal mixture of the smoothers of those forms of the drift, each
+    #: giving a block of members (the form is not known; docs/enkf.md, "Which form of the
+    #: drift")
+    smoother_restart_knots: int | tuple = 1
     #: the restarts' model discrepancy (relative sd of the rise; smooth_constant's
     #: ``discrepancy``) and its correlation time (s): 0 for identical twins
     smoother_restart_discrepancy: float = 0.0
@@ -279,10 +282,20 @@ class TissueFilterSetup:
             self.smoother_restarts = tuple(float(v) for v in t)
             if not t.size:
                 return
-        for name in ("smoother_restart_iterations", "smoother_restart_knots"):
-            n = getattr(self, name)
-            if not (isinstance(n, (int, np.integer)) and not isinstance(n, bool) and n >= 1):
-                raise ValueError(f"{name} must be an integer >= 1, got {n!r}")
+        n = self.smoother_restart_iterations
+        if not (isinstance(n, (int, np.integer)) and not isinstance(n, bool) and n >= 1):
+            raise ValueError(f"smoother_restart_iterations must be an integer >= 1, got {n!r}")
+        forms = self.smoother_restart_knots
+        forms = tuple(forms) if isinstance(forms, (list, tuple)) else (forms,)
+        if not forms or not all(isinstance(k, (int, np.integer)) and not isinstance(k, bool)
+                                and k >= 1 for k in forms):
+            raise ValueError(f"smoother_restart_knots must be an integer >= 1 or a list of "
+                             f"them, got {self.smoother_restart_knots!r}")
+        if len(forms) > 1 and (min(forms) < 2 or len(set(forms)) < len(forms)):
+            raise ValueError(f"smoother_restart_knots = {list(forms)}: a mixture of drift forms "
+                             "needs different counts of knots, each >= 2")
+        self.smoother_restart_knots = int(forms[0]) if len(forms) == 1 else tuple(
+            int(k) for k in forms)
         if not isinstance(self.smoother_restart_gaussian, (bool, np.bool_)):
             raise ValueError(f"smoother_restart_gaussian must be True or False, got "
                              f"{self.smoother_restart_gaussian!r}")
@@ -297,7 +310,7 @@ class TissueFilterSetup:
                                  f", got {v!r}")
         walk = np.asarray(self.random_walk_std, float)
         if self.parameter_model != "random_walk" or (
-                self.smoother_restart_knots == 1 and np.any(walk != 0)):
+                not self.restart_drifts and np.any(walk != 0)):
             raise ValueError(f"smoother_restarts needs constant optics (parameter_model = "
                              f"'random_walk', random_walk_std = 0) or drifting ones "
                              f"(smoother_restart_knots >= 2), got parameter_model = "
@@ -307,15 +320,29 @@ class TissueFilterSetup:
             raise ValueError("smoother_restarts does not estimate sensor offsets: set "
                              "sensor_offset_std = 0")
         drifting = self.restart_drifting
-        if self.smoother_restart_knots > 1 and not drifting:
+        if self.restart_drifts and not drifting:
             raise ValueError(f"smoother_restart_knots = {self.smoother_restart_knots} is for "
                              "drifting optics: no parameter walks (random_walk_std = "
                              f"{self.random_walk_std!r})")
-        free = len(self.parameter_names) + (self.smoother_restart_knots - 1) * len(drifting)
+        free = len(self.parameter_names) + (max(self.restart_knot_forms) - 1) * len(drifting)
+        if self.smoother_restart_gaussian and self.n_members < 2 * len(self.restart_knot_forms):
+            raise ValueError(f"a mixture of {len(self.restart_knot_forms)} drift forms needs "
+                             f"at least 2 members per form, got n_members = {self.n_members}")
         if self.smoother_restart_gaussian and self.n_members <= free:
             raise ValueError(f"smoother_restart_gaussian needs more members than the restart's "
                              f"free values ({free}: the parameters, and every knot of the "
                              f"drifting ones), got n_members = {self.n_members}")
+
+    @property
+    def restart_knot_forms(self) -> tuple:
+        """The restarts' counts of knots, one per form of the drift (:attr:`smoother_restart_knots`)."""
+        k = self.smoother_restart_knots
+        return tuple(k) if isinstance(k, tuple) else (int(k),)
+
+    @property
+    def restart_drifts(self) -> bool:
+        """Whether the restarts let the optics drift (knots >= 2)."""
+        return max(self.restart_knot_forms) > 1
 
     @property
     def restart_drifting(self) -> tuple:
