@@ -101,6 +101,7 @@ def study(tissues, models, seeds: int, estimate_radius: bool = False,
             heat = np.array([r["cov_heat"] for r in runs])
             reduced = fin[:, 1] * (1.0 - MODEL_G)
             row = {"model": model, "g": g, "radius": radius, "mus": mus, "seeds": seeds,
+                   "camera": camera,
                    "mua": fin[:, 0].mean(), "mua_sd": sd[:, 0].mean(),
                    "mus_est": fin[:, 1].mean(), "mus_sd": sd[:, 1].mean(),
                    "reduced": reduced.mean(),
@@ -133,7 +134,10 @@ def report(rows: list[dict], command: str) -> str:
              "filter's model has g = 0.9 and a radius of 0.1 cm (`examples/own_data.toml`"
              + (", with `filter.estimate = [\"mua\", \"mus\", \"beam_radius\"]`: the radius "
                 "carried by the ensemble, its prior uniform over 0.09-0.11 cm"
-                if any("radius_est" in r for r in rows) else "") + "). Means "
+                if any("radius_est" in r for r in rows) else "")
+             + ("; read through a 16 x 16 camera over +-0.2 cm (its default model error) "
+                "instead of the point sensor" if any(r.get("camera") for r in rows) else "")
+             + "). Means "
              "over seeds; coverage: fraction of steps whose +-2 sd band holds the temperature at "
              "z = 0, 0.1, 0.2 cm (mean, and the worst seed while cooling).", "",
              "| truth | g | beam radius (cm) | truth mus | filter mua (sd) | filter mus (sd) | "
