@@ -202,12 +202,17 @@ def _map_at(knots, maps, t):
     return (1 - a) * maps[i] + a * maps[i + 1]
 
 
+def _bins(edges, r, z, shape):
+    """(ir, iz): the (r, z) bin of ``shape`` that holds each point."""
+    r_edges, z_edges = edges
+    ir = np.clip(np.searchsorted(r_edges, r, side="right") - 1, 0, shape[0] - 1)
+    iz = np.clip(np.searchsorted(z_edges, z, side="right") - 1, 0, shape[1] - 1)
+    return ir, iz
+
+
 def _lookup(density, edges, r, z):
     """Density of the (r, z) bin that holds each point."""
-    r_edges, z_edges = edges
-    ir = np.clip(np.searchsorted(r_edges, r, side="right") - 1, 0, density.shape[0] - 1)
-    iz = np.clip(np.searchsorted(z_edges, z, side="right") - 1, 0, density.shape[1] - 1)
-    return density[ir, iz]
+    return density[_bins(edges, r, z, density.shape)]
 
 
 # ---------------------------------------------------------------------------- heat solvers
@@ -370,7 +375,11 @@ class SpectralBox:
 
     def source(self, density, edges, total):
         """The modes' coefficients of the power density per W (rescaled to ``total``)."""
-        s = _lookup(density, edges, self.r, self.z)
+        key = (edges[0].tobytes(), edges[1].tobytes(), density.shape)
+        if getattr(self, "_bins", (None,))[0] != key:  # the sample points' bins, once
+            ir, iz = _bins(edges, self.r, self.z, density.shape)
+            self._bins = (key, ir * density.shape[1] + iz)
+        s = density.ravel()[self._bins[1]]
         nx, ny, nz = self.shape
         sx, sy, sz = self._sub
         cells = s.reshape(nx, sx, ny, sy, nz, sz).mean(axis=(1, 3, 5))
