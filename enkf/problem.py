@@ -387,6 +387,9 @@ class StepReport:
     #: tissue filter's restarts from the smoother: each restarted member's re-run from
     #: step 0, so that what a callback integrates follows the members it now holds)
     replayed: bool = False
+    #: the filter of a bank that made this step (e.g. ``"still"`` or ``"drifting"`` of
+    #: :class:`enkf.tissue.drift.DriftBank`); None for a single filter
+    component: str | None = None
 
 
 class FilterDivergence(RuntimeError):

@@ -38,7 +38,11 @@ tissue (g 0.9, VHC 3.76, TC 0.0037), 0.5 W for 5 s then 10 s off. The drifting c
 11 instants of the pulse (every 0.5 s) and interpolates the absorbed power linearly in
 time between them.
 
-    python validation/independent_models.py     # writes the cache, prints the traces
+Other cases (:data:`CASES`): a step of the optics at the onset of coagulation, a saturating
+drift, a drift of mua alone, and a train of two 2 s pulses with constant and with drifting
+optics; every drift runs on heated time (the optics hold still while the laser is off).
+
+    python validation/independent_models.py [CASE ...]  # writes the cache, prints the traces
 """
 
 from __future__ import annotations
@@ -67,12 +71,53 @@ DT_A = 0.00625  #: s, model A's backward-Euler step (16 per reading; 0.05 before
 VERSIONS = {"A": "v2", "B": "v1", "C": "v1"}
 
 
+#: the laser of each case: (on, off) windows of 0.5 W (s); the paper's single 5 s pulse
+#: unless named here. "pulse-train": two 2 s pulses 3 s apart
+PULSES = {"pulse-train": ((0.0, 2.0), (5.0, 7.0)), "pulse-train-drift": ((0.0, 2.0), (5.0, 7.0))}
+#: every case: the paper's constant optics and ramps, then drifts of other forms (a step at
+#: the onset of coagulation, a saturating curve, mua alone) and a pulse train with constant
+#: and with drifting optics
+CASES = ("constant", "time-varying", "step", "saturating", "mua-only", "pulse-train",
+         "pulse-train-drift")
+
+
+def pulses(case: str) -> tuple:
+    """The laser's on-windows (s) of ``case``."""
+    return PULSES.get(case, ((0.0, T_ON),))
+
+
+def laser_on(case: str, t: float) -> bool:
+    return any(a <= t < b for a, b in pulses(case))
+
+
+def heated(case: str, t: float) -> float:
+    """s of laser-on time before ``t`` (the clock of the drifting optics)."""
+    return float(sum(max(0.0, min(t, b) - a) for a, b in pulses(case)))
+
+
+def heated_total(case: str) -> float:
+    return heated(case, np.inf)
+
+
 def optics(case: str, t: float) -> tuple[float, float]:
-    """(mua, mus) cm^-1 of the truth at time ``t``: Table 1, or the paper's ramps."""
-    if case == "constant":
+    """(mua, mus) cm^-1 of the truth at time ``t``: Table 1, the paper's ramps, or the other
+    drifts, each a function of the heated time (they stop when the laser does)."""
+    h = heated(case, t)
+    if case in ("constant", "pulse-train"):
         return 1.0, 100.0
-    tt = min(t, T_ON)
-    return 1.0 + 0.6 * tt, 100.0 + 80.0 * tt
+    if case == "time-varying":
+        return 1.0 + 0.6 * h, 100.0 + 80.0 * h
+    if case == "step":  # coagulation sets in after 2 s of heating, within 0.5 s
+        a = min(max((h - 2.0) / 0.5, 0.0), 1.0)
+        return 1.0 + 1.5 * a, 100.0 + 200.0 * a
+    if case == "saturating":
+        a = 1.0 - np.exp(-h / 1.5)
+        return float(1.0 + 2.0 * a), float(100.0 + 250.0 * a)
+    if case == "mua-only":
+        return 1.0 + 0.4 * h, 100.0
+    if case == "pulse-train-drift":
+        return 1.0 + 0.5 * h, 100.0 + 50.0 * h
+    raise ValueError(f"unknown case {case!r}; one of {CASES}")
 
 
 # ------------------------------------------------------------------------- Monte Carlo
@@ -176,20 +221,30 @@ def absorbed_maps(model: str, case: str, n_photons: int) -> tuple[np.ndarray, li
     model = "B" if model == "C" else model  # C's light is B's: the same maps
     estimator, dr, dz, seed = {"A": ("analog", 0.0125, 0.00625, 11),
                                "B": ("attenuation", 0.01, 0.005, 22)}[model]
-    knots = np.array([0.0]) if case == "constant" else KNOTS
+    knots = np.array([0.0]) if case in ("constant", "pulse-train") else \
+        np.round(np.linspace(0.0, heated_total(case), int(round(heated_total(case) / 0.5)) + 1), 10)
     tag = hashlib.sha256(f"{model}-{case}-{n_photons}-v1".encode()).hexdigest()[:16]
     path = CACHE / f"maps-{tag}.npz"
     if path.exists():
         with np.load(path) as f:
             return f["knots"], list(f["maps"]), (f["r_edges"], f["z_edges"])
     maps = []
-    for i, t in enumerate(knots):
-        mua, mus = optics(case, float(t))
+    for i, t in enumerate(knots):  # knots in heated time: the optics at that much heating
+        mua, mus = optics(case, _at_heated(case, float(t)))
         m, r_edges, z_edges = monte_carlo(mua, mus, n_photons, estimator, dr, dz, seed + 97 * i)
         maps.append(m)
     CACHE.mkdir(parents=True, exist_ok=True)
     np.savez(path, knots=knots, maps=np.array(maps), r_edges=r_edges, z_edges=z_edges)
     return knots, maps, (r_edges, z_edges)
+
+
+def _at_heated(case: str, h: float) -> float:
+    """The first time at which ``case`` has heated for ``h`` s."""
+    for a, b in pulses(case):
+        if h <= b - a + 1e-12:
+            return a + h
+        h -= b - a
+    return pulses(case)[-1][1]
 
 
 def _map_at(knots, maps, t):
@@ -464,9 +519,10 @@ def _run(model: str, case: str, n_photons: int, xy: np.ndarray | None = None):
     for _ in range(len(TIMES) - 1):
         for _ in range(n_sub):
             tm = t + 0.5 * dt
-            if tm < T_ON:
-                m = _map_at(knots, maps, tm)
-                tot = float(np.interp(tm, knots, totals)) if len(totals) > 1 else totals[0]
+            if laser_on(case, tm):
+                hm = heated(case, tm)  # the maps' clock: heated time
+                m = _map_at(knots, maps, hm)
+                tot = float(np.interp(hm, knots, totals)) if len(totals) > 1 else totals[0]
                 q = POWER * solver.source(m, edges, tot)
             else:
                 q = 0.0
@@ -485,7 +541,9 @@ def _run(model: str, case: str, n_photons: int, xy: np.ndarray | None = None):
 if __name__ == "__main__":
     import time
 
-    for case in ("constant", "time-varying"):
+    import sys
+
+    for case in sys.argv[1:] or ("constant", "time-varying"):
         for model in ALL_MODELS:
             t0 = time.perf_counter()
             T = independent_truth(model, case)

@@ -85,24 +85,28 @@ def _identify_one(cfg, absorption, seed, data_path, out_dir, quiet=True) -> dict
     _check_smoother_size(cfg, data, data_path)  # before the filter, not after it
     fill_prior_points(setup)  # an on-demand emulator: the prior's points before the filter
     medium = cfg.model.G.media[cfg.medium]  # the estimated medium's damage law
-    risk = None
-    if medium.E and medium.A:  # MCmatlab's damage model: the risk of injury per node
-        from ..tissue.risk import RiskTracker
-
-        risk = RiskTracker(E=medium.E, A=medium.A, record_every=10)
-    bar = Progress(len(times), "filter", enabled=not quiet)
+    risks = {}  # one tracker per filter (a drift bank runs two)
+    bank = setup.drift is not None
+    bar = Progress(len(times) * (2 if bank else 1), "filter", enabled=not quiet)
 
     def callback(rep):
-        if risk is not None:
-            risk(rep)  # a restart's replay from step 0 recomputes the damage
-        if not rep.replayed:
-            bar.update(rep.step)
+        if medium.E and medium.A:  # MCmatlab's damage model: the risk of injury per node
+            from ..tissue.risk import RiskTracker
+
+            if rep.component not in risks:
+                risks[rep.component] = RiskTracker(E=medium.E, A=medium.A, record_every=10)
+            risks[rep.component](rep)  # a restart's replay from step 0 recomputes the damage
+        if not rep.replayed:  # a bank's filters one after the other
+            bar.update(rep.step + (len(times) if rep.component == "drifting" else 0))
 
     t0 = time.perf_counter()
     try:
         est = identify(setup, times, data, callback=callback, param_bounds=cfg.param_bounds)
     finally:
         bar.close()
+    # the risk maps of the filter the data support at the end (a bank's mixture weighs
+    # the optics; each filter's damage follows its own members)
+    risk = risks.get(est.drift_behaviour)
     media = cfg.model.G.media
     names = None
     if len(media) > 1:  # whose optics each parameter is (VHC and TC: the whole block's)
@@ -198,6 +202,10 @@ def cmd_identify(args) -> int:
         for j, o in enumerate(r.get("sensor_offsets") or []):
             par += f", sensor {j + 1} offset {o['estimate_final']:+.3f} +- {o['std_final']:.2g} deg C"
         stop = f" (stopped: {r['stopped']})" if r["stopped"] else ""
+        drift = r.get("drift")
+        if drift:
+            par += (f"; optics {drift['behaviour']} while heated (P(drift) = "
+                    f"{drift['weight_final']:.2g})")
         print(f"{r['data']}: {par}{stop}")
     print(f"-> {args.out}")
     return 0
@@ -305,7 +313,8 @@ def _follow(args, cfg, absorption, seed, t_emu) -> int:
     n_off = setup.n_sensor_offsets
     cols = ["time_s"] + [f"{n}_{s}" for n in names for s in ("mean", "std")] + [
         f"sensor{j + 1}_offset_{s}" for j in range(n_off) for s in ("mean", "std")] + [
-        f"T{j}_{s}" for j in range(len(setup.tracked_positions)) for s in ("mean", "std")]
+        f"T{j}_{s}" for j in range(len(setup.tracked_positions)) for s in ("mean", "std")] + (
+        ["drift_weight"] if setup.drift is not None else [])
     fh = open(out / "estimates.csv", "w", encoding="utf-8")
     fh.write(",".join(cols) + "\n")
     fh.flush()
@@ -318,6 +327,8 @@ def _follow(args, cfg, absorption, seed, t_emu) -> int:
                  for v in (est.sensor_offset_mean[j], est.sensor_offset_std[j])]
         vals += [v for j in range(len(est.tracked_mean))
                  for v in (est.tracked_mean[j], est.tracked_std[j])]
+        if est.drift_weight is not None:  # which behaviour of the optics the data support
+            vals.append(est.drift_weight)
         fh.write(",".join(f"{v:.8g}" for v in vals) + "\n")
         fh.flush()  # the estimate is on disk before the next frame is read
         now = time.perf_counter()
@@ -350,7 +361,12 @@ def _follow(args, cfg, absorption, seed, t_emu) -> int:
         fh.close()
     _live_figure(out, ident, setup)
     persistence = persistence_summary(ident)
-    run_json(n, innovation_persistence=persistence)
+    drift = {}
+    if setup.drift is not None and ident.history:
+        w = ident.history[-1].drift_weight
+        drift = {"drift": {"behaviour": "drifting" if w >= 0.5 else "still", "weight_final": w}}
+        print(f"optics {drift['drift']['behaviour']} while heated (P(drift) = {w:.2g})")
+    run_json(n, innovation_persistence=persistence, **drift)
     if persistence["flagged"]:
         warnings.warn(persistence["advice"], RuntimeWarning, stacklevel=2)
     # the result, even with --quiet (it hides the progress bars only)
@@ -385,7 +401,8 @@ def _live_figure(out, ident, setup) -> None:
         tracked_mean=np.array([e.tracked_mean for e in h]),
         tracked_std=np.array([e.tracked_std for e in h]),
         analysed=np.array([e.analysed for e in h]),
-        step_latency_s=np.array([e.latency_s for e in h]), filter_wall_s=0.0)
+        step_latency_s=np.array([e.latency_s for e in h]), filter_wall_s=0.0,
+        drift_weight=None if setup.drift is None else np.array([e.drift_weight for e in h]))
     (Path(out) / "figures").mkdir(exist_ok=True)
     tmp = Path(out) / "figures" / ".estimates.png.tmp.png"
     # the caution when the innovations persist, from the identifier's own record

@@ -90,7 +90,7 @@ _FILTER_KEYS = {
     "smoother_iterations", "smoother_knots", "smoother_discrepancy",
     "smoother_discrepancy_time", "smoother_importance", "smoother_modes", "smoother_restarts",
     "smoother_restart_iterations", "smoother_restart_gaussian", "smoother_restart_knots",
-    "smoother_restart_delay",
+    "smoother_restart_delay", "drift",
 }
 _MODEL_ERROR_KEYS = {"kind", "rel_std", "time_scale", "length_xy", "length_z"}
 _ADAPTIVE_KEYS = {"enabled", "bounds", "time_scale"}
@@ -404,6 +404,7 @@ def identify_config_from_dict(cfg: dict) -> IdentifyConfig:
     from .config_params import (  # it uses this module's number checks: no import cycle
         bounds_settings,
         coagulation_settings,
+        drift_settings,
         filtered_names,
         prior_of,
         prior_settings,
@@ -530,6 +531,7 @@ def identify_config_from_dict(cfg: dict) -> IdentifyConfig:
         else:
             setup_kw["random_walk_std"] = _num("filter.random_walk_std", rw, lo=0)
     _model_error(flt, setup_kw)
+    drift_settings(flt, setup_kw)
     for k, allowed in (("heat_mass", ("averaged", "lumped")),):
         if k in flt:
             if flt[k] not in allowed:
@@ -819,6 +821,9 @@ def check_identify_keys(cfg: dict) -> None:
                {"E", "A", "nominal_factor", "weight_exponent"})
     check_keys("filter.model_error", flt.get("model_error", {}), _MODEL_ERROR_KEYS)
     check_keys("filter.adaptive_inflation", flt.get("adaptive_inflation", {}), _ADAPTIVE_KEYS)
+    from .config_params import DRIFT_KEYS
+
+    check_keys("filter.drift", flt.get("drift", {}), DRIFT_KEYS)
     check_keys("data", cfg.get("data", {}), _DATA_KEYS)
     run_table(cfg)
 

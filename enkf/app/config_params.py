@@ -26,7 +26,7 @@ from . import config as _cfg
 #: keys of [filter.coagulation] (enkf.tissue.coagulation.Coagulation)
 COAGULATION_KEYS = {"E", "A", "nominal_factor", "weight_exponent", "mean_field_rel_std"}
 
-__all__ = ["COAGULATION_KEYS", "bounds_settings", "coagulation_settings", "filtered_names", "nominal_of",
+__all__ = ["COAGULATION_KEYS", "DRIFT_KEYS", "bounds_settings", "drift_settings", "coagulation_settings", "filtered_names", "nominal_of",
            "prior_of", "prior_settings"]
 
 
@@ -134,3 +134,54 @@ def bounds_settings(table, setup_kw: dict, medium, where: str = "G.media[0]"
                                   f"[{p_lo:g}, {p_hi:g}] ({source})")
         out.append((lo, hi))
     return np.array(out)
+
+
+#: keys of [filter.drift] (enkf.tissue.drift.DriftBank, and ``mode``)
+DRIFT_KEYS = {"mode", "walk_std", "switch_prob", "prior_weight", "restart_weight",
+              "restart_delay", "restart_knots", "restart_discrepancy", "rtps"}
+
+
+def drift_settings(flt: dict, setup_kw: dict) -> None:
+    """``[filter.drift]``: whether the data decide if the optics drift (``mode = "auto"``,
+    the default: a :class:`~enkf.tissue.drift.DriftBank` of a still and a drifting filter)
+    or the filter runs as configured (``"none"``). ``"auto"`` needs
+    ``parameter_model = "random_walk"``; with the trend or coagulation model, left out, the
+    mode is ``"none"``."""
+    from ..tissue.drift import DriftBank
+
+    table = check_keys("filter.drift", flt.get("drift", {}), DRIFT_KEYS)
+    model = setup_kw.get("parameter_model", "random_walk")
+    mode = table.get("mode", "auto" if model == "random_walk" else "none")
+    if mode not in ("auto", "none"):
+        raise ConfigError(f"filter.drift.mode must be \"auto\" or \"none\", got "
+                          f"{shorten(repr(mode))}")
+    if mode == "none":
+        return
+    if model != "random_walk":
+        raise ConfigError(f"filter.drift.mode = \"auto\" needs filter.parameter_model = "
+                          f"\"random_walk\", got {model!r}: set filter.drift.mode = \"none\"")
+    kw = {}
+    if "walk_std" in table:
+        w = table["walk_std"]
+        if not (isinstance(w, list) and len(w) == 2):
+            raise ConfigError(f"filter.drift.walk_std must be [mua, mus] (log units per step), "
+                              f"got {shorten(repr(w))}")
+        kw["walk_std"] = tuple(_cfg._num(f"filter.drift.walk_std[{i}]", v, positive=True, hi=10.0)
+                               for i, v in enumerate(w))
+    for k, lim in (("switch_prob", dict(lo=0, hi=0.5)), ("prior_weight", dict(positive=True, hi=1)),
+                   ("restart_weight", dict(lo=0, hi=1)), ("restart_delay", dict(lo=0, hi=1e6)),
+                   ("restart_discrepancy", dict(lo=0, hi=10.0)), ("rtps", dict(lo=0, hi=1))):
+        if k in table:
+            kw[k] = _cfg._num(f"filter.drift.{k}", table[k], **lim)
+    if "restart_knots" in table:
+        k = table["restart_knots"]
+        if not isinstance(k, list) or not k:
+            raise ConfigError(f"filter.drift.restart_knots must be a list of integers >= 2, got "
+                              f"{shorten(repr(k))}")
+        kw["restart_knots"] = tuple(int(_cfg._num(f"filter.drift.restart_knots[{i}]", v,
+                                                  integer=True, lo=2, hi=50))
+                                    for i, v in enumerate(k))
+    try:
+        setup_kw["drift"] = DriftBank(**kw)
+    except ValueError as err:
+        raise ConfigError(str(err).replace("DriftBank.", "filter.drift.")) from None

@@ -69,13 +69,15 @@ def plot_identification(path, est, times, data, power, data_column: int = 0,
     import matplotlib.pyplot as plt
 
     t = est.times
+    drift = getattr(est, "drift_weight", None)
     n_tr, n_par = est.tracked_mean.shape[1], len(est.names)
-    cols = max(n_tr, n_par)
+    n_bottom = n_par + (drift is not None)
+    cols = max(n_tr, n_bottom)
     fig = plt.figure(figsize=(4.2 * cols, 7.5), constrained_layout=True)
     top, bottom = fig.subfigures(2, 1)
     # each row as wide as it needs: no empty panel when there are fewer parameters
     axes_t = np.atleast_1d(top.subplots(1, n_tr, squeeze=False)[0])
-    axes_p = np.atleast_1d(bottom.subplots(1, n_par, squeeze=False)[0])
+    axes_p = np.atleast_1d(bottom.subplots(1, n_bottom, squeeze=False)[0])
     method = {"etkf": "ETKF", "enkf": "EnKF"}.get(getattr(est, "method", None) or "", "filter")
     on = np.array([power(x) > 0 for x in t])
     restarts = [r["time_s"] for r in getattr(est, "restarts", ())]
@@ -106,6 +108,13 @@ def plot_identification(path, est, times, data, power, data_column: int = 0,
         ax.set(title=f"{name} [{PARAMETER_LABELS.get(name, '')}]", xlabel="time [s]")
         if i == 0:
             ax.legend(fontsize=8)
+    if drift is not None:  # the bank: which behaviour of the optics the data support
+        ax = axes_p[n_par]
+        ax.plot(t[: len(drift)], drift, "k-", lw=1.4)
+        ax.axhline(0.5, color="0.5", lw=0.8, ls=":")
+        ax.set(title="P(optics drift while heated)", xlabel="time [s]", ylim=(-0.03, 1.03))
+        ax.text(0.98, 0.04, "still" if drift[-1] < 0.5 else "drifting",
+                transform=ax.transAxes, ha="right", va="bottom", fontsize=9)
     # a model that misses the data's physics: said where the bands are drawn
     if persistence is not None and persistence["flagged"]:
         fig.suptitle(f"Caution: the innovations persist while the laser is off (lag-1 "
@@ -114,6 +123,29 @@ def plot_identification(path, est, times, data, power, data_column: int = 0,
                      color="firebrick", fontsize=9)
     fig.savefig(path, dpi=110)
     plt.close(fig)
+
+
+def drift_summary(est, k: int | None = None) -> dict:
+    """summary.json's ``drift``: with a drift bank (:class:`enkf.tissue.drift.DriftBank`),
+    the probability that the optics drift at the end (``weight_final``; at row ``k``),
+    when it first passed 0.5 and its largest value, the behaviour the data support, and
+    each filter's final estimates and log evidence."""
+    k = len(est.times) - 1 if k is None else k
+    w = est.drift_weight
+    over = np.flatnonzero(w > 0.5)
+    comps = {}
+    for name, e in (est.components or {}).items():
+        j = len(e.times) - (2 if e.diverged and len(e.times) > 1 else 1)
+        comps[name] = {
+            "parameters": {n: {"estimate_final": float(e.param_mean[j, i]),
+                               "std_final": float(e.param_std[j, i])}
+                           for i, n in enumerate(e.names)},
+            "log_evidence": e.log_evidence(), "stopped": e.diverged,
+            "smoother_restarts": len(e.restarts)}
+    return {"behaviour": "drifting" if w[k] >= 0.5 else "still",
+            "weight_final": float(w[k]), "weight_max": float(w.max()),
+            "first_over_half_s": float(est.times[over[0]]) if over.size else None,
+            "components": comps}
 
 
 def _runs(t, on):
@@ -198,6 +230,8 @@ def write_identify_outputs(out: Path, setup, est, times, data, *, absorption=Non
     }
     if getattr(est, "restarts", ()):  # the restarts from the smoother (smoother_restarts)
         summary["smoother_restarts"] = list(est.restarts)
+    if getattr(est, "drift_weight", None) is not None:
+        summary["drift"] = drift_summary(est, k)
     if getattr(est, "effective_mean", None) is not None:
         summary["effective_optics"] = {
             n: {"estimate_final": float(est.effective_mean[k, i]),

@@ -107,6 +107,23 @@ class TissueEstimates:
     #: the restarts from the smoother (``setup.smoother_restarts``), one dict each:
     #: ``time_s`` (the reading after which), ``readings`` (how many it read), ``wall_s``
     restarts: tuple = ()
+    #: (M+1, N, n_par) the members' parameters at each step (the weighted bands of a
+    #: :class:`~enkf.tissue.drift.DriftBank` pool them)
+    param_members: np.ndarray | None = None
+    #: (M+1,) with ``setup.drift`` (:class:`~enkf.tissue.drift.DriftBank`): the
+    #: probability, after each reading, that the optics drift while heated; else None
+    drift_weight: np.ndarray | None = None
+    #: with ``setup.drift``: ``{"still": TissueEstimates, "drifting": TissueEstimates}``,
+    #: the bank's two filters (these estimates are their mixture); else None
+    components: dict | None = None
+
+    @property
+    def drift_behaviour(self) -> str | None:
+        """What the data support at the end, with ``setup.drift``: ``"drifting"`` or
+        ``"still"`` (the more probable), None without a bank."""
+        if self.drift_weight is None or not len(self.drift_weight):
+            return None
+        return "drifting" if self.drift_weight[-1] >= 0.5 else "still"
 
     def log_evidence(self) -> float:
         """Sum of :attr:`innovation_loglik` over the analysed readings (NaN if not recorded)."""
@@ -533,6 +550,11 @@ def identify(setup: TissueFilterSetup, times: np.ndarray, data: np.ndarray, *,
              param_bounds: np.ndarray | None = None) -> TissueEstimates:
     """Run the filter on sensor data.
 
+    With ``setup.drift`` (a :class:`~enkf.tissue.drift.DriftBank`) a still and a drifting
+    filter run on the readings and the estimates are their mixture under the evidence
+    (:func:`enkf.tissue.drift.identify_bank`; ``drift_weight`` says, per reading, how
+    probable the drift is).
+
     Parameters
     ----------
     times : (M,) s, strictly increasing, after 0 (the prior is at t = 0)
@@ -555,6 +577,21 @@ def identify(setup: TissueFilterSetup, times: np.ndarray, data: np.ndarray, *,
     TissueEstimates; if the filter diverges, the estimates up to that point with
     ``diverged`` set to the message.
     """
+    if setup.drift is not None:
+        from .drift import identify_bank
+
+        return identify_bank(setup, times, data, callback=callback, param_bounds=param_bounds)
+    return _identify_single(setup, times, data, callback=callback, param_bounds=param_bounds)
+
+
+def _identify_single(setup: TissueFilterSetup, times: np.ndarray, data: np.ndarray, *,
+                     callback: Callable[[StepReport], None] | None = None,
+                     param_bounds: np.ndarray | None = None,
+                     restart_gate: Callable[[int, np.ndarray], bool] | None = None
+                     ) -> TissueEstimates:
+    """:func:`identify` with one filter. ``restart_gate(a, loglik)``, if given, is asked
+    before each restart (after reading ``a``, with the filter's log-densities of readings
+    1..a): False skips that restart, and the filter goes on with its members."""
     pieces = assemble(setup, param_bounds, float(times[0]) if len(times) else None)
     P_track, n = pieces.P_track, pieces.n
     n_off = setup.n_sensor_offsets
@@ -563,6 +600,7 @@ def identify(setup: TissueFilterSetup, times: np.ndarray, data: np.ndarray, *,
     tr_std = np.full_like(tr_mean, np.nan)
     q_lo = np.full((M + 1, n), np.nan)
     q_hi = np.full_like(q_lo, np.nan)
+    members = np.full((M + 1, setup.n_members, n), np.nan)
     coag = isinstance(pieces.model, CoagulationForwardModel)
     eff_mean = np.full((M + 1, 2), np.nan) if coag else None
     eff_std = np.full((M + 1, 2), np.nan) if coag else None
@@ -570,6 +608,7 @@ def identify(setup: TissueFilterSetup, times: np.ndarray, data: np.ndarray, *,
 
     def record(rep: StepReport, outside: bool = True):
         tr_mean[rep.step], tr_std[rep.step] = pieces.tracked(rep)
+        members[rep.step] = rep.param_ensemble[:, :n]
         with np.errstate(invalid="ignore"):
             q_lo[rep.step], q_hi[rep.step] = np.quantile(
                 rep.param_ensemble[:, :n], [0.02275, 0.97725], axis=0)
@@ -604,6 +643,13 @@ def identify(setup: TissueFilterSetup, times: np.ndarray, data: np.ndarray, *,
     for j, (a, b) in enumerate(zip(edges[:-1], edges[1:], strict=True)):
         if not j:
             problem = pieces.problem(times[:b], data[:b])
+        elif restart_gate is not None and not restart_gate(a, np.concatenate(
+                [p.innovation_loglik for p in parts])):
+            # no restart here: the filter goes on with its members
+            last = parts[-1]
+            problem = pieces.problem(times[a:b], data[a:b], t0=float(times[a - 1]),
+                                     prior=lambda rng, N, X=last.state_ensemble,
+                                     th=last.param_ensemble: (X.copy(), th.copy()))
         else:
             X, theta, w = restart_ensemble(setup, pieces, times[:a], data[:a], on_step)
             restarts.append({"time_s": float(times[a - 1]), "readings": a, "wall_s": w})
@@ -632,7 +678,9 @@ def identify(setup: TissueFilterSetup, times: np.ndarray, data: np.ndarray, *,
                                    f"{times[a - 1]:g} s, reading {a})" if j else "")
             break
         parts.append(res)
-    if diverged is None and M in cuts:  # a restart after the last reading: the final ensemble
+    if diverged is None and M in cuts and (restart_gate is None or restart_gate(
+            M, np.concatenate([p.innovation_loglik for p in parts]))):
+        # a restart after the last reading: the final ensemble
         X, theta, w = restart_ensemble(setup, pieces, times, data, on_step)
         restarts.append({"time_s": float(times[-1]), "readings": M, "wall_s": w})
         parts.append(_restarted(parts[-1], X, theta))
@@ -663,7 +711,7 @@ def identify(setup: TissueFilterSetup, times: np.ndarray, data: np.ndarray, *,
                            for a, b in zip(res.times[:-1], res.times[1:], strict=True)]),
         sensor_offset_mean=res.param_mean[:, -n_off:] if n_off else None,
         sensor_offset_std=res.param_std[:, -n_off:] if n_off else None,
-        restarts=tuple(restarts))
+        restarts=tuple(restarts), param_members=members[:k])
     persistence = persistence_summary(est)
     if persistence["flagged"]:
         warnings.warn(persistence["advice"], RuntimeWarning, stacklevel=2)

@@ -37,6 +37,11 @@ class OnlineEstimate:
     #: energy since the reading before
     innovation_normalized: np.ndarray | None = None
     laser_on: bool | None = None
+    #: log-density of the reading under the forecast (NaN where not analysed)
+    innovation_loglik: float | None = None
+    #: with a drift bank (``setup.drift``): the probability, after this reading, that the
+    #: optics drift while heated
+    drift_weight: float | None = None
 
 
 class OnlineIdentifier:
@@ -48,12 +53,30 @@ class OnlineIdentifier:
     from ``(setup.seed, k)``: a replay of the same readings gives the same estimates
     (they differ from :func:`identify`'s, which draws from one stream).
 
+    With ``setup.drift`` (a :class:`~enkf.tissue.drift.DriftBank`) it runs the still and
+    the drifting filter side by side and reports their mixture under the evidence, with
+    ``drift_weight`` in each estimate (:mod:`enkf.tissue.drift`); a filter the health
+    check stops drops out of the mixture.
+
     Raises :class:`~enkf.problem.FilterDivergence` when the health check stops the
-    filter (the estimates so far stay in :attr:`history`).
+    filter (with a bank: both; the estimates so far stay in :attr:`history`).
     """
 
     def __init__(self, setup: TissueFilterSetup, *, param_bounds=None, dt_hint: float = 0.1):
         self.setup = setup
+        self._bank = None
+        if setup.drift is not None:
+            self._bank = {name: OnlineIdentifier(s, param_bounds=param_bounds, dt_hint=dt_hint)
+                          for name, s in setup.drift.components(setup).items()}
+            self._weights = np.array([1.0 - setup.drift.prior_weight, setup.drift.prior_weight])
+            self._alive = np.ones(2, bool)
+            first = self._bank["still"]
+            self.time, self.history, self.restart_times = 0.0, [], []
+            self.names, self.n_obs = first.names, first.n_obs
+            self._pieces = first._pieces
+            self._bank["drifting"]._restart_gate = self._drift_supported
+            return
+        self._restart_gate = None
         self._pieces = assemble(setup, param_bounds, dt_hint)
         rng = np.random.default_rng([setup.seed, 0])
         self._X, self._theta = self._pieces.prior(rng, setup.n_members)
@@ -109,6 +132,8 @@ class OnlineIdentifier:
         if y.shape != (self.n_obs,):
             raise ValueError(f"a reading must hold {self.n_obs} values (sensors then pixels), "
                              f"got {y.size}")
+        if self._bank is not None:
+            return self._update_bank(t, y)
         X, theta = self._X, self._theta
         problem = self._pieces.problem(np.array([t]), y[None, :],
                                        prior=lambda rng, N: (X, theta), t0=self.time,
@@ -126,7 +151,9 @@ class OnlineIdentifier:
         p_mean, p_std = res.param_mean[-1], res.param_std[-1]
         if self.setup.smoother_restarts:  # keep the readings for the smoother's restarts
             self._readings.append((t, y.copy()))
-            if self.setup.restart_after(self.time, t) and self._restart(t):
+            if self.setup.restart_after(self.time, t) and (
+                    self._restart_gate is None or self._restart_gate(
+                        t, float(res.innovation_loglik[-1]))) and self._restart(t):
                 p_mean, p_std = self._theta.mean(axis=0), self._theta.std(axis=0, ddof=1)
                 last[-1] = replace(last[-1], state_ensemble=self._X, forecast=None)
         T_mean, T_std = self._pieces.tracked(last[-1])
@@ -137,7 +164,72 @@ class OnlineIdentifier:
                              res.param_mean[-1, -n_off:] if n_off else None,
                              res.param_std[-1, -n_off:] if n_off else None,
                              res.innovation_normalized[-1].copy(),
-                             bool(self.setup.mean_power(self.time, t) > 0))
+                             bool(self.setup.mean_power(self.time, t) > 0),
+                             float(res.innovation_loglik[-1]))
+        self.time = t
+        self.history.append(est)
+        return est
+
+    def _step_weights(self, t: float, lls) -> tuple[np.ndarray, float]:
+        """The bank's weights after the reading at ``t`` with the filters' log-densities
+        ``lls`` (K,), and the mixture's log-density (:func:`~enkf.tissue.drift.bank_weights`)."""
+        from .drift import bank_weights
+
+        ll = np.where(self._alive, np.asarray(lls, float), -np.inf)
+        heated = bool(self.setup.mean_power(self.time, t) > 0)
+        w, _, mix = bank_weights(ll[None], self._weights, self.setup.drift.switch_prob,
+                                 np.array([heated]))
+        return w[-1], float(mix[0])
+
+    def _drift_supported(self, t: float, ll_drifting: float) -> bool:
+        """Whether the drifting filter's restart after the reading at ``t`` goes ahead: its
+        weight with this reading above ``drift.restart_weight``."""
+        still = self._bank["still"]
+        ll_still = still.history[-1].innovation_loglik if self._alive[0] and \
+            still.history and still.history[-1].time == t else -np.inf
+        w, _ = self._step_weights(t, [ll_still, ll_drifting])
+        return bool(w[1] > self.setup.drift.restart_weight)
+
+    def _update_bank(self, t: float, y: np.ndarray) -> OnlineEstimate:
+        from ..problem import FilterDivergence
+        from .drift import _mix_moments
+
+        tic = time.perf_counter()
+        ests, lls, errors = [], [], []
+        for j, comp in enumerate(self._bank.values()):
+            e = None
+            if self._alive[j]:
+                try:
+                    e = comp.update(t, y)
+                except FilterDivergence as err:
+                    self._alive[j] = False
+                    errors.append(err)
+            ests.append(e)
+            lls.append(np.nan if e is None or e.innovation_loglik is None
+                       else e.innovation_loglik)
+        if not self._alive.any():
+            raise errors[-1]
+        pred = self._weights
+        self._weights, mix = self._step_weights(t, lls)
+        live = [j for j in range(len(ests)) if self._alive[j]]
+        w = self._weights[live] / self._weights[live].sum()
+        E = [ests[j] for j in live]
+
+        def mix_of(a, b):
+            if getattr(E[0], a) is None:
+                return None, None
+            return _mix_moments(np.array([getattr(e, a) for e in E]),
+                                np.array([getattr(e, b) for e in E]), w)
+
+        p_mean, p_std = mix_of("param_mean", "param_std")
+        T_mean, T_std = mix_of("tracked_mean", "tracked_std")
+        o_mean, o_std = mix_of("sensor_offset_mean", "sensor_offset_std")
+        lead = ests[int(np.argmax(np.where(self._alive, pred, -1)))] or E[0]
+        est = OnlineEstimate(t, p_mean, p_std, T_mean, T_std, any(e.analysed for e in E),
+                             time.perf_counter() - tic, o_mean, o_std,
+                             lead.innovation_normalized, lead.laser_on, mix,
+                             float(self._weights[1]))
+        self.restart_times = list(self._bank["drifting"].restart_times)
         self.time = t
         self.history.append(est)
         return est

@@ -28,6 +28,9 @@ def write_estimates_csv(path, est, truth=None, data=None) -> None:
         for j in range(est.sensor_offset_mean.shape[1]):
             cols += [f"sensor{j + 1}_offset_mean", f"sensor{j + 1}_offset_std"]
             arrays += [est.sensor_offset_mean[:, j], est.sensor_offset_std[:, j]]
+    if getattr(est, "drift_weight", None) is not None:  # the bank: how probable a drift is
+        cols.append("drift_weight")
+        arrays.append(est.drift_weight)
     for j, pos in enumerate(est.tracked_positions):
         tag = f"T_z{pos[2]:.2f}"
         cols += [f"{tag}_mean", f"{tag}_std"]

@@ -193,6 +193,11 @@ class TissueFilterSetup:
     #: ETKF's updates keep an ensemble's shape, and the smoother's skew made the quantile
     #: bands miss (75-80% on the layered twins, 90-95% with it). False: its members as they are
     smoother_restart_gaussian: bool = True
+    #: whether the optics drift is told by the data: a :class:`~enkf.tissue.drift.DriftBank`
+    #: runs this setup's filter (optics still) beside one whose optics drift while heated,
+    #: and reports their mixture under the evidence (the command line's default). None
+    #: (default here): this setup's filter alone
+    drift: object = None
 
     def __post_init__(self):
         est = tuple(self.estimate)
@@ -261,10 +266,29 @@ class TissueFilterSetup:
             raise ValueError(f"model_error must be 'structured' or 'white', got "
                              f"{self.model_error!r}")
         self._check_restarts()
+        self._check_drift()
         for name in ("model_noise_std", "trend_prior_std", "model_error_rel_std", "sensor_offset_std",
                      "model_error_time_scale", "model_error_length_xy", "model_error_length_z"):
             if not (np.isfinite(getattr(self, name)) and getattr(self, name) >= 0):
                 raise ValueError(f"{name} must be >= 0, got {getattr(self, name)!r}")
+
+    def _check_drift(self) -> None:
+        if self.drift is None:
+            return
+        from .drift import DriftBank
+
+        if not isinstance(self.drift, DriftBank):
+            raise ValueError(f"drift must be an enkf.tissue.drift.DriftBank or None, got "
+                             f"{type(self.drift).__name__}")
+        if self.parameter_model != "random_walk":
+            raise ValueError(f"drift (a bank of a still and a drifting filter) needs "
+                             f"parameter_model = 'random_walk', got {self.parameter_model!r}: "
+                             "set drift = None for the trend or coagulation model")
+        if self.n_members < 2 * len(self.drift.restart_knots) or (
+                not self.sensor_offset_std and self.smoother_restart_gaussian and self.n_members
+                <= len(self.parameter_names) * max(self.drift.restart_knots)):
+            raise ValueError(f"drift's restarts need more members, got n_members = "
+                             f"{self.n_members}")
 
     def _check_restarts(self) -> None:
         r = self.smoother_restarts
