@@ -1,0 +1,208 @@
+"""The drift bank (``enkf.tissue.drift``): a still and a drifting filter weighed by their
+evidence. The weights against Bayes' rule, the mixture's moments and quantiles against
+pooled samples, the still filter of the bank against the plain filter, the bank telling
+still from drifting twins, online and in batch, and the config's ``[filter.drift]``."""
+
+from __future__ import annotations
+
+from dataclasses import replace
+
+import numpy as np
+import pytest
+
+import fem
+from enkf.tissue import OnlineIdentifier, TissueForwardModel, identify
+from enkf.tissue.drift import DriftBank, _mix_moments, bank_weights, weighted_quantiles
+
+
+def test_bank_weights_are_bayes_without_switching():
+    """With no switching the weights are the posterior model probabilities: the prior
+    odds times the likelihood ratio of the readings so far; the mixture's log-density
+    summed is the log of the prior-weighted evidences."""
+    rng = np.random.default_rng(0)
+    ll = rng.normal(-1.0, 2.0, (30, 2))
+    w, pred, mix = bank_weights(ll, [0.7, 0.3], 0.0)
+    log_odds = np.log(0.3 / 0.7) + np.cumsum(ll[:, 1] - ll[:, 0])
+    np.testing.assert_allclose(w[1:, 1], 1 / (1 + np.exp(-log_odds)), rtol=1e-12)
+    np.testing.assert_allclose(w.sum(axis=1), 1.0, rtol=1e-14)
+    np.testing.assert_allclose(pred[1:], w[1:-1], rtol=1e-14)
+    evidence = np.log(0.7 * np.exp(ll[:, 0].sum()) + 0.3 * np.exp(ll[:, 1].sum()))
+    np.testing.assert_allclose(mix.sum(), evidence, rtol=1e-12)
+
+
+def test_bank_weights_switch_stop_and_skip():
+    """A switch moves pi of each weight to the other model before a reading (only where
+    ``switching`` allows); a reading not analysed (NaN) changes nothing else; a model
+    that stopped (-inf) has weight 0 from then on, whatever the switching."""
+    ll = np.zeros((4, 2))
+    ll[1] = np.nan
+    ll[2:, 0] = -np.inf
+    w, pred, mix = bank_weights(ll, [0.9, 0.1], 0.1, np.array([True, True, True, False]))
+    np.testing.assert_allclose(w[1], [0.9 * 0.9 + 0.1 * 0.1, 0.1 * 0.9 + 0.9 * 0.1])
+    np.testing.assert_allclose(w[2], [0.82 * 0.9 + 0.18 * 0.1, 0.18 * 0.9 + 0.82 * 0.1])
+    assert np.isnan(mix[1])
+    np.testing.assert_array_equal(w[3:], [[0.0, 1.0], [0.0, 1.0]])
+    with pytest.raises(AssertionError):  # the check above can fail: switching off
+        np.testing.assert_allclose(bank_weights(ll, [0.9, 0.1], 0.0)[0][1], w[1])
+
+
+def test_weighted_quantiles_and_moments_of_a_mixture():
+    """One ensemble: numpy's Hazen quantiles; a weight of 0 drops an ensemble; equal
+    sizes and weights: the pooled members' quantiles and moments (population moments)."""
+    rng = np.random.default_rng(1)
+    a, b = rng.normal(0, 1, (50, 2)), rng.normal(3, 2, (50, 2))
+    q = [0.02275, 0.5, 0.97725]
+    np.testing.assert_allclose(weighted_quantiles([a], [1.0], q),
+                               np.quantile(a, q, axis=0, method="hazen"), rtol=1e-12)
+    np.testing.assert_allclose(weighted_quantiles([a, b], [1.0, 0.0], q),
+                               np.quantile(a, q, axis=0, method="hazen"), rtol=1e-12)
+    pooled = np.vstack([a, b])
+    np.testing.assert_allclose(weighted_quantiles([a, b], [0.5, 0.5], q),
+                               np.quantile(pooled, q, axis=0, method="hazen"), rtol=1e-12)
+    m, s = _mix_moments(np.array([a.mean(0), b.mean(0)]), np.array([a.std(0), b.std(0)]),
+                        np.array([0.5, 0.5]))
+    np.testing.assert_allclose(m, pooled.mean(0), rtol=1e-12)
+    np.testing.assert_allclose(s, pooled.std(0), rtol=1e-12)
+
+
+def test_drift_bank_checks_its_settings():
+    for kw, what in ((dict(walk_std=(0.03, -1.0)), "walk_std"), (dict(switch_prob=0.7), "switch_prob"),
+                     (dict(prior_weight=1.0), "prior_weight"), (dict(restart_knots=(1, 2)), "knots"),
+                     (dict(restart_knots=(2, 2)), "knots"), (dict(rtps=2.0), "rtps"),
+                     (dict(restart_delay=float("nan")), "restart_delay")):
+        with pytest.raises(ValueError, match=what):
+            DriftBank(**kw)
+    assert DriftBank(walk_std=0.05).walk_std == (0.05, 0.05)
+
+
+def _drifting_twin(s, times, path, seed=0):
+    """One sensor at the origin, the setup's own model with optics ``path(t)`` (the
+    twin of a drift), noise var 0.01."""
+    model = TissueForwardModel(s)
+    P = fem.probe_matrix(model.mesh, np.zeros((3, 1)))
+    T = np.zeros((1, model.mesh.p.shape[1]))
+    out, t0 = [], 0.0
+    for t1 in times:
+        T = model(T, np.array([path(0.5 * (t0 + t1))]), t0, t1)
+        out.append((P @ T.T)[0, 0])
+        t0 = t1
+    return np.array(out)[:, None] + 0.1 * np.random.default_rng(seed).standard_normal((len(times), 1))
+
+
+def _ramp(t):  # doubles both optics over the 2 s pulse, then holds them
+    h = min(t, 2.0) / 2.0
+    return [1.0 + 1.0 * h, 100.0 + 100.0 * h]
+
+
+BANK = DriftBank(restart_delay=0.3)
+
+
+@pytest.fixture(scope="module")
+def runs():
+    """The bank on a still and on a drifting twin of the small model (a 2 s pulse, 3.5 s)."""
+    import sys
+    from pathlib import Path
+
+    from mcmatlab_py.heat import HeatSimulation
+
+    sys.path.insert(0, str(Path(__file__).parent))
+    from conftest import make_setup, twin_data
+
+    s = make_setup(drift=BANK, power=HeatSimulation(P=0.5, duration_on=2.0,
+                                                    duration_off=2.0).laser_power)
+    times, still = twin_data(s, 1.3, 80.0, times=0.1 * np.arange(1, 36))
+    drift = _drifting_twin(s, times, _ramp)
+    return s, times, {"still": (still, identify(s, times, still)),
+                      "drifting": (drift, identify(s, times, drift))}
+
+
+def test_the_bank_tells_still_from_drifting_optics(runs):
+    """On the still twin the drift's probability ends below one half (3.5 s of one
+    sensor on the small model leave the drifting filter a fair share), on the drifting
+    twin above 0.95; the reported estimates follow the supported filter (the drifting one
+    restarted from the smoother after the pulse), and the bands hold the truth."""
+    s, times, r = runs
+    est = r["still"][1]
+    assert est.drift_weight.shape == (len(times) + 1,) and est.drift_weight[0] == 0.5
+    assert est.drift_weight[-1] < 0.5 and est.drift_behaviour == "still"
+    # the drifting filter restarts where, and only where, its weight is above the setting
+    for r0 in est.components["drifting"].restarts:
+        assert est.drift_weight[r0["readings"]] > BANK.restart_weight
+    never = identify(replace(s, drift=replace(BANK, restart_weight=1.0)), times, r["still"][0])
+    assert not never.components["drifting"].restarts and not never.restarts
+    est = r["drifting"][1]
+    assert est.drift_weight[-1] > 0.95 and est.drift_behaviour == "drifting"
+    assert [x["component"] for x in est.restarts] == ["drifting"]
+    lo, hi = est.param_band(0)
+    assert lo[-1] <= 2.0 <= hi[-1]
+    lo, hi = est.param_band(1)
+    assert lo[-1] <= 200.0 <= hi[-1]
+    np.testing.assert_allclose(est.param_mean[-1],
+                               est.components["drifting"].param_mean[-1], rtol=0.05)
+
+
+def test_the_banks_still_filter_is_the_plain_filter(runs):
+    """The bank's still filter is the setup's own filter, number for number; the mixture's
+    mean lies between the two filters' means with the final weights."""
+    s, times, r = runs
+    data, est = r["still"]
+    plain = identify(replace(s, drift=None), times, data)
+    np.testing.assert_array_equal(est.components["still"].param_mean, plain.param_mean)
+    np.testing.assert_array_equal(est.components["still"].tracked_std, plain.tracked_std)
+    w = est.drift_weight[-1]
+    np.testing.assert_allclose(
+        est.param_mean[-1], (1 - w) * plain.param_mean[-1]
+        + w * est.components["drifting"].param_mean[-1], rtol=1e-12)
+
+
+def test_online_bank(runs):
+    """One reading at a time: each estimate carries the drift's probability, and it ends
+    on the side the batch run ends (the random numbers differ: see OnlineIdentifier)."""
+    s, times, r = runs
+    for case, side in (("still", False), ("drifting", True)):
+        ident = OnlineIdentifier(s)
+        for t, y in zip(times, r[case][0], strict=True):
+            e = ident.update(t, y)
+        assert (e.drift_weight > 0.5) == side
+        assert np.all(np.isfinite(e.param_mean)) and e.param_mean.shape == (2,)
+        assert len(ident.history) == len(times)
+    np.testing.assert_allclose(ident.restart_times, [2.3])
+
+
+def test_setup_refuses_a_bank_it_cannot_run(tissue):
+    with pytest.raises(ValueError, match="parameter_model"):
+        tissue.setup(drift=DriftBank(), parameter_model="trend")
+    with pytest.raises(ValueError, match="DriftBank"):
+        tissue.setup(drift="auto")
+
+
+def test_config_drift_table(tmp_path):
+    """``[filter.drift]``: "auto" by default (a DriftBank), "none" the filter alone, the
+    trend and coagulation models without a bank unless asked (then refused), and bad
+    values refused naming the key."""
+    from enkf.app.config import identify_config_from_dict
+    from mcmatlab_py.config import ConfigError, read_toml
+
+    from conftest import EXAMPLES
+
+    raw = read_toml(EXAMPLES / "tiny.toml")
+    raw.pop("data", None)
+
+    def parse(**drift):
+        cfg = {**raw, "filter": {**raw.get("filter", {}), **drift}}
+        return identify_config_from_dict(cfg).setup_kw.get("drift")
+
+    assert isinstance(parse(), DriftBank)
+    assert parse(drift={"mode": "none"}) is None
+    bank = parse(drift={"walk_std": [0.05, 0.2], "restart_knots": [2, 4], "restart_delay": 1.0})
+    assert bank.walk_std == (0.05, 0.2) and bank.restart_knots == (2, 4)
+    assert parse(parameter_model="trend") is None
+    for bad, key in (({"mode": "yes"}, "filter.drift.mode"),
+                     ({"walk_std": [0.1]}, "filter.drift.walk_std"),
+                     ({"switch_prob": 0.9}, "filter.drift.switch_prob"),
+                     ({"restart_knots": [1, 2]}, "filter.drift.restart_knots"),
+                     ({"typo": 1}, "filter.drift.typo")):
+        with pytest.raises(ConfigError, match=key):
+            parse(drift=bad)
+    with pytest.raises(ConfigError, match="parameter_model"):
+        parse(parameter_model="trend", drift={"mode": "auto"})

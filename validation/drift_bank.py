@@ -1,0 +1,171 @@
+"""One default config whether the optics hold still, drift, or the laser pulses (issue #45).
+
+``examples/own_data.toml`` as shipped (its default ``[filter.drift] mode = "auto"``: a
+still and a drifting filter weighed by their evidence, ``enkf.tissue.drift``), only the
+laser's schedule changed to the truth's, against the independent forward models of
+``validation/independent_models.py`` (A: analog Monte Carlo and finite differences on
+the box; B: attenuation Monte Carlo and a finite-volume cylinder; C: B's light with a
+spectral solution on the box), one surface sensor at 10 Hz with noise of variance 0.01,
+and every case of the optics there: constant, the paper's ramps, a step at the onset of
+coagulation, a saturating drift, mua alone drifting, and a train of two 2 s pulses with
+constant and with drifting optics.
+
+Targets per run: constant optics, mua within 5% and mus within 25 cm^-1 at 15 s; drifting
+optics, mua's RMSE over the run <= 0.3 cm^-1 and mus within 10% at 15 s; each
+parameter's final band (the mixture's 2.3-97.7% quantiles) holds the truth; the
+temperature bands (mean +- 2 sd) hold the truth on >= 0.9 of the steps at 0, 0.1 and
+0.2 cm below the beam.
+
+    python validation/drift_bank.py --seeds 20 --jobs 2 [--model A B C] [--case ...]
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+import time
+import warnings
+from concurrent.futures import ProcessPoolExecutor
+from pathlib import Path
+
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).parent))
+from independent_models import ALL_MODELS, CASES, TIMES, independent_truth, optics, pulses  # noqa: E402
+
+ROOT = Path(__file__).parents[1]
+CONSTANT = ("constant", "pulse-train")
+
+
+def config_for(case: str, mode: str = "auto"):
+    """examples/own_data.toml with the laser of ``case`` (and ``[filter.drift] mode``)."""
+    from enkf.app.config import identify_config_from_dict
+    from mcmatlab_py.config import read_toml
+
+    raw = read_toml(ROOT / "examples" / "own_data.toml")
+    windows = pulses(case)
+    on = windows[0][1] - windows[0][0]
+    period = windows[1][0] - windows[0][0] if len(windows) > 1 else 15.0
+    raw["HS"].update(duration_on=on, duration_off=period - on, n_pulses=len(windows))
+    raw["filter"].setdefault("drift", {})["mode"] = mode
+    raw.pop("data", None)
+    return identify_config_from_dict(raw)
+
+
+_CFG: dict = {}
+
+
+def run_one(args) -> dict:
+    from enkf.tissue import identify
+
+    model, case, seed, mode = args
+    key = (case, mode)
+    if key not in _CFG:
+        cfg = config_for(case, mode)
+        _CFG[key] = (cfg, cfg.emulator(progress=False))
+    cfg, emulator = _CFG[key]
+    truth = independent_truth(model, case)
+    rng = np.random.default_rng([seed, 18])
+    data = truth[1:, :1] + 0.1 * rng.standard_normal((len(TIMES) - 1, 1))
+    setup = cfg.setup(emulator, seed=seed)
+    tic = time.perf_counter()
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        est = identify(setup, TIMES[1:], data, param_bounds=cfg.param_bounds)
+    wall = time.perf_counter() - tic
+    k = len(est.times)
+    true_p = np.array([optics(case, float(t)) for t in est.times])
+    cov = np.abs(est.tracked_mean[1:] - truth[1:k]) <= 2 * est.tracked_std[1:]
+    band = [est.param_band(i) for i in range(2)]
+    return {
+        "model": model, "case": case, "seed": seed, "mode": mode, "diverged": est.diverged,
+        "final": est.param_mean[-1].tolist(), "final_sd": est.param_std[-1].tolist(),
+        "final_truth": true_p[-1].tolist(),
+        "band_final": [[float(lo[-1]), float(hi[-1])] for lo, hi in band],
+        "mua_rmse": float(np.sqrt(np.mean((est.param_mean[1:, 0] - true_p[1:, 0]) ** 2))),
+        "cov_T": cov.mean(0).tolist(),
+        "drift_weight_final": None if est.drift_weight is None else float(est.drift_weight[-1]),
+        "restarts": len(est.restarts), "wall_s": wall,
+        "step_max_s": float(np.max(est.step_latency_s)),
+    }
+
+
+def passes(r: dict) -> dict:
+    """The issue's targets of one run."""
+    (mua, mus), (tmua, tmus) = r["final"], r["final_truth"]
+    ok = {"ran": r["diverged"] is None}
+    if r["case"] in CONSTANT:
+        ok["estimates"] = abs(mua - tmua) <= 0.05 * tmua and abs(mus - tmus) <= 25
+    else:
+        ok["estimates"] = r["mua_rmse"] <= 0.3 and abs(mus - tmus) <= 0.1 * tmus
+    ok["bands"] = all(lo <= t <= hi for (lo, hi), t in zip(r["band_final"], r["final_truth"],
+                                                           strict=True))
+    ok["T bands"] = min(r["cov_T"]) >= 0.9
+    return ok
+
+
+def report(rows: list, path: Path, command: str) -> None:
+    lines = ["# One default config for still, drifting and pulsed optics", "",
+             f"Command: `{command}`", "", __doc__.split("\n\n")[1].replace("\n", " "), "",
+             __doc__.split("\n\n")[2].replace("\n", " "), "",
+             "Seeds passing each target (the issue asks >= 19 of 20 for the constant "
+             "estimates, >= 18 of 20 elsewhere); the temperature coverage is the mean (worst) "
+             "over seeds; P(drift) the final drift weight (median over seeds).", "",
+             "| truth | case | seeds | estimates | parameter bands | T bands >= 0.9 | "
+             "T coverage z = 0, 0.1, 0.2 | mua, mus at 15 s (median) | truth | P(drift) | "
+             "wall s (median) |", "|---|---|---|---|---|---|---|---|---|---|---|"]
+    keys = sorted({(r["model"], r["case"]) for r in rows},
+                  key=lambda k: (k[0], CASES.index(k[1])))
+    for key in keys:
+        rs = [r for r in rows if (r["model"], r["case"]) == key]
+        n = len(rs)
+        ok = [passes(r) for r in rs]
+        c = np.array([r["cov_T"] for r in rs])
+        fin = np.median(np.array([r["final"] for r in rs]), axis=0)
+        w = [r["drift_weight_final"] for r in rs if r["drift_weight_final"] is not None]
+        cov = ", ".join(f"{m:.2f} ({lo:.2f})" for m, lo in zip(c.mean(0), c.min(0), strict=True))
+        lines.append(
+            f"| {key[0]} | {key[1]} | {n} | {sum(o['estimates'] and o['ran'] for o in ok)} | "
+            f"{sum(o['bands'] for o in ok)} | {sum(o['T bands'] for o in ok)} | {cov} | "
+            f"{fin[0]:.3g}, {fin[1]:.4g} | {rs[0]['final_truth'][0]:.3g}, "
+            f"{rs[0]['final_truth'][1]:.4g} | {np.median(w) if w else float('nan'):.3g} | "
+            f"{np.median([r['wall_s'] for r in rs]):.1f} |")
+    lines += ["", f"Per-run numbers: `validation/reports/{path.with_suffix('.json').name}`."]
+    path.write_text("\n".join(lines) + "\n")
+    path.with_suffix(".json").write_text(json.dumps(rows, indent=1))
+
+
+def main(argv=None):
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--seeds", type=int, default=20)
+    ap.add_argument("--first-seed", type=int, default=0)
+    ap.add_argument("--case", nargs="+", default=list(CASES), choices=list(CASES))
+    ap.add_argument("--model", nargs="+", default=list(ALL_MODELS), choices=list(ALL_MODELS))
+    ap.add_argument("--mode", default="auto", choices=("auto", "none"))
+    ap.add_argument("--jobs", type=int, default=1)
+    ap.add_argument("--out", default=str(ROOT / "validation" / "reports" / "drift_bank.md"))
+    args = ap.parse_args(argv)
+    for case in args.case:  # the truths and the emulator's points, once, before the workers
+        for model in args.model:
+            independent_truth(model, case)
+    tasks = [(m, c, s, args.mode) for c in args.case for m in args.model
+             for s in range(args.first_seed, args.first_seed + args.seeds)]
+    rows = []
+    t0 = time.perf_counter()
+    with ProcessPoolExecutor(args.jobs) as pool:
+        for r in pool.map(run_one, tasks):
+            rows.append(r)
+            o = passes(r)
+            print(f"{r['model']} {r['case']:18s} seed {r['seed']:2d}: "
+                  + " ".join(f"{k}={'ok' if v else 'FAIL'}" for k, v in o.items())
+                  + f" final {np.round(r['final'], 3)} truth {r['final_truth']} "
+                  f"cov {np.round(r['cov_T'], 2)} P(drift) {r['drift_weight_final']} "
+                  f"{r['wall_s']:.1f} s", flush=True)
+    command = "python validation/drift_bank.py " + " ".join(sys.argv[1:] if argv is None else argv)
+    report(rows, Path(args.out), command)
+    print(f"{len(rows)} runs in {time.perf_counter() - t0:.0f} s -> {args.out}")
+
+
+if __name__ == "__main__":
+    main()
