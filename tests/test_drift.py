@@ -180,10 +180,10 @@ def test_config_drift_table(tmp_path):
     """``[filter.drift]``: "auto" by default (a DriftBank), "none" the filter alone, the
     trend and coagulation models without a bank unless asked (then refused), and bad
     values refused naming the key."""
+    from conftest import EXAMPLES
+
     from enkf.app.config import identify_config_from_dict
     from mcmatlab_py.config import ConfigError, read_toml
-
-    from conftest import EXAMPLES
 
     raw = read_toml(EXAMPLES / "tiny.toml")
     raw.pop("data", None)
@@ -206,3 +206,40 @@ def test_config_drift_table(tmp_path):
             parse(drift=bad)
     with pytest.raises(ConfigError, match="parameter_model"):
         parse(parameter_model="trend", drift={"mode": "auto"})
+
+
+def _fake(z, laser_on, drift=None):
+    from types import SimpleNamespace
+
+    from enkf.tissue.identify import laser_persistence
+
+    est = SimpleNamespace(innovation_normalized=z, laser_on=laser_on, sensor_offset_mean=None,
+                          drift_weight=None if drift is None else np.array([0.5, drift]))
+    est.innovation_persistence = lambda laser="off": laser_persistence(z, laser_on, laser)
+    return est
+
+
+def test_the_likely_cause_from_the_innovations():
+    """White innovations: no cause. Persistent ones while the laser is off: the model's
+    physics. The same with the first readings all high: a sensor offset. Persistent while
+    heated only, with no bank: drifting optics. A bank that supports a drift: drifting
+    optics, and no advice unless the innovations persist while cooling too."""
+    from enkf.tissue.identify import persistence_summary
+
+    rng = np.random.default_rng(3)
+    on = np.arange(150) < 50
+    white = rng.standard_normal((150, 1))
+    assert persistence_summary(_fake(white, on))["likely_cause"] is None
+    slow = np.cumsum(rng.standard_normal((150, 1)), axis=0) * 0.3
+    slow -= slow[:5].mean()
+    s = persistence_summary(_fake(slow, on))
+    assert s["likely_cause"] == "model physics" and "docs/beyond.md" in s["advice"]
+    s = persistence_summary(_fake(slow + 3.0 * (np.arange(150) < 10)[:, None], on))
+    assert s["likely_cause"] == "sensor offset" and "sensor_offset_std" in s["advice"]
+    heated = np.where(on[:, None], slow, white)
+    s = persistence_summary(_fake(heated, on))
+    assert s["likely_cause"] == "drifting optics" and "[filter.drift]" in s["advice"]
+    s = persistence_summary(_fake(white, on, drift=0.99))
+    assert s["likely_cause"] == "drifting optics" and s["advice"] is None and not s["flagged"]
+    s = persistence_summary(_fake(slow, on, drift=0.99))
+    assert s["likely_cause"] == "drifting optics" and s["flagged"] and "P = 0.99" in s["advice"]

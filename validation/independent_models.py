@@ -539,9 +539,8 @@ def _run(model: str, case: str, n_photons: int, xy: np.ndarray | None = None):
 
 
 if __name__ == "__main__":
-    import time
-
     import sys
+    import time
 
     for case in sys.argv[1:] or ("constant", "time-varying"):
         for model in ALL_MODELS:

@@ -26,8 +26,8 @@ from . import config as _cfg
 #: keys of [filter.coagulation] (enkf.tissue.coagulation.Coagulation)
 COAGULATION_KEYS = {"E", "A", "nominal_factor", "weight_exponent", "mean_field_rel_std"}
 
-__all__ = ["COAGULATION_KEYS", "DRIFT_KEYS", "bounds_settings", "drift_settings", "coagulation_settings", "filtered_names", "nominal_of",
-           "prior_of", "prior_settings"]
+__all__ = ["COAGULATION_KEYS", "DRIFT_KEYS", "bounds_settings", "coagulation_settings",
+           "drift_settings", "filtered_names", "nominal_of", "prior_of", "prior_settings"]
 
 
 #: every name [filter.prior] and [filter.bounds] may hold

@@ -109,10 +109,16 @@ class TissueForwardModel:
                 continue
             want = [v for v in (lo, hi) if v is not None]
             key = "radius_range" if name == "beam_radius" else f"{name}_range"
-            advice.append(f"widen filter.emulator.{key} (now {list(rng.get(name, ()))}) to "
-                          f"cover {', '.join(f'{v:.4g}' for v in want)} "
-                          f"{PARAMETER_UNITS[name]}, or narrow the "
-                          f"prior and filter.bounds of {name}")
+            edges = rng.get(name, (np.nan, np.nan))
+            side = " and ".join(
+                f"{'below' if v is lo else 'above'} {edges[0 if v is lo else 1]:.4g}"
+                for v in (lo, hi) if v is not None)
+            advice.append(f"members' {name} {side} {PARAMETER_UNITS[name]} were computed at "
+                          f"the table's edge, which biases the {name} estimate towards it "
+                          f"while they matter; widen filter.emulator.{key} (now "
+                          f"{list(rng.get(name, ()))}) to cover "
+                          f"{', '.join(f'{v:.4g}' for v in want)} {PARAMETER_UNITS[name]}, or "
+                          f"narrow the prior and filter.bounds of {name}")
         return {"forecast_steps": int(c["calls"]), "member_steps": int(c["member_calls"]),
                 "below_table": {k: float(v) for k, v in c["lo"].items()},
                 "above_table": {k: float(v) for k, v in c["hi"].items()},

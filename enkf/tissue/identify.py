@@ -33,22 +33,12 @@ from .forward import TissueForwardModel, observation_operator
 from .model_error import StructuredModelError
 from .setup import TissueFilterSetup
 
-__all__ = ["PERSISTENCE_ADVICE", "STATE_BOUNDS", "FilterPieces", "TissueEstimates", "assemble",
+__all__ = ["STATE_BOUNDS", "FilterPieces", "TissueEstimates", "assemble",
            "identify", "laser_persistence", "persistence_summary"]
 
 #: deg C: the health check stops a run whose mean temperature anywhere leaves this range
 #: (below absolute zero, or far above anything tissue reaches before it vaporises)
 STATE_BOUNDS = (-273.15, 1.0e4)
-
-#: what a flagged persistence means (summary.json, the command line's warning)
-PERSISTENCE_ADVICE = (
-    "the filter's innovations persist from reading to reading while the laser is off "
-    "(lag-1 correlation {r:.2f}; white when the model is right): the heat model misses "
-    "something the data show (the tissue's shape, boundaries, perfusion, conduction), and "
-    "the temperature bands below the surface, and the optics' bands, may be too narrow. "
-    "Check the geometry and the heat settings against the tissue; see docs/beyond.md, "
-    "'A model that misses the truth's physics'")
-
 
 @dataclass
 class TissueEstimates:
@@ -511,18 +501,28 @@ def persistence_summary(est) -> dict:
     innovations while the laser is off and over all readings, whether it is flagged
     (:func:`enkf.adaptive.persistence_flagged`) and what that means (``advice``, also
     the warning's text), of ``est`` (a :class:`~enkf.tissue.TissueEstimates` or an
-    :class:`~enkf.tissue.OnlineIdentifier`)."""
+    :class:`~enkf.tissue.OnlineIdentifier`); ``likely_cause`` names what the evidence
+    points at (:func:`enkf.tissue.diagnose.likely_cause`: drifting optics, a sensor
+    offset, the model's physics), and ``advice`` what to do about it (None when nothing
+    is to be done: no misfit, or a drift the drift bank has taken up)."""
+    from .diagnose import drift_weight_of, likely_cause
+
     r_off, n_off = est.innovation_persistence("off")
+    r_on, n_on = est.innovation_persistence("on")
     r_all, n_all = est.innovation_persistence("all")
     flagged = persistence_flagged(r_off, n_off)
+    cause, advice = likely_cause(est, r_off, n_off, r_on, n_on)
+    if cause == "drifting optics" and not flagged and drift_weight_of(est) is not None:
+        advice = None  # a drift bank has taken the drift up: nothing to do
 
     def num(r):
         return round(float(r), 4) if np.isfinite(r) else None
 
     return {"laser_off": num(r_off), "laser_off_pairs": n_off,
+            "laser_on": num(r_on), "laser_on_pairs": n_on,
             "all": num(r_all), "all_pairs": n_all,
-            "threshold": PERSISTENCE_THRESHOLD, "flagged": flagged,
-            "advice": PERSISTENCE_ADVICE.format(r=r_off) if flagged else None}
+            "threshold": PERSISTENCE_THRESHOLD, "flagged": flagged or advice is not None,
+            "likely_cause": cause, "advice": advice}
 
 
 def _no_rows(a: np.ndarray | None) -> np.ndarray | None:
