@@ -243,3 +243,41 @@ def test_the_likely_cause_from_the_innovations():
     assert s["likely_cause"] == "drifting optics" and s["advice"] is None and not s["flagged"]
     s = persistence_summary(_fake(slow, on, drift=0.99))
     assert s["likely_cause"] == "drifting optics" and s["flagged"] and "P = 0.99" in s["advice"]
+
+
+def test_the_command_line_reports_the_drift(tmp_path):
+    """identify's default is the bank: estimates.csv's drift_weight column, summary.json's
+    drift (behaviour, final weight, each filter's estimates), the printed line; with
+    --follow the same column in the live estimates and run.json's drift; mode = "none"
+    gives the filter alone, as before."""
+    import json
+
+    from enkf.app.cli import main
+
+    from conftest import EXAMPLES
+
+    cache = str(tmp_path / "cache")
+    out = tmp_path / "run"
+    assert main(["identify", str(EXAMPLES / "tiny.toml"), "--data",
+                 str(EXAMPLES / "tiny_data.csv"), "--out", str(out), "--quiet",
+                 "--cache-dir", cache]) == 0
+    header = (out / "estimates.csv").read_text().splitlines()[0].split(",")
+    assert "drift_weight" in header
+    d = json.loads((out / "summary.json").read_text())["drift"]
+    assert d["behaviour"] in ("still", "drifting") and 0 <= d["weight_final"] <= 1
+    assert set(d["components"]) == {"still", "drifting"}
+    live = tmp_path / "live"
+    assert main(["identify", str(EXAMPLES / "tiny.toml"), "--follow",
+                 str(EXAMPLES / "tiny_data.csv"), "--out", str(live), "--quiet",
+                 "--cache-dir", cache, "--idle-timeout", "1"]) == 0
+    rows = (live / "estimates.csv").read_text().splitlines()
+    assert rows[0].endswith(",drift_weight") and len(rows) > 10
+    w = [float(r.split(",")[-1]) for r in rows[1:]]
+    assert all(0 <= x <= 1 for x in w)
+    assert json.loads((live / "run.json").read_text())["drift"]["weight_final"] == pytest.approx(
+        w[-1], rel=1e-6)
+    cfg = tmp_path / "none.toml"
+    cfg.write_text((EXAMPLES / "tiny.toml").read_text() + "\n[filter.drift]\nmode = \"none\"\n")
+    assert main(["identify", str(cfg), "--data", str(EXAMPLES / "tiny_data.csv"), "--out",
+                 str(tmp_path / "none"), "--quiet", "--cache-dir", cache]) == 0
+    assert "drift" not in json.loads((tmp_path / "none" / "summary.json").read_text())
