@@ -415,9 +415,11 @@ def test_identify_with_restarts_from_the_smoother(tmp_path, cache):
     """``[filter] smoother_restarts``: the filter restarts from the smoother after the
     pulse (summary.json lists the restart), also with --follow; bad values exit 2 with
     nothing written."""
+    # the filter alone (no drift bank): its restarts are the config's
     cfg, out, s = _identify_tiny(tmp_path, cache, "random_walk_std = 0.0\n"
                                  "smoother_restarts = \"laser_off\"\n"
-                                 "smoother_restart_iterations = 2\n")
+                                 "smoother_restart_iterations = 2\n"
+                                 "drift = { mode = \"none\" }\n")
     (r,) = s["smoother_restarts"]
     assert r["time_s"] == pytest.approx(1.0) and r["readings"] == 10
     from enkf.app.config import load_identify
@@ -434,7 +436,8 @@ def test_identify_with_restarts_from_the_smoother(tmp_path, cache):
     cfg, out, s = _identify_tiny(tmp_path / "mix", cache, "random_walk_std = [0.03, 0.1]\n"
                                  "smoother_restarts = \"laser_off\"\n"
                                  "smoother_restart_iterations = 2\n"
-                                 "smoother_restart_knots = [2, 3]\n")
+                                 "smoother_restart_knots = [2, 3]\n"
+                                 "drift = { mode = \"none\" }\n")
     assert load_identify(cfg).setup_kw["smoother_restart_knots"] == (2, 3)
     assert len(s["smoother_restarts"]) == 1
     for bad in ("random_walk_std = [0.03, 0.1]\nsmoother_restarts = \"laser_off\"\n"

@@ -80,6 +80,10 @@ def build_parser() -> argparse.ArgumentParser:
                               "while heated, beyond the paper), or 'sensitivity' for the "
                               "paper's sensitivity study")
     p_paper.add_argument("--members", type=int, default=50, help="ensemble size N (default 50)")
+    p_paper.add_argument("--drift", choices=("paper", "auto"), default="paper",
+                         help="'paper' (default): the scenario's own random walk, chosen "
+                              "knowing whether its optics drift; 'auto': identify's default, "
+                              "a still and a drifting filter weighed by the data")
     p_paper.add_argument("--method", choices=("enkf", "etkf"), default="etkf",
                          help="analysis: deterministic ETKF (default) or the paper's EnKF "
                               "with perturbed observations")

@@ -52,7 +52,8 @@ def _paper(args, paper, client, verbose) -> int:
                                n_members=args.members, method=args.method, truth_config=tcfg,
                                emulator_photons=args.emulator_photons,
                                emulator_table=args.emulator_table, exact=args.exact,
-                               cache_dir=args.cache_dir, progress=verbose, client=client)
+                               cache_dir=args.cache_dir, progress=verbose, client=client,
+                               drift=args.drift)
     with atomic_dir(args.out, args.force) as tmp:
         paper.write_run(run, tmp)
         from .report import manifest
@@ -62,7 +63,8 @@ def _paper(args, paper, client, verbose) -> int:
                          "method": args.method, "fine": list(args.fine),
                          "truth_photons": args.truth_photons,
                          "emulator_photons": args.emulator_photons,
-                         "emulator_table": args.emulator_table, "exact": args.exact},
+                         "emulator_table": args.emulator_table, "exact": args.exact,
+                         "drift": args.drift},
                  seed=run.summary["seed"], timings={"total": run.summary["wall_seconds"],
                                                     **{k: v for k, v in
                                                        run.summary["timing"].items()

@@ -17,8 +17,23 @@ __all__ = ["emulator_for", "filter_setup"]
 
 
 def filter_setup(scenario: str, absorption, *, seed: int = 0, n_members: int = 50,
-                 coarse=(20, 20, 10), method: str = DEFAULT_METHOD, **overrides):
-    """The filter of a scenario: the coarse model, the paper's priors, our C and E."""
+                 coarse=(20, 20, 10), method: str = DEFAULT_METHOD, drift: str = "paper",
+                 **overrides):
+    """The filter of a scenario: the coarse model, the paper's priors, our C and E.
+
+    ``drift = "paper"`` (default): the scenario's own walk, chosen knowing whether its
+    optics drift (the paper's way). ``"auto"``: the command line's default for measured
+    data, a :class:`~enkf.tissue.drift.DriftBank` of the constant scenario's filter and a
+    drifting one, which tells from the data whether the optics drift."""
+    if drift not in ("paper", "auto"):
+        raise ValueError(f"drift must be 'paper' or 'auto', got {drift!r}")
+    if drift == "auto":
+        from ..tissue.drift import DriftBank
+
+        overrides.setdefault("drift", DriftBank())
+        overrides.setdefault("random_walk_std", 0.002)
+        overrides.setdefault("rtps", 0.0)
+        overrides.setdefault("random_walk_when_off", 0.0)
     P, on, off, n = PULSES[scenario]
     HS = HeatSimulation(P=P, duration_on=on, duration_off=off, n_pulses=n, dt=0.1)
     estimate = ESTIMATES[1] if scenario == "all-params" else ESTIMATES[0]

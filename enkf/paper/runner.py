@@ -37,13 +37,15 @@ def run_experiment(scenario: str, seed: int = 0, *, n_members: int = 50, method:
                    truth_config: TruthConfig | None = None, emulator_photons: int = 250_000,
                    emulator_table: int = 12, exact: bool = False, cache_dir=None,
                    progress: bool = True, twin: bool = False, client=None,
-                   **overrides) -> PaperRun:
+                   drift: str = "paper", **overrides) -> PaperRun:
     """Truth (cached), noisy data (``seed``), and the filter (``seed``) for one scenario.
 
     ``twin=True`` replaces the fine-grid truth by the filter's own coarse model at the
     true parameters (:func:`twin_truth`): the identical-twin experiment, free of model
     error. ``client`` (a ``dask.distributed`` client) spreads the emulator table, the
     constant truth's Monte Carlo and the exact mode's members over a cluster.
+    ``drift``: ``"paper"`` (the scenario's own walk) or ``"auto"`` (a drift bank that
+    tells from the data whether the optics drift; :func:`filter_setup`).
     ``overrides`` go to :class:`~enkf.tissue.TissueFilterSetup` (e.g. ``model_noise_std``).
     """
     if scenario not in SCENARIOS:
@@ -64,10 +66,15 @@ def run_experiment(scenario: str, seed: int = 0, *, n_members: int = 50, method:
 
         absorption = DirectMonteCarloAbsorption(emu.spec, client=client)
     setup = filter_setup(scenario, absorption, seed=seed, n_members=n_members, method=method,
-                         **overrides)
+                         drift=drift, **overrides)
     fill_prior_points(setup)  # an on-demand emulator: the prior's points, outside the filter
     bar = Progress(len(truth.times) - 1, "filter", enabled=progress)
-    est = identify(setup, truth.times[1:], data[:, None], callback=lambda r: bar.update(r.step))
+    n = len(truth.times) - 1
+
+    def step(r):  # a drift bank's two filters one after the other
+        bar.update(min(n, r.step) if r.component != "drifting" else n)
+
+    est = identify(setup, truth.times[1:], data[:, None], callback=step)
     bar.close()
     summary = summarize(scenario, est, truth)
     summary["truth"] = {"grid": list(tcfg.grid), "mc_seed": tcfg.mc_seed,

@@ -398,9 +398,9 @@ def _reissue(caught, est) -> None:
             if "innovations persist" in text:  # said once below, for the mixture
                 continue
             if "clamped" in text:
-                text = (f"the {name} filter (weight {w:.3g} at the end; "
-                        f"{'its estimates are reported' if w >= 0.5 else 'the data reject it'})"
-                        f": {text}")
+                share = ("the data reject it" if w < 0.05 else
+                         f"it makes {w:.0%} of the reported estimates")
+                text = f"the {name} filter (weight {w:.3g} at the end: {share}): {text}"
             warnings.warn(text, r.category, stacklevel=3)
     persistence = persistence_summary(est)
     if persistence["flagged"]:
