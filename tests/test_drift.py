@@ -252,9 +252,9 @@ def test_the_command_line_reports_the_drift(tmp_path):
     gives the filter alone, as before."""
     import json
 
-    from enkf.app.cli import main
-
     from conftest import EXAMPLES
+
+    from enkf.app.cli import main
 
     cache = str(tmp_path / "cache")
     out = tmp_path / "run"
