@@ -377,7 +377,7 @@ def _follow(args, cfg, absorption, seed, t_emu) -> int:
 def _follow_restarts(ident, setup) -> dict:
     """run.json's ``smoother_restarts`` of a --follow run (summary.json's shape, without
     the wall time): the time of each restart and the readings it used."""
-    if not setup.smoother_restarts:
+    if not setup.smoother_restarts and setup.drift is None:
         return {}
     times = [h.time for h in ident.history]
     return {"smoother_restarts": [{"time_s": t, "readings": times.index(t) + 1}

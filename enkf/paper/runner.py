@@ -124,6 +124,9 @@ def summarize(scenario: str, est, truth: Truth) -> dict:
             "rmse": float(np.sqrt(np.mean((mean[1:] - tru[1:]) ** 2))),
             "coverage_2sd": float(np.mean(np.abs(mean[1:] - tru[1:]) <= 2 * sd[1:])),
         }
+        lo, hi = est.param_band(i)  # the members' 2.3-97.7% quantiles
+        params[name]["band_final"] = [float(lo[k - 1]), float(hi[k - 1])]
+        params[name]["band_covers_truth_final"] = bool(lo[k - 1] <= tru[-1] <= hi[k - 1])
     temps = {}
     for j, z in enumerate(TRACKED_DEPTHS):
         mean, sd = est.tracked_mean[1:k, j], est.tracked_std[1:k, j]
@@ -143,4 +146,6 @@ def summarize(scenario: str, est, truth: Truth) -> dict:
                    if est.result is not None else None},
         "diverged": est.diverged,
         "final_time": float(est.times[k - 1]),
+        **({} if est.drift_weight is None else {"drift": {
+            "behaviour": est.drift_behaviour, "weight_final": float(est.drift_weight[k - 1])}}),
     }
