@@ -22,7 +22,6 @@ temperature bands (mean +- 2 sd) hold the truth on >= 0.9 of the steps at 0, 0.1
 from __future__ import annotations
 
 import argparse
-import json
 import sys
 import time
 import warnings
@@ -33,6 +32,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).parent))
 from independent_models import ALL_MODELS, CASES, TIMES, independent_truth, optics, pulses  # noqa: E402
+from reporting import write_report  # noqa: E402
 
 ROOT = Path(__file__).parents[1]
 CONSTANT = ("constant", "pulse-train")
@@ -131,9 +131,7 @@ def report(rows: list, path: Path, command: str) -> None:
             f"{fin[0]:.3g}, {fin[1]:.4g} | {rs[0]['final_truth'][0]:.3g}, "
             f"{rs[0]['final_truth'][1]:.4g} | {np.median(w) if w else float('nan'):.3g} | "
             f"{np.median([r['wall_s'] for r in rs]):.1f} |")
-    lines += ["", f"Per-run numbers: `validation/reports/{path.with_suffix('.json').name}`."]
-    path.write_text("\n".join(lines) + "\n")
-    path.with_suffix(".json").write_text(json.dumps(rows, indent=1))
+    write_report(path, lines, rows)
 
 
 def main(argv=None):

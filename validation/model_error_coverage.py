@@ -27,7 +27,6 @@ straight line in heated time), ``restarts-rtps`` (the restarts with ``rtps = 0.1
 from __future__ import annotations
 
 import argparse
-import json
 import sys
 import time
 from pathlib import Path
@@ -36,6 +35,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).parent))
 from independent_models import ALL_MODELS, MODELS, TIMES, independent_truth, optics  # noqa: E402
+from reporting import write_report  # noqa: E402
 
 from enkf.app.config import load_identify  # noqa: E402
 from enkf.tissue import identify  # noqa: E402
@@ -175,9 +175,7 @@ def report(rows: list, path: Path, command: str) -> None:
             f"| {key[0]} | {key[1]} | {key[2]} | {n} | {cov(ch)} | {cov(cc)} | {es(eh, sh)} | "
             f"{es(ec, sc)} | {tg} | mua {pct[0]:.2f}, mus {pct[1]:.2f}; mua {pcf[0]}/{n}, "
             f"mus {pcf[1]}/{n} | {np.median(infl):.2f}, {imax:.2f} |")
-    lines += ["", f"Per-run numbers: `validation/reports/{path.with_suffix('.json').name}`."]
-    path.write_text("\n".join(lines) + "\n")
-    path.with_suffix(".json").write_text(json.dumps(rows, indent=1))
+    write_report(path, lines, rows)
 
 
 def main(argv=None):
