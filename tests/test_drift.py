@@ -281,3 +281,15 @@ def test_the_command_line_reports_the_drift(tmp_path):
     assert main(["identify", str(cfg), "--data", str(EXAMPLES / "tiny_data.csv"), "--out",
                  str(tmp_path / "none"), "--quiet", "--cache-dir", cache]) == 0
     assert "drift" not in json.loads((tmp_path / "none" / "summary.json").read_text())
+
+
+def test_paper_filter_with_the_bank(tissue):
+    """``filter_setup(..., drift="auto")``: the constant scenario's filter inside a bank
+    (walk 0.002, no relaxation), whatever the scenario; "paper" keeps the scenario's walk."""
+    from enkf.paper import filter_setup
+
+    s = filter_setup("time-varying", tissue.absorption, drift="auto")
+    assert isinstance(s.drift, DriftBank) and s.random_walk_std == 0.002 and s.rtps == 0.0
+    assert filter_setup("time-varying", tissue.absorption).drift is None
+    with pytest.raises(ValueError, match="drift"):
+        filter_setup("constant", tissue.absorption, drift="maybe")
