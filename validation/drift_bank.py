@@ -22,6 +22,7 @@ temperature bands (mean +- 2 sd) hold the truth on >= 0.9 of the steps at 0, 0.1
 from __future__ import annotations
 
 import argparse
+import json
 import sys
 import time
 import warnings
@@ -143,7 +144,16 @@ def main(argv=None):
     ap.add_argument("--mode", default="auto", choices=("auto", "none"))
     ap.add_argument("--jobs", type=int, default=1)
     ap.add_argument("--out", default=str(ROOT / "validation" / "reports" / "drift_bank.md"))
+    ap.add_argument("--from-json", nargs="+", default=None, metavar="FILE",
+                    help="write the report from the per-run numbers of earlier runs (their "
+                         "JSON files) instead of running")
+    ap.add_argument("--command", default=None,
+                    help="with --from-json: the command(s) that made the numbers, for the report")
     args = ap.parse_args(argv)
+    if args.from_json:
+        rows = [r for f in args.from_json for r in json.loads(Path(f).read_text())]
+        report(rows, Path(args.out), args.command or "see the JSON files")
+        return
     for case in args.case:  # the truths and the emulator's points, once, before the workers
         for model in args.model:
             independent_truth(model, case)
