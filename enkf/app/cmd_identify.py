@@ -85,9 +85,10 @@ def _identify_one(cfg, absorption, seed, data_path, out_dir, quiet=True) -> dict
     _check_smoother_size(cfg, data, data_path)  # before the filter, not after it
     fill_prior_points(setup)  # an on-demand emulator: the prior's points before the filter
     medium = cfg.model.G.media[cfg.medium]  # the estimated medium's damage law
-    risks = {}  # one tracker per filter (a drift bank runs two)
-    bank = setup.drift is not None
-    bar = Progress(len(times) * (2 if bank else 1), "filter", enabled=not quiet)
+    risks = {}  # one tracker per filter (a drift bank runs several)
+    n_filters = 1 if setup.drift is None else len(setup.drift.restart_knots) + 1
+    bar = Progress(len(times) * n_filters, "filter", enabled=not quiet)
+    seen = {}  # the bank's filters run one after the other
 
     def callback(rep):
         if medium.E and medium.A:  # MCmatlab's damage model: the risk of injury per node
@@ -96,8 +97,8 @@ def _identify_one(cfg, absorption, seed, data_path, out_dir, quiet=True) -> dict
             if rep.component not in risks:
                 risks[rep.component] = RiskTracker(E=medium.E, A=medium.A, record_every=10)
             risks[rep.component](rep)  # a restart's replay from step 0 recomputes the damage
-        if not rep.replayed:  # a bank's filters one after the other
-            bar.update(rep.step + (len(times) if rep.component == "drifting" else 0))
+        if not rep.replayed:
+            bar.update(rep.step + len(times) * seen.setdefault(rep.component, len(seen)))
 
     t0 = time.perf_counter()
     try:
@@ -106,7 +107,7 @@ def _identify_one(cfg, absorption, seed, data_path, out_dir, quiet=True) -> dict
         bar.close()
     # the risk maps of the filter the data support at the end (a bank's mixture weighs
     # the optics; each filter's damage follows its own members)
-    risk = risks.get(est.drift_behaviour)
+    risk = risks.get(est.leading_component)
     media = cfg.model.G.media
     names = None
     if len(media) > 1:  # whose optics each parameter is (VHC and TC: the whole block's)

@@ -140,6 +140,7 @@ def drift_summary(est, k: int | None = None) -> dict:
             "parameters": {n: {"estimate_final": float(e.param_mean[j, i]),
                                "std_final": float(e.param_std[j, i])}
                            for i, n in enumerate(e.names)},
+            "weight_final": float(est.component_weights[name][k]),
             "log_evidence": e.log_evidence(), "stopped": e.diverged,
             "smoother_restarts": len(e.restarts)}
     return {"behaviour": "drifting" if w[k] >= 0.5 else "still",

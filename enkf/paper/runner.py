@@ -72,7 +72,7 @@ def run_experiment(scenario: str, seed: int = 0, *, n_members: int = 50, method:
     n = len(truth.times) - 1
 
     def step(r):  # a drift bank's two filters one after the other
-        bar.update(min(n, r.step) if r.component != "drifting" else n)
+        bar.update(min(n, r.step) if r.component in (None, "still") else n)
 
     est = identify(setup, truth.times[1:], data[:, None], callback=step)
     bar.close()

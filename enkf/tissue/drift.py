@@ -1,19 +1,21 @@
-r"""Whether the optics drift while the laser heats: two filters weighed by their evidence.
+r"""Whether the optics drift while the laser heats: filters weighed by their evidence.
 
 A user rarely knows beforehand whether the tissue's optics will change while it is
 heated; finding out is one reason to measure. :class:`DriftBank` (the default of
-``tissue-enkf identify``) runs two filters on the same readings:
+``tissue-enkf identify``) runs several filters on the same readings:
 
 ``"still"``
     the setup as given: optics that hold still (its own small random walk, 0.002 log
     units per step by default);
-``"drifting"``
+``"drifting-K"``, one for each ``K`` of :attr:`DriftBank.restart_knots`
     the same setup with optics that drift while the laser heats: a random walk of
     :attr:`DriftBank.walk_std` log units per heated step (none while the laser is off,
     when nothing holds a walk back), restarted from the smoother after each pulse with
-    an equal mixture of drift forms (piecewise linear in heated time through 2 and 3
-    knots: :attr:`DriftBank.restart_knots`), and relaxation of the temperatures' spread
-    to the prior's (:attr:`DriftBank.rtps`).
+    optics piecewise linear in heated time through ``K`` knots (2: a straight line; 6: a
+    path that can turn, e.g. a step at the onset of coagulation), and relaxation of the
+    temperatures' spread to the prior's (:attr:`DriftBank.rtps`). Before its first
+    restart each drifting filter is the same filter; the cooling readings after the
+    restarts tell the forms of the drift apart.
 
 Each reading's density under each filter's forecast,
 :math:`\ell_{k,j} = \log p(y_k \mid y_{1:k-1}, \text{model } j)`
@@ -26,13 +28,13 @@ interacting-multiple-model filter (Blom & Bar-Shalom 1988, IEEE TAC 33):
     \tilde w_{k,j} = (1 - \pi)\, w_{k-1,j} + \frac{\pi}{K - 1} (1 - w_{k-1,j}),
     \qquad w_{k,j} \propto \tilde w_{k,j}\, e^{\ell_{k,j}},
 
-with a switch probability :math:`\pi` per reading (:attr:`DriftBank.switch_prob`), so
-that optics that start to drift late are still taken up. The reported estimates are the
-mixture of the two ensembles under these weights (means, spreads, and the quantile
-bands of the weighted members), and the weight of ``"drifting"`` is reported at every
-reading (``drift_weight``). The drifting filter restarts from the smoother only where the
-data support a drift (its weight above :attr:`DriftBank.restart_weight`): constant optics
-cost no smoother run.
+with a switch probability :math:`\pi` per heated reading (:attr:`DriftBank.switch_prob`),
+so that optics that start to drift late are still taken up. The reported estimates are
+the mixture of the ensembles under these weights (means, spreads, and the quantile bands
+of the weighted members), and the probability of a drift, one less the still filter's
+weight, is reported at every reading (``drift_weight``). A drifting filter restarts from
+the smoother only where the data support it against still optics (its weight in that
+pair above :attr:`DriftBank.restart_weight`): constant optics cost no smoother run.
 """
 
 from __future__ import annotations
@@ -44,11 +46,11 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-__all__ = ["COMPONENTS", "DriftBank", "bank_weights", "identify_bank", "mixture_estimates",
+__all__ = ["STILL", "DriftBank", "bank_weights", "identify_bank", "mixture_estimates",
            "weighted_quantiles"]
 
-#: the bank's filters, in their order
-COMPONENTS = ("still", "drifting")
+#: the name of the bank's filter with still optics (the drifting ones: ``"drifting-K"``)
+STILL = "still"
 #: the parameters whose walk :attr:`DriftBank.walk_std` sets: mua's value for the
 #: absorption coefficients, mus's for the scattering ones
 _WALKED = {"mua": 0, "mua2": 0, "mus": 1, "mus2": 1}
@@ -62,7 +64,8 @@ class DriftBank:
     ----------
     walk_std : (2,) log units per heated step
         The drifting filter's random walk of (mua, mus) (also of a second medium's
-        mua2, mus2); other estimated parameters keep the setup's walk.
+        mua2, mus2); other estimated parameters (VHC, TC, the beam's radius) are
+        constants of the drifting filter (its restarts fit one value each).
     switch_prob : float
         Probability per heated reading that the optics' behaviour changes (the IMM's
         transition probability): it keeps either model's weight above about
@@ -77,8 +80,8 @@ class DriftBank:
         s after each pulse's end at which the drifting filter restarts (some cooling
         readings tell the optics' final values).
     restart_knots : tuple of int
-        The drift forms the restart mixes (knots of piecewise-linear paths in heated
-        time, each >= 2).
+        The forms of the drift, one drifting filter each: the knots of its restarts'
+        piecewise-linear paths in heated time (each >= 2).
     restart_discrepancy : float
         The restarts' model discrepancy (relative sd of the rise).
     rtps : float
@@ -90,7 +93,7 @@ class DriftBank:
     prior_weight: float = 0.5
     restart_weight: float = 0.05
     restart_delay: float = 2.5
-    restart_knots: tuple = (2, 3)
+    restart_knots: tuple = (2, 3, 6)
     restart_discrepancy: float = 0.01
     rtps: float = 0.1
 
@@ -126,25 +129,29 @@ class DriftBank:
         self.restart_knots = tuple(int(v) for v in k)
 
     def components(self, setup) -> dict:
-        """``{"still": setup, "drifting": setup}``: the two filters' setups from the
-        user's ``setup`` (a :class:`~enkf.tissue.TissueFilterSetup` with ``drift`` set),
-        each without a bank of its own."""
-        still = replace(setup, drift=None)
+        """``{"still": setup, "drifting-K": setup, ...}``: the bank's filters' setups from
+        the user's ``setup`` (a :class:`~enkf.tissue.TissueFilterSetup` with ``drift``
+        set), each without a bank of its own; one drifting filter for each ``K`` of
+        :attr:`restart_knots`."""
+        out = {STILL: replace(setup, drift=None)}
         names = setup.parameter_names
+        # the optics drift; VHC, TC and the beam's radius keep the still filter's walk
+        # (0.01 per step would let a lagging mua be made up for by them), fitted as
+        # constants by the restarts
         walk = np.broadcast_to(np.asarray(setup.random_walk_std, float), (len(names),)).copy()
         for i, n in enumerate(names):
-            if n in _WALKED:
-                walk[i] = self.walk_std[_WALKED[n]]
+            walk[i] = self.walk_std[_WALKED[n]] if n in _WALKED else 0.0
         kw = dict(drift=None, random_walk_std=walk.tolist(), random_walk_when_off=0.0,
                   rtps=self.rtps)
-        if not setup.sensor_offset_std:  # the smoother does not estimate sensor offsets
-            kw.update(smoother_restarts="laser_off", smoother_restart_delay=self.restart_delay,
-                      smoother_restart_knots=self.restart_knots
-                      if len(self.restart_knots) > 1 else self.restart_knots[0],
-                      smoother_restart_discrepancy=self.restart_discrepancy)
-        else:
-            kw.update(smoother_restarts=())
-        return {"still": still, "drifting": replace(setup, **kw)}
+        for k in self.restart_knots:
+            if setup.sensor_offset_std:  # the smoother does not estimate sensor offsets
+                out[f"drifting-{k}"] = replace(setup, **kw, smoother_restarts=())
+                break  # one drifting filter: without restarts the forms are the same
+            out[f"drifting-{k}"] = replace(
+                setup, **kw, smoother_restarts="laser_off",
+                smoother_restart_delay=self.restart_delay, smoother_restart_knots=k,
+                smoother_restart_discrepancy=self.restart_discrepancy)
+        return out
 
 
 def bank_weights(loglik: np.ndarray, prior: Sequence[float], switch_prob: float,
@@ -253,8 +260,8 @@ def _component_loglik(est, M: int) -> np.ndarray:
 def mixture_estimates(parts: dict, weights: np.ndarray, predicted: np.ndarray,
                       loglik_mix: np.ndarray, wall_s: float):
     """One :class:`~enkf.tissue.TissueEstimates` from the bank's filters ``parts``
-    (``{name: TissueEstimates}`` in :data:`COMPONENTS` order, each with
-    ``param_members``) under ``weights`` (M + 1, K) (:func:`bank_weights`)."""
+    (``{name: TissueEstimates}``, the still filter first, each with ``param_members``)
+    under ``weights`` (M + 1, K) (:func:`bank_weights`)."""
     from .identify import TissueEstimates
 
     names = list(parts)
@@ -311,7 +318,7 @@ def mixture_estimates(parts: dict, weights: np.ndarray, predicted: np.ndarray,
     latency = np.zeros(k_end - 1)
     for e in ests:
         latency[:len(e.step_latency_s)] += e.step_latency_s[:k_end - 1]
-    drifting = names.index("drifting") if "drifting" in names else None
+    still = names.index(STILL)
     return TissueEstimates(
         times=times, names=ests[0].names, param_mean=p_mean, param_std=p_std,
         tracked_positions=ests[0].tracked_positions, tracked_mean=t_mean, tracked_std=t_std,
@@ -324,23 +331,32 @@ def mixture_estimates(parts: dict, weights: np.ndarray, predicted: np.ndarray,
         sensor_offset_mean=o_mean if off else None, sensor_offset_std=o_std if off else None,
         restarts=tuple({**r, "component": names[j]} for j, e in enumerate(ests)
                        for r in e.restarts),
-        drift_weight=None if drifting is None else w_rows[:, drifting],
-        components=dict(parts))
+        drift_weight=1.0 - w_rows[:, still], components=dict(parts),
+        component_weights={n: w_rows[:, j] for j, n in enumerate(names)})
+
+
+def prior_weights(bank: DriftBank, names) -> np.ndarray:
+    """(K,) the filters' probabilities before any reading: ``1 - prior_weight`` for the
+    still filter, ``prior_weight`` shared evenly by the drifting ones."""
+    drifting = len(names) - 1
+    return np.array([1.0 - bank.prior_weight if n == STILL else bank.prior_weight / drifting
+                     for n in names])
 
 
 def identify_bank(setup, times: np.ndarray, data: np.ndarray, *,
                   callback: Callable | None = None, param_bounds=None):
     """:func:`~enkf.tissue.identify` with ``setup.drift`` (a :class:`DriftBank`): the
-    still and the drifting filter on the same readings, weighed by their evidence
+    still and the drifting filters on the same readings, weighed by their evidence
     (module docstring). The callback sees each filter's steps, still first, with
     :attr:`~enkf.problem.StepReport.component` naming the filter."""
     from .identify import _identify_single
 
     bank: DriftBank = setup.drift
     setups = bank.components(setup)
+    names = list(setups)
     times = np.asarray(times, float)
     M = len(times)
-    prior = np.array([1.0 - bank.prior_weight, bank.prior_weight])
+    prior = prior_weights(bank, names)
     tic = time.perf_counter()
     parts, lls, caught = {}, [], []
 
@@ -351,16 +367,16 @@ def identify_bank(setup, times: np.ndarray, data: np.ndarray, *,
 
     heated = np.array([setup.mean_power(float(a), float(b)) > 0
                        for a, b in zip(np.r_[0.0, times[:-1]], times, strict=True)], bool)
-    for name in COMPONENTS:
+    for j, name in enumerate(names):
         gate = None
-        if name == "drifting":
-            still_ll = lls[0]
+        if j:
+            pair = prior[[0, j]] / prior[[0, j]].sum()
 
-            def gate(a, ll_so_far, still_ll=still_ll):
-                # the drifting filter's weight after reading a, from both filters' records
+            def gate(a, ll_so_far, still_ll=lls[0], pair=pair):
+                # this drifting filter's weight against still optics after reading a
                 ll = np.column_stack([still_ll[:a], np.r_[ll_so_far, np.full(
                     a - len(ll_so_far), np.nan)][:a]])
-                w = bank_weights(ll, prior, bank.switch_prob, heated[:a])[0][-1, 1]
+                w = bank_weights(ll, pair, bank.switch_prob, heated[:a])[0][-1, 1]
                 return w > bank.restart_weight
         with warnings.catch_warnings(record=True) as rec:
             warnings.simplefilter("always")
@@ -371,19 +387,16 @@ def identify_bank(setup, times: np.ndarray, data: np.ndarray, *,
         lls.append(_component_loglik(est, M))
     w, pred, mix = bank_weights(np.column_stack(lls), prior, bank.switch_prob, heated)
     est = mixture_estimates(parts, w, pred, mix, time.perf_counter() - tic)
-    est.clamped = _bank_clamps(parts, est.drift_weight)
+    est.clamped = _bank_clamps(parts, est.component_weights)
     _reissue(caught, est)
     return est
 
 
-def _bank_clamps(parts: dict, drift_weight) -> dict | None:
+def _bank_clamps(parts: dict, weights: dict) -> dict | None:
     """The emulator's clamps of each filter, with the filter's final weight: a clamp in a
     filter the data reject biased nothing that is reported."""
-    out = {}
-    for j, (name, e) in enumerate(parts.items()):
-        if e.clamped:
-            w = float(drift_weight[-1] if j else 1.0 - drift_weight[-1])
-            out[name] = {**e.clamped, "final_weight": w}
+    out = {name: {**e.clamped, "final_weight": float(weights[name][-1])}
+           for name, e in parts.items() if e.clamped}
     return out or None
 
 
@@ -391,8 +404,8 @@ def _reissue(caught, est) -> None:
     """The filters' warnings, once each, with the filter's name and final weight."""
     from .identify import persistence_summary
 
-    for j, (name, rec) in enumerate(caught):
-        w = est.drift_weight[-1] if j else 1.0 - est.drift_weight[-1]
+    for name, rec in caught:
+        w = float(est.component_weights[name][-1])
         for r in rec:
             text = str(r.message)
             if "innovations persist" in text:  # said once below, for the mixture

@@ -103,9 +103,20 @@ class TissueEstimates:
     #: (M+1,) with ``setup.drift`` (:class:`~enkf.tissue.drift.DriftBank`): the
     #: probability, after each reading, that the optics drift while heated; else None
     drift_weight: np.ndarray | None = None
-    #: with ``setup.drift``: ``{"still": TissueEstimates, "drifting": TissueEstimates}``,
-    #: the bank's two filters (these estimates are their mixture); else None
+    #: with ``setup.drift``: ``{"still": TissueEstimates, "drifting-2": ..., ...}``, the
+    #: bank's filters (these estimates are their mixture); else None
     components: dict | None = None
+    #: with ``setup.drift``: ``{name: (M+1,)}``, each filter's probability after each
+    #: reading (their sum is 1); else None
+    component_weights: dict | None = None
+
+    @property
+    def leading_component(self) -> str | None:
+        """With ``setup.drift``: the bank's filter of the largest final weight (its risk
+        maps are the run's); None without a bank."""
+        if not self.component_weights:
+            return None
+        return max(self.component_weights, key=lambda n: self.component_weights[n][-1])
 
     @property
     def drift_behaviour(self) -> str | None:

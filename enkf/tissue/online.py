@@ -66,15 +66,19 @@ class OnlineIdentifier:
         self.setup = setup
         self._bank = None
         if setup.drift is not None:
+            from .drift import prior_weights
+
             self._bank = {name: OnlineIdentifier(s, param_bounds=param_bounds, dt_hint=dt_hint)
                           for name, s in setup.drift.components(setup).items()}
-            self._weights = np.array([1.0 - setup.drift.prior_weight, setup.drift.prior_weight])
-            self._alive = np.ones(2, bool)
+            self._weights = prior_weights(setup.drift, list(self._bank))
+            self._alive = np.ones(len(self._bank), bool)
             first = self._bank["still"]
             self.time, self.history, self.restart_times = 0.0, [], []
             self.names, self.n_obs = first.names, first.n_obs
             self._pieces = first._pieces
-            self._bank["drifting"]._restart_gate = self._drift_supported
+            for j, comp in enumerate(self._bank.values()):
+                if j:  # a drifting filter restarts where the data support it
+                    comp._restart_gate = lambda t, ll, j=j: self._drift_supported(t, ll, j)
             return
         self._restart_gate = None
         self._pieces = assemble(setup, param_bounds, dt_hint)
@@ -170,24 +174,31 @@ class OnlineIdentifier:
         self.history.append(est)
         return est
 
-    def _step_weights(self, t: float, lls) -> tuple[np.ndarray, float]:
-        """The bank's weights after the reading at ``t`` with the filters' log-densities
-        ``lls`` (K,), and the mixture's log-density (:func:`~enkf.tissue.drift.bank_weights`)."""
+    def _step_weights(self, t: float, lls, weights=None, alive=None
+                      ) -> tuple[np.ndarray, float]:
+        """The bank's weights (or ``weights``, of the filters ``alive``) after the
+        reading at ``t`` with the filters' log-densities ``lls`` (K,), and the mixture's
+        log-density (:func:`~enkf.tissue.drift.bank_weights`)."""
         from .drift import bank_weights
 
-        ll = np.where(self._alive, np.asarray(lls, float), -np.inf)
+        weights = self._weights if weights is None else weights
+        alive = self._alive if alive is None else alive
+        ll = np.where(alive, np.asarray(lls, float), -np.inf)
         heated = bool(self.setup.mean_power(self.time, t) > 0)
-        w, _, mix = bank_weights(ll[None], self._weights, self.setup.drift.switch_prob,
+        w, _, mix = bank_weights(ll[None], weights, self.setup.drift.switch_prob,
                                  np.array([heated]))
         return w[-1], float(mix[0])
 
-    def _drift_supported(self, t: float, ll_drifting: float) -> bool:
-        """Whether the drifting filter's restart after the reading at ``t`` goes ahead: its
-        weight with this reading above ``drift.restart_weight``."""
+    def _drift_supported(self, t: float, ll_drifting: float, j: int) -> bool:
+        """Whether drifting filter ``j``'s restart after the reading at ``t`` goes ahead:
+        its weight against still optics, with this reading, above
+        ``drift.restart_weight``."""
         still = self._bank["still"]
         ll_still = still.history[-1].innovation_loglik if self._alive[0] and \
             still.history and still.history[-1].time == t else -np.inf
-        w, _ = self._step_weights(t, [ll_still, ll_drifting])
+        pair = self._weights[[0, j]]
+        w, _ = self._step_weights(t, [ll_still, ll_drifting], pair / pair.sum(),
+                                  np.ones(2, bool))
         return bool(w[1] > self.setup.drift.restart_weight)
 
     def _update_bank(self, t: float, y: np.ndarray) -> OnlineEstimate:
@@ -228,8 +239,9 @@ class OnlineIdentifier:
         est = OnlineEstimate(t, p_mean, p_std, T_mean, T_std, any(e.analysed for e in E),
                              time.perf_counter() - tic, o_mean, o_std,
                              lead.innovation_normalized, lead.laser_on, mix,
-                             float(self._weights[1]))
-        self.restart_times = list(self._bank["drifting"].restart_times)
+                             float(1.0 - self._weights[0]))
+        self.restart_times = sorted({t for j, c in enumerate(self._bank.values()) if j
+                                     for t in c.restart_times})
         self.time = t
         self.history.append(est)
         return est
