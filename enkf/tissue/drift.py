@@ -66,6 +66,12 @@ class DriftBank:
         The drifting filter's random walk of (mua, mus) (also of a second medium's
         mua2, mus2); other estimated parameters (VHC, TC, the beam's radius) are
         constants of the drifting filter (its restarts fit one value each).
+    walk_std_thermal : (3,) log units per heated step
+        The drifting filters' walk of mua, mus and of VHC and TC when the thermal
+        properties are estimated too: with mua's walk of ``walk_std`` and none on VHC and
+        TC, a lagging mua was made up for by them and the first reading after the
+        paper's all-parameters pulse threw mus out of its bounds (every seed of 0-4
+        stopped there); the paper's own walk (these values) gets every seed through.
     switch_prob : float
         Probability per heated reading that the optics' behaviour changes (the IMM's
         transition probability): it keeps either model's weight above about
@@ -89,6 +95,7 @@ class DriftBank:
     """
 
     walk_std: Sequence[float] = (0.03, 0.10)
+    walk_std_thermal: Sequence[float] = (0.05, 0.10, 0.01)
     switch_prob: float = 1e-3
     prior_weight: float = 0.5
     restart_weight: float = 0.05
@@ -107,6 +114,16 @@ class DriftBank:
             raise ValueError(f"DriftBank.walk_std must be > 0 (log units per step), got "
                              f"{self.walk_std!r}")
         self.walk_std = w
+        try:
+            wt = tuple(float(v) for v in np.broadcast_to(np.asarray(self.walk_std_thermal, float),
+                                                         (3,)))
+        except (TypeError, ValueError):
+            raise ValueError(f"DriftBank.walk_std_thermal must be three numbers (mua, mus, "
+                             f"VHC and TC), got {self.walk_std_thermal!r}") from None
+        if not all(np.isfinite(v) and v >= 0 for v in wt):
+            raise ValueError(f"DriftBank.walk_std_thermal must be >= 0, got "
+                             f"{self.walk_std_thermal!r}")
+        self.walk_std_thermal = wt
         for name, lo, hi in (("switch_prob", 0.0, 0.5), ("prior_weight", 0.0, 1.0),
                              ("restart_weight", 0.0, 1.0), ("rtps", 0.0, 1.0)):
             v = getattr(self, name)
@@ -135,12 +152,12 @@ class DriftBank:
         :attr:`restart_knots`."""
         out = {STILL: replace(setup, drift=None)}
         names = setup.parameter_names
-        # the optics drift; VHC, TC and the beam's radius keep the still filter's walk
-        # (0.01 per step would let a lagging mua be made up for by them), fitted as
-        # constants by the restarts
-        walk = np.broadcast_to(np.asarray(setup.random_walk_std, float), (len(names),)).copy()
-        for i, n in enumerate(names):
-            walk[i] = self.walk_std[_WALKED[n]] if n in _WALKED else 0.0
+        # the optics drift (with VHC and TC estimated, those drift too: walk_std_thermal);
+        # the beam's radius holds, fitted as a constant by the restarts
+        thermal = "VHC" in names
+        w = self.walk_std_thermal if thermal else self.walk_std
+        walk = np.array([w[_WALKED[n]] if n in _WALKED else
+                         (w[2] if n in ("VHC", "TC") else 0.0) for n in names])
         kw = dict(drift=None, random_walk_std=walk.tolist(), random_walk_when_off=0.0,
                   rtps=self.rtps)
         for k in self.restart_knots:
