@@ -385,6 +385,11 @@ def identify_bank(setup, times: np.ndarray, data: np.ndarray, *,
     heated = np.array([setup.mean_power(float(a), float(b)) > 0
                        for a, b in zip(np.r_[0.0, times[:-1]], times, strict=True)], bool)
     for j, name in enumerate(names):
+        if j > 1 and not parts[names[1]].restarts:
+            # the drifting filters differ only in their restarts' form: with none, each is
+            # the first one (the same seeds and settings, the same gates' decisions)
+            parts[name], lls = parts[names[1]], [*lls, lls[1]]
+            continue
         gate = None
         if j:
             pair = prior[[0, j]] / prior[[0, j]].sum()
