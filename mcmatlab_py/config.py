@@ -191,6 +191,11 @@ def model_from_config(cfg: dict) -> Model:
         missing = [k for k in ("mua", "mus") if k not in m]
         if missing:
             raise ConfigError(f"G.media[{i}].{missing[0]} is missing")
+        if "name" in m and not isinstance(m["name"], str):
+            raise ConfigError(f"G.media[{i}].name must be a string, got {shorten(repr(m['name']))}")
+        for k, v in m.items():
+            if k != "name":  # the type here, naming the key; the range in Medium
+                _number(f"G.media[{i}].{k}", v)
         try:
             media.append(Medium(**{"name": f"medium {i}", **m}))
         except TypeError as err:

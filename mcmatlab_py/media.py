@@ -17,7 +17,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from fem.checks import check_number
+from fem.checks import check_number, shorten
 
 from ._strict import StrictAttributes
 
@@ -190,8 +190,9 @@ class Medium(StrictAttributes):
         return f"Medium({self.name!r})"
 
     def _number(self, field: str, value) -> float:
-        if isinstance(value, bool):
-            raise ValueError(f"{self._label}.{field} must be a number, got {value!r}")
+        if isinstance(value, bool | str | bytes):  # float() would take "1.0"
+            raise ValueError(f"{self._label}.{field} must be a number or a function, "
+                             f"got {shorten(repr(value))}")
         try:
             v = float(value)
         except (TypeError, ValueError):

