@@ -45,6 +45,10 @@ __all__ = ["HeatSimulation", "Schedule", "auto_dt", "simulate_heat_distribution"
 #: of its voxel scheme, 15 times with ``largeTimeSteps``: lambda_max dt = 3 (or 30)
 MCMATLAB_STEP_FACTOR = 3.0
 LARGE_STEP_FACTOR = 10.0  #: ``large_time_steps``: MCmatlab's 15 / 1.5
+#: deg C: the start temperatures accepted, from absolute zero to far above anything tissue
+#: reaches before it vaporises (the range of the filter's health check, whose run would
+#: otherwise stop at step 0)
+T_INITIAL_RANGE = (-273.15, 1.0e4)
 
 
 def auto_dt(spacing, vhc, tc, theta: float = 1.0, large_time_steps: bool = False) -> float:
@@ -232,7 +236,8 @@ class HeatSimulation(StrictAttributes):
         if np.ndim(T0) == 0 and (isinstance(T0, bool) or not isinstance(T0, (int, float, np.number))
                                  or not math.isfinite(T0)):
             raise ValueError(f"HS.T_initial must be a finite number (deg C), got {T0!r}")
-        self.T_initial = state_field("HS.T_initial", T0, (G.nx, G.ny, G.nz))
+        self.T_initial = state_field("HS.T_initial", T0, (G.nx, G.ny, G.nz),
+                                     lower=T_INITIAL_RANGE[0], upper=T_INITIAL_RANGE[1])
 
     def _validate_sensors(self, G) -> None:
         if not isinstance(self.temp_sensor_positions, (list, tuple, np.ndarray)):

@@ -4,7 +4,8 @@ Each test fails without its fix: numeric strings and non-string names in [[G.med
 start temperatures below absolute zero or absurdly high, switches that are no booleans,
 "1_0" in a CSV file, API fields of the wrong type, a light source the emulator cannot
 take, seeds and photon counts beyond 64 bits, bad paper options, and SIGHUP and SIGQUIT,
-which left partial directories behind.
+which left partial directories behind. The last test guards that --out naming a file
+leaves the file as it was.
 """
 
 from __future__ import annotations
@@ -16,6 +17,7 @@ from pathlib import Path
 import pytest
 
 from enkf.app.cli import main
+from enkf.app.config import identify_config_from_dict
 from mcmatlab_py import Medium
 from mcmatlab_py.config import ConfigError, model_from_config
 
@@ -81,3 +83,20 @@ def test_a_numeric_string_in_media_is_bad_input_on_the_command_line(tmp_path, ca
     assert run("mc", cfg, "--out", tmp_path / "o") == 2
     one_error_line(capsys, "G.media[0].mua must be a number, got '1.0'")
     assert not (tmp_path / "o").exists()
+
+
+# ------------------------------------------------------------------ HS.T_initial
+
+@pytest.mark.parametrize("value", [-273.2, -1000.0, 1e4 + 1, 1e300])
+def test_t_initial_below_absolute_zero_or_absurd_is_refused(tmp_path, capsys, value):
+    with pytest.raises(ConfigError, match=r"HS\.T_initial must be finite and in \[-273\.15, "):
+        identify_config_from_dict(with_("HS.T_initial", value))
+    cfg = write_toml(tmp_path, "T_initial = 0.0 ", f"T_initial = {value!r} ")
+    assert run("heat", cfg, "--out", tmp_path / "o") == 2
+    one_error_line(capsys, "HS.T_initial", repr(value))
+    assert not (tmp_path / "o").exists()
+
+
+def test_t_initial_at_the_limits_is_taken():
+    for value in (-273.15, 1e4):
+        assert identify_config_from_dict(with_("HS.T_initial", value)).setup_kw is not None
