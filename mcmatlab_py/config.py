@@ -153,6 +153,9 @@ def _set(obj, section: str, table: dict, skip=()) -> None:
             continue
         if isinstance(v, dict):
             raise ConfigError(f"{section}.{k} must be a value, got a table")
+        if isinstance(getattr(obj, k), bool) and not isinstance(v, bool):
+            # a switch (its default is one): "abc", nan or 2 would be taken by truthiness
+            raise ConfigError(f"{section}.{k} must be true or false, got {shorten(repr(v))}")
         setattr(obj, k, v)
 
 

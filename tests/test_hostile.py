@@ -11,6 +11,7 @@ leaves the file as it was.
 from __future__ import annotations
 
 import copy
+import math
 import tomllib
 from pathlib import Path
 
@@ -100,3 +101,26 @@ def test_t_initial_below_absolute_zero_or_absurd_is_refused(tmp_path, capsys, va
 def test_t_initial_at_the_limits_is_taken():
     for value in (-273.15, 1e4):
         assert identify_config_from_dict(with_("HS.T_initial", value)).setup_kw is not None
+
+
+# ------------------------------------------------------------------ switches
+
+@pytest.mark.parametrize("path", [
+    "MC.matched_interfaces", "MC.russian_roulette", "MC.use_light_collector",
+    "MC.request_collected_photons", "MC.calc_normalized_irradiance",
+    "MC.calc_normalized_fluence_rate", "MC.deposition_criteria.only_collected",
+    "MC.deposition_criteria.evaluate_only_at_end_of_life",
+])
+@pytest.mark.parametrize("value", ["abc", math.nan, 2, 0, "true"])
+def test_switches_must_be_toml_booleans(path, value):
+    with pytest.raises(ConfigError) as exc:
+        model_from_config(with_(path, value))
+    assert str(exc.value).startswith(f"{path} must be true or false, got ")
+
+
+def test_the_smoothers_gaussian_restart_switch_must_be_a_boolean():
+    cfg = with_("filter.smoother_restarts", "laser_off")
+    cfg["filter"]["smoother_restart_gaussian"] = 1
+    with pytest.raises(ConfigError, match="filter.smoother_restart_gaussian must be true or "
+                                          "false, got 1"):
+        identify_config_from_dict(cfg)

@@ -335,7 +335,10 @@ def _restart_settings(flt: dict, setup_kw: dict, options: dict) -> None:
     if "smoother_restart_delay" in flt:
         setup_kw["smoother_restart_delay"] = float(_num("filter.smoother_restart_delay",
                                                         flt["smoother_restart_delay"], lo=0))
-    if "smoother_restart_gaussian" in flt:  # TissueFilterSetup checks it is a bool
+    if "smoother_restart_gaussian" in flt:
+        if not isinstance(flt["smoother_restart_gaussian"], bool):
+            raise ConfigError(f"filter.smoother_restart_gaussian must be true or false, got "
+                              f"{shorten(repr(flt['smoother_restart_gaussian']))}")
         setup_kw["smoother_restart_gaussian"] = flt["smoother_restart_gaussian"]
     setup_kw["smoother_restart_discrepancy"] = options["discrepancy"]
     setup_kw["smoother_restart_discrepancy_time"] = options["discrepancy_time"]
