@@ -19,6 +19,7 @@ import pytest
 
 from enkf.app.cli import main
 from enkf.app.config import identify_config_from_dict
+from enkf.app.readers import read_sensor_csv
 from mcmatlab_py import Medium
 from mcmatlab_py.config import ConfigError, model_from_config
 
@@ -124,3 +125,21 @@ def test_the_smoothers_gaussian_restart_switch_must_be_a_boolean():
     with pytest.raises(ConfigError, match="filter.smoother_restart_gaussian must be true or "
                                           "false, got 1"):
         identify_config_from_dict(cfg)
+
+
+# ------------------------------------------------------------------ CSV numbers
+
+@pytest.mark.parametrize("value", ["1_0", "0x10", "\u0663", "1e"])
+def test_csv_numbers_that_only_python_reads_are_refused(tmp_path, value):
+    p = tmp_path / "d.csv"
+    p.write_text(f"time,probe\n0.1,1.0\n0.2,{value}\n")
+    with pytest.raises(ValueError, match=rf"d\.csv:3: field 2 is not a number: '{value}'"):
+        read_sensor_csv(p, 1)
+
+
+def test_csv_numbers_as_programs_write_them_are_read(tmp_path):
+    p = tmp_path / "d.csv"
+    p.write_text("time,probe\n0.1,1.5\n.2,-2.\n3e-1,+4E+1\n4e-1,-nan\n5e-1,\n")
+    times, data, _ = read_sensor_csv(p, 1)
+    assert times.tolist() == [0.1, 0.2, 0.3, 0.4, 0.5]
+    assert data[:3, 0].tolist() == [1.5, -2.0, 40.0] and math.isnan(data[3, 0])

@@ -23,6 +23,7 @@ from __future__ import annotations
 import csv
 import math
 import os
+import re
 import sys
 import time
 import zipfile
@@ -40,6 +41,10 @@ __all__ = ["apply_time_offset", "follow_csv", "load_frames", "parse_header", "pa
 
 _BOM = "\ufeff"
 _TIME_NAMES = ("time", "t", "time_s")
+#: a number as a CSV file writes it: ASCII digits, an optional sign, point and exponent, or
+#: inf (refused later, naming it)
+_NUMBER = re.compile(r"[+-]?(?:[0-9]+\.?[0-9]*|\.[0-9]+)(?:[eE][+-]?[0-9]+)?|[+-]?inf(?:inity)?",
+                     re.IGNORECASE)
 
 
 def _fields(line: str, where: str) -> list[str]:
@@ -82,14 +87,13 @@ def parse_line(line: str, n_columns: int, where: str) -> tuple[float, np.ndarray
         raise ValueError(f"{where}: expected {n_columns} comma-separated fields, got {len(fields)}")
     vals = []
     for j, f in enumerate(fields):
-        if f == "" or f.lower() == "nan":
+        if f == "" or f.lower() in ("nan", "+nan", "-nan"):  # C's printf writes -nan
             vals.append(math.nan)
             continue
-        try:
-            vals.append(float(f))
-        except ValueError:
+        if not _NUMBER.fullmatch(f):  # float() also takes "1_0" (10) and other digits
             raise ValueError(f"{where}: field {j + 1} is not a number: "
-                             f"{shorten(repr(f))}") from None
+                             f"{shorten(repr(f))}")
+        vals.append(float(f))
     v = np.array(vals)
     if not np.isfinite(v[0]):
         raise ValueError(f"{where}: the time must be a finite number, got "
