@@ -12,7 +12,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from fem.checks import check_number
+from fem.checks import check_number, shorten
 
 from ._strict import StrictAttributes
 from .media import Medium, check_positive, n_arguments
@@ -69,8 +69,13 @@ class Geometry(StrictAttributes):
             if getattr(self, L) / getattr(self, n) < MIN_VOXEL_SIZE:
                 raise ValueError(f"G.{L} / G.{n} = {getattr(self, L) / getattr(self, n):.3g} cm is "
                                  f"below the smallest voxel size {MIN_VOXEL_SIZE:g} cm (1 nm)")
+        if not isinstance(self.media, list | tuple):
+            raise ValueError(f"G.media must be a list of Medium, got {shorten(repr(self.media))}")
         if not self.media:
             raise ValueError("G.media must hold at least one Medium, got []")
+        if self.geom_func is not None and not callable(self.geom_func):
+            raise ValueError(f"G.geom_func must be a function of (X, Y, Z) or (X, Y, Z, params), "
+                             f"or None, got {shorten(repr(self.geom_func))}")
         for i, m in enumerate(self.media):
             if not isinstance(m, Medium):
                 raise ValueError(f"G.media[{i}] must be a Medium, got {m!r}")

@@ -27,11 +27,16 @@ from .light_source import (
 from .media import check_positive
 from .media_bins import state_field
 
-__all__ = ["EnergyBalanceError", "Geometry", "LightSource", "Model", "MonteCarloSimulation",
-           "check_energy_balance"]
+__all__ = ["MAX_PHOTONS", "MAX_SEED", "EnergyBalanceError", "Geometry", "LightSource", "Model",
+           "MonteCarloSimulation", "check_energy_balance"]
 
 #: every launched packet is accounted for in fixed point: the balance is 1 to rounding
 ENERGY_TOLERANCE = 1e-9
+#: seeds are non-negative 64-bit integers (numpy's generators and the kernels' streams)
+MAX_SEED = 2**63 - 1
+#: packets a run may request: the kernels count them in int64, and a run limited by time
+#: counts up to this many (about 2.3e18: years on any machine)
+MAX_PHOTONS = np.iinfo(np.int64).max // 4
 #: the first of n fluence-rate iterations has 2^-(n-1) of the photons: more is pointless
 MAX_FR_DEP_ITERATIONS = 64
 BOUNDARY_TYPES = {
@@ -253,7 +258,7 @@ class MonteCarloSimulation(StrictAttributes):
         o = self._owner_label  # "MC", or "FMC" for the fluorescence run
         if self.n_photons_requested is not None:
             self.n_photons_requested = check_int(o, "n_photons_requested",
-                                                  self.n_photons_requested)
+                                                  self.n_photons_requested, maximum=MAX_PHOTONS)
         if self.simulation_time_requested is not None:
             self.simulation_time_requested = check_positive(
                 o, "simulation_time_requested", self.simulation_time_requested)
@@ -273,7 +278,7 @@ class MonteCarloSimulation(StrictAttributes):
         if self.n_threads is not None:
             self.n_threads = check_int(o, "n_threads", self.n_threads)
         if self.seed is not None:
-            self.seed = check_int(o, "seed", self.seed, minimum=0)
+            self.seed = check_int(o, "seed", self.seed, minimum=0, maximum=MAX_SEED)
         if not isinstance(self.use_gpu, bool | np.bool_):
             raise ValueError(f"{o}.use_gpu must be True or False, got {self.use_gpu!r}")
         if not isinstance(self.calc_normalized_fluence_rate, bool | np.bool_):

@@ -16,6 +16,7 @@ from ._strict import NotBuiltError
 from .broadband import is_broadband, run_broadband
 from .mc_outputs import OutputSpec, output_spec, store_outputs
 from .media_bins import optical_media_properties
+from .model import MAX_PHOTONS
 from .progress import Progress
 
 __all__ = [
@@ -224,7 +225,7 @@ def simulate(G, MC, M: np.ndarray, mua, mus, g, nref, *, seed: int, n_photons: i
         n_photons = None  # run until enough packets are collected
         time_limit_s = 60.0 * MC.simulation_time_requested if MC.simulation_time_requested \
             else None
-    n_total = n_photons if n_photons is not None else np.iinfo(np.int64).max // 4
+    n_total = n_photons if n_photons is not None else MAX_PHOTONS
     n_batches = -(-n_total // bs) if n_photons is not None else None
     args = _kernel_args(G, MC, M, mua, mus, g, nref, seed, n_total)
 
@@ -314,7 +315,7 @@ def _simulate_gpu(G, MC, M, mua, mus, g, nref, *, seed, n_photons, time_limit_s,
 
     if not numba.config.ENABLE_CUDASIM:
         cuda.select_device(int(MC.gpu_device))
-    n_total = n_photons if n_photons is not None else np.iinfo(np.int64).max // 4
+    n_total = n_photons if n_photons is not None else MAX_PHOTONS
     args = list(_kernel_args(G, MC, M, mua, mus, g, nref, seed, n_total))
     if args[22] is None:  # phase_idx: the CUDA kernel takes an array (-1: Henyey-Greenstein)
         args[22] = np.full(len(mua), -1, dtype=np.int32)

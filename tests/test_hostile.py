@@ -20,7 +20,7 @@ import pytest
 from enkf.app.cli import main
 from enkf.app.config import identify_config_from_dict
 from enkf.app.readers import read_sensor_csv
-from mcmatlab_py import Medium
+from mcmatlab_py import Medium, Model
 from mcmatlab_py.config import ConfigError, model_from_config
 
 EX = Path(__file__).parents[1] / "examples"
@@ -143,3 +143,45 @@ def test_csv_numbers_as_programs_write_them_are_read(tmp_path):
     times, data, _ = read_sensor_csv(p, 1)
     assert times.tolist() == [0.1, 0.2, 0.3, 0.4, 0.5]
     assert data[:3, 0].tolist() == [1.5, -2.0, 40.0] and math.isnan(data[3, 0])
+
+
+# ------------------------------------------------------------------ API types, 64-bit limits
+
+def _small_model() -> Model:
+    m = Model()
+    m.G.nx = m.G.ny = m.G.nz = 4
+    m.G.media = [Medium("t", mua=1.0, mus=10.0)]
+    m.MC.n_photons_requested, m.MC.seed = 200, 1
+    return m
+
+
+@pytest.mark.parametrize("field, value, message", [
+    ("G.geom_func", 5, r"G\.geom_func must be a function .* got 5"),
+    ("G.media", Medium("t", mua=1.0, mus=10.0), r"G\.media must be a list of Medium, got "
+                                                r"Medium\(name='t'"),
+    ("MC.seed", 2**64, r"MC\.seed must be <= .* got 18446744073709551616"),
+    ("MC.n_photons_requested", 2**70, r"MC\.n_photons_requested must be <= .* got "
+                                      r"1180591620717411303424"),
+])
+def test_api_fields_of_the_wrong_type_are_named(field, value, message):
+    m = _small_model()
+    part, name = field.split(".")
+    setattr(getattr(m, part), name, value)
+    with pytest.raises(ValueError, match=message):
+        m.run_monte_carlo()
+
+
+@pytest.mark.parametrize("old, new, needle", [
+    ("seed = 1\n", "seed = 1e300\n", "MC.seed must be <= "),
+    ("n_photons_requested = 20_000", "n_photons_requested = 1e300",
+     "MC.n_photons_requested must be <= "),
+])
+def test_mc_refuses_seeds_and_photons_beyond_64_bits(tmp_path, capsys, old, new, needle):
+    assert run("mc", write_toml(tmp_path, old, new), "--out", tmp_path / "o") == 2
+    one_error_line(capsys, needle, "1e+300")
+    assert not (tmp_path / "o").exists()
+
+
+def test_mc_refuses_a_photon_count_beyond_64_bits(tmp_path, capsys):
+    assert run("mc", EX / "tiny.toml", "--photons", str(2**70), "--out", tmp_path / "o") == 2
+    one_error_line(capsys, "--photons must be <= ")

@@ -5,7 +5,9 @@ from __future__ import annotations
 import time
 from pathlib import Path
 
+from fem.checks import check_number
 from mcmatlab_py.budget import check_heat
+from mcmatlab_py.model import MAX_PHOTONS
 
 from .common import apply_threads, close_client, dask_client
 
@@ -26,7 +28,8 @@ def _run_model_mc(args, heat: bool):
     if args.seed is not None:
         model.MC.seed = args.seed
     if args.photons is not None:
-        model.MC.n_photons_requested = args.photons
+        model.MC.n_photons_requested = check_number("--photons", args.photons, integer=True,
+                                                    lo=1, hi=MAX_PHOTONS)
     model.MC.progress = model.HS.progress = not args.quiet
     model.MC.n_threads = args.threads
     model.MC.validate(model.G)

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 from fem.checks import shorten  # re-exported: the one helper of all packages
+from mcmatlab_py.model import MAX_SEED  # re-exported: the seeds' limit of the kernels
 
 from .config import run_table
 
@@ -12,7 +13,6 @@ __all__ = ["EXIT_BAD_INPUT", "EXIT_CHECK_FAILED", "EXIT_UNEXPECTED", "MAX_SEED",
 EXIT_BAD_INPUT = 2
 EXIT_CHECK_FAILED = 1  #: validate: a check failed (its report is still written)
 EXIT_UNEXPECTED = 1  #: an error that is not the input's fault (a bug: reported in one line)
-MAX_SEED = 2**63 - 1  #: seeds are non-negative 64-bit integers (numpy and the kernels)
 
 
 def dask_client(args, config: dict | None = None):
