@@ -29,18 +29,23 @@ from pathlib import Path
 
 import numpy as np
 
+from fem.checks import shorten
+
 from ._interp import interpolate_log_na, stencil_starts
 from ._strict import NotBuiltError
+from .light_source import source_kind
 from .media import Medium
 from .model import Geometry, MonteCarloSimulation
 
 __all__ = [
+    "EMULATED_SOURCES",
     "AbsorptionEmulator",
     "DirectMonteCarloAbsorption",
     "EmulatorSpec",
     "default_cache_dir",
     "direct_member",
     "cache_key",
+    "check_emulated",
     "interpolate_log_na",
     "resolve_method",
     "symmetrize",
@@ -66,6 +71,44 @@ def default_cache_dir() -> Path:
     """``$TISSUE_ENKF_CACHE``, else ``~/.cache/tissue-enkf``."""
     env = os.environ.get("TISSUE_ENKF_CACHE")
     return Path(env) if env else Path.home() / ".cache" / "tissue-enkf"
+
+
+#: the light sources an emulator table is built for (straight beams and a point)
+EMULATED_SOURCES = ("pencil", "tophat", "gaussian", "plane_wave", "isotropic_point")
+
+
+def _emulated_source(source_type) -> str:
+    """``source_type`` as the emulator names it: a name as given (the cache keys of earlier
+    tables), an MCmatlab code (0: pencil) by its name."""
+    return source_type if isinstance(source_type, str) else source_kind(source_type)
+
+
+def check_emulated(model) -> None:
+    """Raise :class:`NotBuiltError` naming what of ``model`` an emulator table cannot
+    represent: a tilted beam or line emitter, a source other than :data:`EMULATED_SOURCES`,
+    a source distribution, media given as functions or with a custom phase function (the
+    table would silently be that of a straight, plain beam in a plain medium)."""
+    G, src = model.G, model.MC.light_source
+    unsupported = [f"MC.light_source.{k}" for k in ("theta", "phi", "psi", "emitter_length")
+                   if getattr(src, k)]
+    try:
+        name = _emulated_source(src.source_type)
+    except ValueError:  # not a source type at all: said by MC.validate
+        name = None
+    if name not in EMULATED_SOURCES:
+        unsupported.append(f"MC.light_source.source_type = {shorten(repr(src.source_type))}")
+    if model.MC.source_distribution is not None:
+        unsupported.append("MC.source_distribution")
+    for i, m in enumerate(G.media):
+        for k in ("mua", "mus", "g", "n"):
+            if callable(getattr(m, k)):
+                unsupported.append(f"G.media[{i}].{k} as a function")
+        if getattr(m, "custom_phase_func", None) is not None:
+            unsupported.append(f"G.media[{i}].custom_phase_func")
+    if unsupported:
+        raise NotBuiltError(f"the absorption emulator supports straight pencil, top-hat, "
+                            f"Gaussian, plane-wave and point sources in a plain medium; "
+                            f"not built for {', '.join(unsupported)}")
 
 
 @dataclass
@@ -183,30 +226,14 @@ class EmulatorSpec:
         if not 0 <= medium < len(G.media):
             raise ValueError(f"medium must be an index of G.media (0..{len(G.media) - 1}), "
                              f"got {medium}")
+        check_emulated(model)
         src = MC.light_source
-        unsupported = [f"MC.light_source.{k}" for k in ("theta", "phi", "psi", "emitter_length")
-                       if getattr(src, k)]
-        if src.source_type not in ("pencil", "tophat", "gaussian", "plane_wave",
-                                   "isotropic_point"):
-            unsupported.append(f"MC.light_source.source_type = {src.source_type!r}")
-        if MC.source_distribution is not None:
-            unsupported.append("MC.source_distribution")
-        for i, m in enumerate(G.media):
-            for k in ("mua", "mus", "g", "n"):
-                if callable(getattr(m, k)):
-                    unsupported.append(f"G.media[{i}].{k} as a function")
-            if getattr(m, "custom_phase_func", None) is not None:
-                unsupported.append(f"G.media[{i}].custom_phase_func")
-        if unsupported:
-            # the table would silently be that of a straight, plain beam in a plain medium
-            raise NotBuiltError(f"the absorption emulator supports straight pencil, top-hat, "
-                                f"Gaussian, plane-wave and point sources in a plain medium; "
-                                f"not built for {', '.join(unsupported)}")
         if len(G.media) > 1:
             kw.update(media=tuple((m.mua, m.mus, m.g, m.n) for m in G.media), estimated=medium,
                       medium_map=G.medium_map())
         return cls(nx=G.nx, ny=G.ny, nz=G.nz, Lx=G.Lx, Ly=G.Ly, Lz=G.Lz, g=G.media[medium].g,
-                   n=G.media[medium].n, source_type=src.source_type, radius=src.radius,
+                   n=G.media[medium].n, source_type=_emulated_source(src.source_type),
+                   radius=src.radius,
                    x_focus=src.x_focus, y_focus=src.y_focus, z_focus=src.z_focus,
                    boundary_type=MC.boundary_type, matched_interfaces=MC.matched_interfaces,
                    n_outside=MC.n_outside, **kw)

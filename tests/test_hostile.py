@@ -185,3 +185,30 @@ def test_mc_refuses_seeds_and_photons_beyond_64_bits(tmp_path, capsys, old, new,
 def test_mc_refuses_a_photon_count_beyond_64_bits(tmp_path, capsys):
     assert run("mc", EX / "tiny.toml", "--photons", str(2**70), "--out", tmp_path / "o") == 2
     one_error_line(capsys, "--photons must be <= ")
+
+
+# ------------------------------------------------------------------ the emulator, paper options
+
+def test_mcmatlabs_pencil_code_is_the_emulators_pencil():
+    from mcmatlab_py.emulator import EmulatorSpec
+
+    ic = identify_config_from_dict(with_("MC.light_source.source_type", 0))
+    assert EmulatorSpec.from_model(ic.model).source_type == "pencil"
+
+
+def test_a_source_the_emulator_cannot_take_is_bad_input(tmp_path, capsys):
+    cfg = write_toml(tmp_path, 'source_type = "tophat"', "source_type = 1")  # isotropic
+    assert run("identify", cfg, "--data", EX / "tiny_data.csv", "--out", tmp_path / "o") == 2
+    one_error_line(capsys, "MC.light_source.source_type = 1")
+    assert not (tmp_path / "o").exists()
+
+
+@pytest.mark.parametrize("option, value, needle", [
+    ("--emulator-photons", "-5", "--emulator-photons must be >= 1, got -5"),
+    ("--emulator-photons", "0", "--emulator-photons must be >= 1, got 0"),
+    ("--emulator-table", "2", "--emulator-table must be >= 4, got 2"),
+])
+def test_paper_refuses_bad_emulator_options(tmp_path, capsys, option, value, needle):
+    assert run("paper", "constant", option, value, "--out", tmp_path / "o") == 2
+    one_error_line(capsys, needle)
+    assert not (tmp_path / "o").exists()

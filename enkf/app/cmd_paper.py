@@ -4,7 +4,10 @@ from __future__ import annotations
 
 import sys
 
+from fem.checks import check_number
+
 from .common import apply_threads, close_client, dask_client
+from .config import _LIMITS
 
 __all__ = ["cmd_paper"]
 
@@ -16,6 +19,11 @@ def cmd_paper(args) -> int:
     apply_threads(args.threads)
     if args.members < 2:
         raise ValueError(f"--members must be >= 2, got {args.members}")
+    # the limits of the config's keys for the same things (filter.emulator.*)
+    check_number("--emulator-photons", args.emulator_photons, integer=True, lo=1,
+                 hi=_LIMITS["filter.emulator.n_photons"])
+    check_number("--emulator-table", args.emulator_table, integer=True, lo=4,
+                 hi=_LIMITS["filter.emulator.n_mua"])
     verbose = not args.quiet
     client = dask_client(args)
     try:

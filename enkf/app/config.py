@@ -51,6 +51,7 @@ from types import SimpleNamespace
 import numpy as np
 
 from fem.checks import check_number, shorten
+from mcmatlab_py import NotBuiltError
 from mcmatlab_py.budget import check_filter, check_steps
 from mcmatlab_py.config import ConfigError, check_keys, model_from_config, read_toml
 
@@ -404,6 +405,8 @@ def _pair(key, v, positive=False):
 
 def identify_config_from_dict(cfg: dict) -> IdentifyConfig:
     """Validate a parsed config for ``tissue-enkf identify``."""
+    from mcmatlab_py.emulator import check_emulated
+
     from .config_params import (  # it uses this module's number checks: no import cycle
         bounds_settings,
         coagulation_settings,
@@ -418,7 +421,8 @@ def identify_config_from_dict(cfg: dict) -> IdentifyConfig:
     G = model.G
     try:
         model.HS.validate(G)
-    except ValueError as err:
+        check_emulated(model)  # the filter's forward model is an emulator of this source
+    except (ValueError, NotBuiltError) as err:
         raise ConfigError(str(err)) from None
     flt = check_keys("filter", cfg.get("filter", {}), _FILTER_KEYS)
     medium, second = _estimated_media(flt.get("medium"), G)
