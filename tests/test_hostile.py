@@ -12,6 +12,9 @@ from __future__ import annotations
 
 import copy
 import math
+import signal
+import subprocess
+import sys
 import tomllib
 from pathlib import Path
 
@@ -212,3 +215,53 @@ def test_paper_refuses_bad_emulator_options(tmp_path, capsys, option, value, nee
     assert run("paper", "constant", option, value, "--out", tmp_path / "o") == 2
     one_error_line(capsys, needle)
     assert not (tmp_path / "o").exists()
+
+
+# ------------------------------------------------------------------ signals
+
+_SIGNALLED_RUN = """
+import os, signal, sys
+import mcmatlab_py.plotting as plotting
+from enkf.app.cli import main
+
+def plot_na_slices(model, path):  # the run is writing its outputs: the signal arrives
+    os.kill(os.getpid(), signal.{name})
+
+plotting.plot_na_slices = plot_na_slices
+sys.exit(main(["mc", {config!r}, "--out", {out!r}, "--photons", "100", "--quiet"]))
+"""
+
+
+@pytest.mark.parametrize("sig", [signal.SIGHUP, signal.SIGQUIT, signal.SIGTERM])
+def test_hangup_and_quit_clean_up_as_sigterm(tmp_path, sig):
+    out = tmp_path / "out"
+    code = _SIGNALLED_RUN.format(name=sig.name, config=str(EX / "tiny.toml"), out=str(out))
+    proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                          timeout=300)
+    assert proc.returncode == 128 + sig, proc.stderr
+    assert f"terminated ({sig.name})" in proc.stderr and "Traceback" not in proc.stderr
+    assert not out.exists() and not list(tmp_path.glob(".*partial"))
+
+
+# ------------------------------------------------------------------ --out a file
+
+@pytest.mark.parametrize("argv", [
+    ["mc", EX / "tiny.toml"], ["heat", EX / "tiny.toml"],
+    ["identify", EX / "tiny.toml", "--data", EX / "tiny_data.csv"],
+    ["identify", EX / "tiny.toml", "--follow", EX / "tiny_data.csv"],
+    ["paper", "constant"], ["validate", "--only", "no_such_check"],
+])
+@pytest.mark.parametrize("force", [[], ["--force"]])
+def test_out_naming_a_file_is_refused_and_the_file_left_untouched(tmp_path, capsys, argv,
+                                                                    force):
+    f = tmp_path / "notes.txt"
+    f.write_text("years of work")
+    before = f.stat()
+    assert run(*argv, "--out", f, *force) == 2
+    one_error_line(capsys, "exists and is not a directory")
+    after = f.stat()
+    assert f.read_text() == "years of work"
+    assert (after.st_ino, after.st_mtime_ns, after.st_mode) == (before.st_ino,
+                                                                 before.st_mtime_ns,
+                                                                 before.st_mode)
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["notes.txt"]

@@ -166,12 +166,22 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
+#: the signals that end a run as Ctrl-C does: kill's default, a closed terminal or SSH
+#: session, Ctrl-\ (whose default, a core dump, would leave the partial outputs behind)
+TERMINATING_SIGNALS = (signal.SIGTERM, signal.SIGHUP, signal.SIGQUIT)
+
+
 class Terminated(BaseException):
-    """SIGTERM arrived: unwind like Ctrl-C (partial outputs are removed on the way out)."""
+    """A terminating signal arrived: unwind like Ctrl-C (partial outputs are removed on the
+    way out); ``signum`` is the signal's number."""
+
+    def __init__(self, signum: int = signal.SIGTERM):
+        super().__init__(signum)
+        self.signum = signum
 
 
-def _on_sigterm(signum, frame):
-    raise Terminated
+def _on_signal(signum, frame):
+    raise Terminated(signum)
 
 
 def main(argv=None) -> int:
@@ -179,8 +189,8 @@ def main(argv=None) -> int:
 
     0 success; 1 a validation check failed, or an unexpected error (one line and a hint
     to report it; ``--debug`` shows the traceback); 2 bad input (one line naming the
-    field and the value, nothing written); 130 Ctrl-C and 143 SIGTERM (partial outputs
-    removed).
+    field and the value, nothing written); 130 Ctrl-C, 143 SIGTERM, 129 SIGHUP and 131
+    SIGQUIT (partial outputs removed).
     """
     parser = build_parser()
     args = parser.parse_args(argv)
@@ -189,9 +199,9 @@ def main(argv=None) -> int:
     report.command_line = ["tissue-enkf", *(sys.argv[1:] if argv is None else argv)]
     if not args.debug:  # a warning is one line for the user, not a source excerpt
         warnings.formatwarning = lambda message, *a, **k: f"warning: {message}\n"
-    old = old_int = None
+    old, old_int = {}, None
     if threading.current_thread() is threading.main_thread():
-        old = signal.signal(signal.SIGTERM, _on_sigterm)
+        old = {s: signal.signal(s, _on_signal) for s in TERMINATING_SIGNALS}
         # Ctrl-C raises KeyboardInterrupt (exit 130, what was kept said) even when a library
         # imported earlier in this process (a Dask cluster, a notebook) replaced the handler
         old_int = signal.signal(signal.SIGINT, signal.default_int_handler)
@@ -204,9 +214,9 @@ def main(argv=None) -> int:
         print(f"interrupted: {getattr(exc, 'outcome', 'nothing written')}", file=sys.stderr)
         return 130
     except Terminated as exc:
-        print(f"terminated (SIGTERM): {getattr(exc, 'outcome', 'nothing written')}",
-              file=sys.stderr)
-        return 143
+        print(f"terminated ({signal.Signals(exc.signum).name}): "
+              f"{getattr(exc, 'outcome', 'nothing written')}", file=sys.stderr)
+        return 128 + exc.signum  # the shell's status of a process the signal ended
     except (ValueError, OSError) as err:
         if args.debug:
             raise
@@ -223,8 +233,8 @@ def main(argv=None) -> int:
               f"--debug's traceback.", file=sys.stderr)
         return EXIT_UNEXPECTED
     finally:
-        if old is not None:
-            signal.signal(signal.SIGTERM, old)
+        for s, handler in old.items():
+            signal.signal(s, handler)
         if old_int is not None:
             signal.signal(signal.SIGINT, old_int)
 
