@@ -114,6 +114,9 @@ class HeatSimulation(StrictAttributes):
     * ``sensor_temps``: (n_times, n_sensors) deg C at ``temp_sensor_positions``.
     * ``T``: final temperature, deg C, on the mesh nodes: (nx+1, ny+1, nz+1) for the
       default mesh whose nodes are the voxel corners (``T_nodes`` is the flat (npoints,)).
+      Set before a run, it is the start temperature, as MCmatlab's ``HS.T``: a number or
+      (nx, ny, nz) on the voxels (or this shape on the nodes); before a first run it
+      becomes ``T_initial`` too, and one of its own that differs raises a ``ValueError``.
     * ``Omega``: Arrhenius damage integral, same shape as ``T`` (0 where E, A not given).
     * ``T_voxels``, ``Omega_voxels``: the same at the voxel centres, (nx, ny, nz)
       (MCmatlab's ``HS.T`` and ``HS.Omega``): ``T_voxels`` the P1 field evaluated there;

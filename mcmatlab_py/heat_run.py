@@ -1,7 +1,8 @@
 """The time loop of the heat simulation (:func:`run_heat`, behind ``model.simulate_heat_distribution``).
 
 One run: set up the mesh, the voxel <-> node operators and the thermal sub-media,
-start from ``HS.T_initial`` (or, chained, from the end of the previous run), and march
+start from ``HS.T_initial`` or a ``HS.T`` set before the run (or, chained, from the end
+of the previous run), and march
 the schedule of :meth:`HeatSimulation.schedule` with :func:`fem.march`. After every
 step the damage integral and the media's highest temperatures advance; at every update
 the state is reported (slice plots, movie frames) and, every
@@ -113,13 +114,14 @@ def run_heat(model) -> None:  # noqa: C901  (one loop with its callbacks)
     if chained and (HS.T_nodes is None or HS.T_nodes.size != npts):
         raise ValueError("HS holds a previous run on another mesh: call model.HS.reset() to "
                          "start afresh")
+    T_set = _start_from_T(HS, G, S, chained)
     if chained:
-        T0 = np.array(HS.T_nodes, dtype=float)
+        T0 = np.array(HS.T_nodes, dtype=float) if T_set is None else T_set
         Omega = np.array(HS.Omega, dtype=float).ravel()
         Omega_vox = np.array(HS.Omega_voxels, dtype=float).ravel()
         t_offset = float(HS.sensor_times[-1])
     else:
-        T0 = voxels_to_nodes(L, HS.T_initial)
+        T0 = voxels_to_nodes(L, HS.T_initial) if T_set is None else T_set
         Omega = np.zeros(npts)
         Omega_vox = np.zeros(M.size)
         t_offset = 0.0
@@ -301,6 +303,58 @@ def run_heat(model) -> None:  # noqa: C901  (one loop with its callbacks)
             warnings.warn(f"medium {m.name!r} gets hotter than {BOILING_WARNING_C:g} deg C "
                           f"({HS.max_media_temps[i]:.4g} deg C): water in it would boil, "
                           "which this heat model does not include", stacklevel=4)
+
+
+def _start_from_T(HS, G, S, chained) -> np.ndarray | None:
+    """(npoints,) deg C: the start temperature given as ``HS.T``, MCmatlab's way, or None.
+
+    MCmatlab's ``HS.T`` is both the start temperature (a number or (nx, ny, nz) on the
+    voxels; this port also takes (nx+1, ny+1, nz+1) on the nodes of the default mesh, the
+    shape of its own ``HS.T``) and the result. ``HS.T`` is taken as set by the user when no
+    run has filled it, or when it no longer holds the last run's nodal field (a chained run
+    then continues from it, with the damage and clock of the previous run, as MCmatlab's).
+    Before a first run, ``HS.T_initial`` is set to it (so that ``HS.reset()`` and the
+    figures' rise above ``T_initial`` agree); a ``T_initial`` of its own that differs raises.
+    """
+    from .heat import T_INITIAL_RANGE, HeatSimulation
+    from .media_bins import state_field
+
+    T = HS.T
+    if T is None:
+        return None
+    node_shape = tuple(n + 1 for n in S.mesh_grid.shape)
+    is_nodal = np.shape(T) == node_shape and np.shape(T) != (G.nx, G.ny, G.nz)
+    if chained and is_nodal and HS.T_nodes is not None \
+            and np.array_equal(np.asarray(T, dtype=float).ravel(), HS.T_nodes):
+        return None  # the previous run's result: chain from it
+    lo, hi = T_INITIAL_RANGE
+    if is_nodal:
+        value = state_field("HS.T", T, node_shape, lower=lo, upper=hi)
+        T0 = np.asarray(value, dtype=float).ravel().copy()
+        voxel_value = S.to_voxels(T0)
+    else:
+        value = state_field("HS.T", T, (G.nx, G.ny, G.nz), lower=lo, upper=hi)
+        T0, voxel_value = voxels_to_nodes(S.L, value), value
+    if not chained:
+        default = HeatSimulation.__dataclass_fields__["T_initial"].default
+        own = HS.T_initial
+        if not (np.ndim(own) == 0 and own == default):
+            # both are numbers or (nx, ny, nz) arrays here (HS.validate ran): they broadcast
+            if is_nodal or not np.all(np.asarray(own) == np.asarray(value)):
+                raise ValueError(f"HS.T = {_short(T)} and HS.T_initial = {_short(own)} both give "
+                                 "the start temperature and differ: set HS.T_initial only (or "
+                                 "HS.T = None), or MCmatlab's HS.T with HS.T_initial left at "
+                                 f"{default}")
+        HS.T_initial = voxel_value
+    return T0
+
+
+def _short(v) -> str:
+    if np.ndim(v) == 0:
+        return repr(v)
+    a = np.asarray(v)
+    return f"array of shape {a.shape}" + (f" ({a.min():g}..{a.max():g})" if a.size and
+                                           np.issubdtype(a.dtype, np.number) else "")
 
 
 def heat_source(model) -> np.ndarray:

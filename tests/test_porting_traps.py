@@ -1,0 +1,89 @@
+"""MCmatlab habits that the port must take, or refuse naming its own way (issue 46)."""
+
+import numpy as np
+import pytest
+
+from mcmatlab_py import Medium, Model
+
+VHC, TC = 3.7, 0.0052
+
+
+def block(n=(4, 4, 3), absorbed=False, media=None, geom_func=None):
+    """A small insulated block heated (when ``absorbed``) by 1 W absorbed in its top layer."""
+    model = Model()
+    G = model.G
+    G.nx, G.ny, G.nz = n
+    G.Lx, G.Ly, G.Lz = 0.3, 0.3, 0.2
+    G.media = media or [Medium("tissue", mua=1.0, mus=10.0, VHC=VHC, TC=TC)]
+    G.geom_func = geom_func
+    NA = np.zeros(n)
+    if absorbed:
+        NA[:, :, 0] = 1.0 / (G.Lx * G.Ly * G.dz)
+    model.MC.NA = NA
+    HS = model.HS
+    HS.P, HS.progress = 1.0, False
+    HS.duration_on, HS.duration_off, HS.dt = 0.1, 0.1, 0.05
+    return model
+
+
+# ------------------------------------------------------------------ 1. HS.T as the start
+
+
+def test_hs_T_set_before_the_run_is_the_start_temperature():
+    model = block()
+    model.HS.T = 20
+    model.simulate_heat_distribution()
+    np.testing.assert_allclose(model.HS.T_voxels, 20.0, rtol=1e-12)
+    assert model.HS.T_initial == 20.0  # recorded: a reset run starts there again
+    model.HS.reset()
+    model.simulate_heat_distribution()
+    np.testing.assert_allclose(model.HS.T_voxels, 20.0, rtol=1e-12)
+
+
+def test_hs_T_array_equals_the_same_T_initial():
+    T0 = np.full((4, 4, 3), 30.0)
+    T0[:2, :2, :2] = 60.0
+    by_T, by_initial = block(absorbed=True), block(absorbed=True)
+    by_T.HS.T = T0
+    by_initial.HS.T_initial = T0.copy()
+    by_T.simulate_heat_distribution()
+    by_initial.simulate_heat_distribution()
+    np.testing.assert_allclose(by_T.HS.T_nodes, by_initial.HS.T_nodes, rtol=1e-13)
+    np.testing.assert_array_equal(by_T.HS.T_initial, T0)
+
+
+def test_hs_T_and_a_different_T_initial_are_refused():
+    model = block()
+    model.HS.T, model.HS.T_initial = 20.0, 45.0
+    with pytest.raises(ValueError, match=r"HS\.T = 20\.0 and HS\.T_initial = 45\.0"):
+        model.simulate_heat_distribution()
+    model.HS.T_initial = 20.0  # the same: no ambiguity
+    model.simulate_heat_distribution()
+    np.testing.assert_allclose(model.HS.T_voxels, 20.0, rtol=1e-12)
+
+
+@pytest.mark.parametrize("value, pattern", [
+    ("hot", r"HS\.T must be a number or an array of shape \(4, 4, 3\)"),
+    (np.zeros((2, 2, 2)), r"HS\.T must be a number or an array of shape \(4, 4, 3\), got shape"),
+    (float("nan"), r"HS\.T must be finite"),
+])
+def test_bad_hs_T_is_named(value, pattern):
+    model = block()
+    model.HS.T = value
+    with pytest.raises(ValueError, match=pattern):
+        model.simulate_heat_distribution()
+
+
+def test_chained_run_still_continues_and_a_new_hs_T_restarts_the_temperature():
+    one, two = block(absorbed=True), block(absorbed=True)
+    one.HS.duration_on, one.HS.duration_off = 0.1, 0.2
+    one.simulate_heat_distribution()
+    two.simulate_heat_distribution()  # 0.1 on, 0.1 off
+    two.HS.duration_on, two.HS.duration_off = 0.0, 0.1
+    two.simulate_heat_distribution()  # chained: HS.T holds the last run's result
+    np.testing.assert_allclose(two.HS.T_nodes, one.HS.T_nodes, rtol=1e-12)
+    # MCmatlab's: a HS.T set between runs is where the next one starts; the clock goes on
+    two.HS.T = 25.0
+    two.simulate_heat_distribution()
+    np.testing.assert_allclose(two.HS.T_voxels, 25.0, rtol=1e-12)
+    assert two.HS.sensor_times[-1] == pytest.approx(0.4)
