@@ -38,14 +38,16 @@ __all__ = [
 ]
 
 
-def element_coefficient(mesh, value, name: str) -> np.ndarray:
+def element_coefficient(mesh, value, name: str, *, allow_zero: bool = False) -> np.ndarray:
     """Validate a positive per-element coefficient; scalar or (nelements,).
+
+    ``allow_zero``: 0 is taken too (a conductivity of 0: a perfect insulator).
 
     Raises
     ------
     ValueError
-        Naming ``name`` and the first bad value (non-finite or <= 0) or the
-        bad shape.
+        Naming ``name`` and the first bad value (non-finite or <= 0, < 0 with
+        ``allow_zero``) or the bad shape.
     """
     ne = mesh.t.shape[1]
     c = np.asarray(value, dtype=np.float64)
@@ -53,9 +55,10 @@ def element_coefficient(mesh, value, name: str) -> np.ndarray:
         c = np.full(ne, float(c))
     if c.shape != (ne,):
         raise ValueError(f"{name} must be a scalar or have shape ({ne},), got shape {c.shape}")
-    bad = np.flatnonzero(~np.isfinite(c) | (c <= 0))
+    bad = np.flatnonzero(~np.isfinite(c) | ((c < 0) if allow_zero else (c <= 0)))
     if bad.size:
-        raise ValueError(f"{name} must be > 0 and finite, got {name}[{bad[0]}]={float(c[bad[0]])!r}")
+        raise ValueError(f"{name} must be {'>=' if allow_zero else '>'} 0 and finite, got "
+                         f"{name}[{bad[0]}]={float(c[bad[0]])!r}")
     return c
 
 
@@ -91,14 +94,14 @@ def stiffness_matrix(mesh, tc, prune: bool = True) -> sp.csr_matrix:
     ----------
     mesh : skfem.MeshTet
     tc : float or array (nelements,)
-        W cm^-1 K^-1.
+        W cm^-1 K^-1 (>= 0; 0: an insulating element).
     prune : bool
         Drop entries below ``1e-13`` of their row's diagonal: on Kuhn meshes
         the face and body diagonals of a voxel couple with exactly zero weight
         (orthogonal barycentric gradients), and dropping them halves the
         number of stored entries.
     """
-    k = element_coefficient(mesh, tc, "tc")
+    k = element_coefficient(mesh, tc, "tc", allow_zero=True)
     grid = structured_grid(mesh)
     if grid is not None and prune:
         return _kuhn_stiffness(grid, k)

@@ -72,7 +72,7 @@ class HeatStepper:
     vhc : float or array (nelements,)
         J cm^-3 K^-1, volumetric heat capacity per element (> 0).
     tc : float or array (nelements,)
-        W cm^-1 K^-1, thermal conductivity per element (> 0).
+        W cm^-1 K^-1, thermal conductivity per element (>= 0; 0: a perfect insulator).
     dt : float
         s, time step (> 0).
     theta : float
@@ -137,7 +137,7 @@ class HeatStepper:
         self.mesh = mesh
         n = mesh.p.shape[1]
         self.vhc = element_coefficient(mesh, vhc, "vhc")
-        self.tc = element_coefficient(mesh, tc, "tc")
+        self.tc = element_coefficient(mesh, tc, "tc", allow_zero=True)
         dt_f = float(dt)
         if not np.isfinite(dt_f) or dt_f <= 0:
             raise ValueError(f"dt must be > 0, got {dt_f!r}")
@@ -266,7 +266,7 @@ class HeatStepper:
     def _kron_preconditioner(self):
         """Fast diagonalization of the volume-averaged operator, on structured meshes whose
         VHC and TC vary little (:data:`KRON_PRECONDITIONER_MAX_RATIO`); else None (Jacobi)."""
-        if not self.lumped or self.theta == 0:
+        if not self.lumped or self.theta == 0 or not self.tc.any():
             return None
         for name, coefficient in (("vhc", self.vhc), ("tc", self.tc)):
             if coefficient.max() > KRON_PRECONDITIONER_MAX_RATIO[name] * coefficient.min():
@@ -301,6 +301,8 @@ class HeatStepper:
             return "consistent mass is not a Kronecker product"
         if np.ptp(self.vhc) != 0 or np.ptp(self.tc) != 0:
             return "VHC and TC must be homogeneous"
+        if not self.tc.any():
+            return "TC = 0 (no conduction: the step is a diagonal solve)"
         self._grid = structured_grid(self.mesh)
         if self._grid is None:
             return "the mesh is not a fem.mesh.box_mesh"

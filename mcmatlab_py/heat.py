@@ -69,7 +69,9 @@ def auto_dt(spacing, vhc, tc, theta: float = 1.0, large_time_steps: bool = False
     spacing : (3,) cm
         Mesh spacing ``(hx, hy, hz)``.
     vhc, tc : arrays (n,)
-        J cm^-3 K^-1 and W cm^-1 K^-1, of the elements or media (NaN entries ignored).
+        J cm^-3 K^-1 and W cm^-1 K^-1, of the elements or media (NaN entries ignored);
+        TC = 0 (an insulator) sets no bound, and a ``ValueError`` asks for ``HS.dt`` when
+        every TC is 0.
     theta : float
         The scheme's implicitness, in [0.5, 1].
     large_time_steps : bool
@@ -78,7 +80,9 @@ def auto_dt(spacing, vhc, tc, theta: float = 1.0, large_time_steps: bool = False
     alpha = np.asarray(tc, float) / np.asarray(vhc, float)
     alpha = alpha[np.isfinite(alpha)]
     if alpha.size == 0 or alpha.max() <= 0:
-        raise ValueError("auto_dt needs media with VHC > 0 and TC > 0")
+        raise ValueError("HS.dt = None, but every medium has TC = 0: the automatic time step "
+                         "needs some TC > 0 (perfect insulators have no time scale); set HS.dt "
+                         "(s)")
     lam = 4.0 * float(alpha.max()) * sum(1.0 / float(h) ** 2 for h in spacing)
     z = MCMATLAB_STEP_FACTOR
     if theta < 1.0:

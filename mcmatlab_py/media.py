@@ -72,8 +72,9 @@ def _range_problem(field: str, v: np.ndarray) -> str | None:
         return "must be in [-1, 1]" if (np.abs(v) > 1).any() else None
     if field in LIMITS and (v > LIMITS[field]).any():
         return f"must be <= {LIMITS[field]:g}"
-    if field in THERMAL_FIELDS:
+    if field == "VHC":
         return "must be > 0" if (v <= 0).any() else None
+    # TC = 0 is a perfect insulator (MCmatlab takes it): no heat crosses the medium
     return "must be >= 0" if (v < 0).any() else None  # mua, mus, E, A
 
 
@@ -123,8 +124,8 @@ class Medium(StrictAttributes):
         Volumetric heat capacity, J cm^-3 K^-1 (> 0), or ``VHC(T, FD)``; needed by the heat
         simulation.
     TC : float or callable, optional
-        Thermal conductivity, W cm^-1 K^-1 (> 0), or ``TC(T, FD)``; needed by the heat
-        simulation.
+        Thermal conductivity, W cm^-1 K^-1 (>= 0; 0 is a perfect insulator), or
+        ``TC(T, FD)``; needed by the heat simulation.
     E : float, optional
         Arrhenius activation energy, J/mol (>= 0), for thermal damage.
     A : float, optional

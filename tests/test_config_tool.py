@@ -49,7 +49,7 @@ def with_(path: str, value, base=None):
     ("G.media.0.mua", -1.0, "mua must be >= 0, got -1.0"),
     ("G.media.0.mus", float("nan"), "mus must be finite, got nan"),
     ("G.media.0.VHC", 0.0, "VHC must be > 0, got 0.0"),
-    ("G.media.0.TC", -0.1, "TC must be > 0, got -0.1"),
+    ("G.media.0.TC", -0.1, "TC must be >= 0, got -0.1"),
     ("G.media.0.g", 1.5, "g must be in [-1, 1], got 1.5"),
     ("G.media.0.g", -1.5, "g must be in [-1, 1], got -1.5"),
     ("G.media.0.n", 0.5, "n must be >= 1, got 0.5"),

@@ -141,7 +141,7 @@ def test_probe_style_shapes_single_and_ensemble():
 @pytest.mark.parametrize(
     ("kwargs", "match"),
     [(dict(vhc=-1.0), r"vhc must be > 0 and finite, got vhc\[0\]=-1.0"),
-     (dict(tc=0.0), r"tc must be > 0 and finite, got tc\[0\]=0.0"),
+     (dict(tc=-1.0), r"tc must be >= 0 and finite, got tc\[0\]=-1.0"),
      (dict(dt=0.0), r"dt must be > 0, got 0.0"),
      (dict(dt=-0.1), r"dt must be > 0, got -0.1"),
      (dict(theta=1.5), r"theta must be in \[0, 1\], got 1.5"),

@@ -3,6 +3,7 @@
 import numpy as np
 import pytest
 
+import fem
 from mcmatlab_py import Medium, Model
 
 VHC, TC = 3.7, 0.0052
@@ -87,3 +88,49 @@ def test_chained_run_still_continues_and_a_new_hs_T_restarts_the_temperature():
     two.simulate_heat_distribution()
     np.testing.assert_allclose(two.HS.T_voxels, 25.0, rtol=1e-12)
     assert two.HS.sensor_times[-1] == pytest.approx(0.4)
+
+
+# ------------------------------------------------------------------ 2. TC = 0
+
+
+def test_a_perfect_insulator_is_a_medium():
+    assert Medium("insulator", mua=1.0, mus=10.0, VHC=3.7, TC=0).TC == 0.0
+    with pytest.raises(ValueError, match=r"Medium\('x'\)\.TC must be >= 0, got -1\.0"):
+        Medium("x", mua=1.0, mus=10.0, VHC=3.7, TC=-1.0)
+    with pytest.raises(ValueError, match=r"VHC must be > 0, got 0"):
+        Medium("x", mua=1.0, mus=10.0, VHC=0, TC=0)
+
+
+@pytest.mark.parametrize("dt", [0.05, None])
+def test_heat_deposited_in_an_insulator_stays_where_it_was_deposited(dt):
+    """The lower half is a perfect insulator heated in its deepest voxel layer: the nodes
+    with only insulating elements around them rise by exactly the energy their hat
+    functions receive over their heat capacity (no conduction), and the rest stays at T0."""
+    media = [Medium("tissue", mua=1.0, mus=10.0, VHC=VHC, TC=TC),
+             Medium("insulator", mua=1.0, mus=10.0, VHC=VHC, TC=0)]
+    model = block(n=(4, 4, 4), media=media, geom_func=lambda X, Y, Z: (Z > 0.1).astype(int))
+    G, HS = model.G, model.HS
+    NA = np.zeros((4, 4, 4))
+    NA[:, :, 3] = 1.0 / (G.Lx * G.Ly * G.dz)  # 1 W per W, all in the deepest layer
+    model.MC.NA = NA
+    HS.dt = dt
+    model.simulate_heat_distribution()
+    mesh = HS.mesh
+    energy = fem.voxel_load_matrix(mesh, G.grid) @ NA.ravel() * HS.P * HS.duration_on  # J
+    rise = energy / fem.lumped_mass(mesh, VHC)
+    z = mesh.p[2]
+    insulated = z > 0.1 + 1e-9  # node layers 3 and 4: every element around them insulates
+    np.testing.assert_allclose(HS.T_nodes[insulated] - 37.0, rise[insulated], rtol=1e-10)
+    np.testing.assert_allclose(HS.T_nodes[~insulated], 37.0, rtol=1e-12)
+
+
+def test_all_insulators_need_a_given_time_step():
+    model = block(absorbed=True, media=[Medium("insulator", mua=1.0, mus=10.0, VHC=VHC, TC=0)])
+    model.HS.dt = None
+    with pytest.raises(ValueError, match=r"HS\.dt = None, but every medium has TC = 0.*set "
+                                         r"HS\.dt"):
+        model.simulate_heat_distribution()
+    model.HS.dt = 0.05  # then the heat stays in the top layer
+    model.simulate_heat_distribution()
+    top = model.HS.T_voxels[:, :, 0]
+    assert np.all(top > 37.0) and np.all(model.HS.T_voxels[:, :, 2] == pytest.approx(37.0))
