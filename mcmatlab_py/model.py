@@ -428,10 +428,11 @@ class Model(StrictAttributes):
         simulate_heat_distribution(self)
         return self
 
-    def plot(self, what: str, path=None, *, interactive: bool = False) -> dict:
+    def plot(self, what: str | None = None, path=None, *, interactive: bool = False) -> dict:
         """MCmatlab's ``plot(model, what)`` for ``what`` in "G", "MC", "FMC", "HS": returns
         ``{name: Figure}``, saved as ``<stem>_<name>.png`` next to ``path`` when given
-        (:func:`mcmatlab_py.plotting.plot_model`)."""
+        (:func:`mcmatlab_py.plotting.plot_model`). Without ``what`` (MCmatlab's
+        ``plot(model)``): every stage that has outputs, named ``"<stage>_<name>"``."""
         from .plotting import plot_model
 
         return plot_model(self, what, path, interactive=interactive)

@@ -134,3 +134,43 @@ def test_all_insulators_need_a_given_time_step():
     model.simulate_heat_distribution()
     top = model.HS.T_voxels[:, :, 0]
     assert np.all(top > 37.0) and np.all(model.HS.T_voxels[:, :, 2] == pytest.approx(37.0))
+
+
+# ------------------------------------------------------------------ 3. plot(model)
+
+
+def test_plot_without_a_type_draws_every_stage_that_has_outputs(tmp_path):
+    """MCmatlab's ``plot(model)``: the geometry always, then each stage that has run."""
+    matplotlib = pytest.importorskip("matplotlib")
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    from matplotlib.figure import Figure
+
+    model = Model()
+    G = model.G
+    G.nx, G.ny, G.nz = 4, 4, 3
+    G.Lx = G.Ly = G.Lz = 0.1
+    G.media = [Medium("dye", mua=lambda w: 5.0 if w < 500 else 1.0, mus=10.0, g=0.9, n=1.0,
+                      VHC=VHC, TC=TC, QY=0.5)]
+    for sim, wavelength, seed in ((model.MC, 450.0, 1), (model.FMC, 550.0, 2)):
+        sim.n_photons_requested, sim.seed, sim.progress = 2000, seed, False
+        sim.wavelength = wavelength
+    model.MC.light_source.source_type = "plane_wave"
+    model.HS.progress, model.HS.duration_on, model.HS.dt = False, 0.02, 0.01
+    try:
+        def stages(figs):
+            assert figs and all(isinstance(f, Figure) for f in figs.values())
+            return {name.split("_", 1)[0] for name in figs}
+
+        assert stages(model.plot()) == {"G"}
+        model.run_monte_carlo()
+        assert stages(model.plot()) == {"G", "MC"}
+        model.run_monte_carlo("fluorescence")
+        model.simulate_heat_distribution()
+        figs = model.plot(path=tmp_path / "all")
+        assert stages(figs) == {"G", "MC", "FMC", "HS"}
+        assert {"G_geometry", "MC_NA", "FMC_NA", "HS_temperature"} <= set(figs)
+        assert (tmp_path / "all_HS_temperature.png").is_file()
+        assert set(model.plot("MC")) == {"media_properties", "NA", "NFR"}  # as before
+    finally:
+        plt.close("all")
