@@ -48,12 +48,15 @@ class StrictAttributes:
     * ``_renamed``: MCmatlab name -> our name, where the snake_case rule does not give it;
     * ``_not_built``: MCmatlab names (and their snake_case forms are derived) of
       features not built yet; using one raises :class:`NotBuiltError`.
+    * ``_instead``: MCmatlab name -> how this port does the same, for features it does
+      another way; using one raises :class:`NotBuiltError` with that advice.
     """
 
     _owner_label: ClassVar[str] = ""  #: how error messages name the object, e.g. "MC"
     _extra_attributes: ClassVar[tuple[str, ...]] = ()
     _renamed: ClassVar[dict[str, str]] = {}
     _not_built: ClassVar[tuple[str, ...]] = ()
+    _instead: ClassVar[dict[str, str]] = {}
 
     @classmethod
     def _known_attributes(cls) -> frozenset[str]:
@@ -94,6 +97,10 @@ class StrictAttributes:
         if snake != name.lower() and snake in by_lower:
             return AttributeError(f"{head}: MCmatlab's {name} is {label}.{by_lower[snake]} here "
                                   "(snake_case)")
+        instead = {**cls._instead, **{camel_to_snake(k): v for k, v in cls._instead.items()}}
+        if name in instead or snake in instead:
+            return NotBuiltError(f"MCmatlab's {label}.{name} has no counterpart in this port: "
+                                 f"{instead.get(name) or instead[snake]}")
         not_built = set(cls._not_built) | {camel_to_snake(n) for n in cls._not_built}
         if name in not_built or snake in not_built:
             return NotBuiltError(f"MCmatlab's {label}.{name} is not built yet")

@@ -51,7 +51,10 @@ class Geometry(StrictAttributes):
 
     _owner_label = "G"
     _renamed = {"mediaPropertiesFunc": "media"}
-    _not_built = ("silentMode", "mediaPropParams", "M_raw")
+    _not_built = ("silentMode", "M_raw")
+    _instead = {"mediaPropParams": "G.media is the list of Medium itself (MCmatlab's "
+                "mediaPropertiesFunc, called with mediaPropParams): build the list from your "
+                "parameters, e.g. G.media = my_media(params), and again when they change"}
 
     #: more voxels than this cannot be held (a medium map, per-thread int64 tallies)
     MAX_VOXELS = 200_000_000

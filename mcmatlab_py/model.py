@@ -382,6 +382,23 @@ class Model(StrictAttributes):
         self.FMC = FluorescenceMonteCarloSimulation()
         self.HS = HeatSimulation()
 
+    def reset(self, what: str | None = None) -> Model:
+        """MCmatlab's ``model = reset(model, what)``: ``what`` ("G", "MC", "FMC" or "HS") back
+        to its defaults, settings and results; without ``what``, all four (a new model).
+        Returns ``self``. (``model.HS.reset()`` forgets only the heat results, keeping the
+        settings, to start a heat run afresh.)"""
+        from .fluorescence import FluorescenceMonteCarloSimulation
+        from .heat import HeatSimulation
+
+        fresh = {"G": Geometry, "MC": MonteCarloSimulation,
+                 "FMC": FluorescenceMonteCarloSimulation, "HS": HeatSimulation}
+        if what is not None and what not in fresh:
+            raise ValueError(f"model.reset takes 'G', 'MC', 'FMC', 'HS' or None (all), got "
+                             f"{what!r}")
+        for name in fresh if what is None else (what,):
+            setattr(self, name, fresh[name]())
+        return self
+
     def run_monte_carlo(self, kind: str = "excitation", *, client=None) -> Model:
         """Run the Monte Carlo light transport; fills ``self.MC`` and returns ``self``.
 

@@ -174,3 +174,85 @@ def test_plot_without_a_type_draws_every_stage_that_has_outputs(tmp_path):
         assert set(model.plot("MC")) == {"media_properties", "NA", "NFR"}  # as before
     finally:
         plt.close("all")
+
+
+# ------------------------------------------------------------------ 4. MCmatlab's other names
+
+
+def fluorescent_model(seed=2, n_photons=2000):
+    model = Model()
+    G = model.G
+    G.nx, G.ny, G.nz = 3, 3, 4
+    G.Lx = G.Ly = G.Lz = 0.1
+    G.media = [Medium("dye", mua=lambda w: 5.0 if w < 500 else 1.0, mus=10.0, g=0.9, n=1.0,
+                      QY=0.5)]
+    for sim, wavelength in ((model.MC, 450.0), (model.FMC, 550.0)):
+        sim.n_photons_requested, sim.seed, sim.progress = n_photons, 1, False
+        sim.wavelength = wavelength
+    model.MC.light_source.source_type = "plane_wave"
+    model.FMC.seed = seed
+    return model
+
+
+def test_reset_returns_the_model_with_defaults():
+    """MCmatlab's ``model = reset(model, what)``: settings and results back to the defaults."""
+    model = block(absorbed=True)
+    model.simulate_heat_distribution()
+    model.MC.n_photons_requested = 123
+    assert model.reset("HS") is model
+    assert model.HS.T is None and model.HS.duration_on == Model().HS.duration_on
+    assert model.MC.n_photons_requested == 123 and model.G.nx == 4  # the others kept
+    model = model.reset()
+    assert model.MC.n_photons_requested is None and model.MC.NA is None
+    assert model.G.nx == Model().G.nx and model.G.media == []
+    with pytest.raises(ValueError, match=r"model\.reset takes 'G', 'MC', 'FMC', 'HS' or None "
+                                         r"\(all\), got 'heat'"):
+        model.reset("heat")
+
+
+def test_media_prop_params_names_the_way_of_this_port():
+    from mcmatlab_py import NotBuiltError
+
+    G = Model().G
+    for name in ("mediaPropParams", "media_prop_params"):
+        with pytest.raises(NotBuiltError, match=rf"MCmatlab's G\.{name} has no counterpart in "
+                                                r"this port: G\.media is the list of Medium "
+                                                r"itself.*G\.media = my_media\(params\)"):
+            setattr(G, name, [1.0])
+        assert not hasattr(G, name)
+
+
+def test_combine_models_combines_fluorescence_runs_by_photon_count():
+    """MCmatlab's ``combineModels(models, 'FMC')``: two fluorescence runs of one excitation
+    averaged with weights FMC.n_photons, as one run of all their photons."""
+    import copy
+
+    from mcmatlab_py.combine import combine_models
+
+    a = fluorescent_model().run_monte_carlo()
+    b = copy.deepcopy(a)
+    a.FMC.seed, b.FMC.seed, b.FMC.n_photons_requested = 2, 3, 6000
+    a.run_monte_carlo("fluorescence")
+    b.run_monte_carlo("fluorescence")
+    ab = combine_models([a, b], simulation="FMC")
+    wa, wb = a.FMC.n_photons, b.FMC.n_photons
+    assert ab.FMC.n_photons == wa + wb
+    np.testing.assert_allclose(ab.FMC.NA, (wa * a.FMC.NA + wb * b.FMC.NA) / (wa + wb),
+                               rtol=1e-12)
+    np.testing.assert_array_equal(ab.MC.NA, a.MC.NA)  # the excitation unchanged
+    assert ab.FMC.emitted_power == a.FMC.emitted_power
+    mc = combine_models([a, b])  # the excitations (one run, copied): as before, by MC photons
+    assert mc.MC.n_photons == 2 * a.MC.n_photons
+    np.testing.assert_allclose(mc.MC.NA, a.MC.NA, rtol=1e-12)
+    np.testing.assert_array_equal(mc.FMC.NA, a.FMC.NA)  # the FMC of the first, untouched
+    with pytest.raises(ValueError, match=r"powers = \[1\.0, 2\.0\] with simulation='FMC'"):
+        combine_models([a, b], powers=[1.0, 2.0], simulation="FMC")
+    other = fluorescent_model().run_monte_carlo()
+    other.MC.seed = 9
+    other.run_monte_carlo().run_monte_carlo("fluorescence")
+    with pytest.raises(ValueError, match=r"the excitations differ \(MC\.NA or MC\.wavelength\)"):
+        combine_models([a, other], simulation="FMC")
+    with pytest.raises(ValueError, match=r"every model must have run its FMC Monte Carlo"):
+        combine_models([a, fluorescent_model().run_monte_carlo()], simulation="FMC")
+    with pytest.raises(ValueError, match=r"simulation must be 'MC' or 'FMC', got 'HS'"):
+        combine_models([a], simulation="HS")
