@@ -324,12 +324,17 @@ def test_the_health_check_stops_and_the_estimates_up_to_then_are_written(tmp_pat
     assert (out / "run.json").exists() and (out / "figures" / "estimates.png").exists()
 
 
-def test_validate_quick_subset_writes_report_and_manifest(tmp_path):
+@pytest.mark.parametrize("relative", [False, True], ids=["absolute", "relative"])
+def test_validate_quick_subset_writes_report_and_manifest(tmp_path, monkeypatch, relative):
     src = Path(__file__).parents[1] / "validation" / "reports" / "fem_convergence.md"
     before = src.read_bytes()
-    out = tmp_path / "val"
-    assert run("validate", "--only", "fem_convergence", "--out", out, "--quiet",
-               "--threads", "1") == 0
+    out = tmp_path / "runs" / "val"
+    if relative:  # the scripts run inside the run folder: the same layout as absolute
+        monkeypatch.chdir(tmp_path)
+    assert run("validate", "--only", "fem_convergence", "--out",
+               Path("runs", "val") if relative else out, "--quiet", "--threads", "1") == 0
+    assert {p.name for p in out.iterdir()} == {"figures", "fem_convergence.md", "report.md",
+                                               "run.json"}
     report = (out / "report.md").read_text()
     assert "| fem_convergence | ok |" in report and "Fitted order" in report
     assert (out / "fem_convergence.md").exists() and (out / "figures" / "fem_convergence.png").exists()

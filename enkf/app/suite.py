@@ -136,6 +136,9 @@ def run_suite(out: Path, *, full: bool = False, only: list[str] | None = None, s
     """
     from mcmatlab_py.progress import Progress
 
+    # the scripts run with ``out`` as their folder: a relative --out would be read from
+    # there again and land in out/out/
+    out = Path(out).resolve()
     root = validation_dir()
     names = select(full, only)
     env = dict(os.environ)
