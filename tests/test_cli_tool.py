@@ -24,9 +24,10 @@ def run(*argv):
     return main([str(a) for a in argv])
 
 
-def test_heat_writes_sensors_fields_and_manifest(tmp_path):
+def test_heat_writes_sensors_fields_and_manifest(tmp_path, capsys):
     out = tmp_path / "heat"
     assert run("heat", EX / "tiny.toml", "--out", out, "--quiet") == 0
+    printed = capsys.readouterr().out
     for f in ("sensors.csv", "summary.json", "run.json", "fields/temperature.vtu",
               "fields/absorbed_power.vtu", "figures/sensors.png", "figures/NA_slices.png"):
         assert (out / f).exists(), f
@@ -35,6 +36,10 @@ def test_heat_writes_sensors_fields_and_manifest(tmp_path):
     assert man["versions"]["numpy"] and man["seed"] == 1
     table = np.loadtxt(out / "sensors.csv", delimiter=",", skiprows=1)
     assert table.shape == (21, 3) and table[10, 1] > table[10, 2] > 0  # hotter at the surface
+    # the run's maximum: the pulse's peak (a sensor's), not the cooler last field's
+    s = json.loads((out / "summary.json").read_text())
+    assert s["T_max"] >= table[:, 1:].max() - 1e-6 > s["T_final_max"]  # csv: 8 digits
+    assert f"max temperature {s['T_max']:.2f} deg C during the run" in printed
 
 
 def test_identify_on_the_example_data(tmp_path, cache):
