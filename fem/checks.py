@@ -4,14 +4,17 @@ One implementation: :func:`check_number` refuses what is not a real number (a st
 such as ``"0.5"``, a bool, None), what is not finite, not an integer when one is needed,
 or outside a physically sensible range, with a ``ValueError`` (or the caller's subclass)
 that names the field and shows the value, cut to one short line by :func:`shorten`.
+A misspelt name is answered by :func:`unknown_name_hint`: the closest known name and
+the known names, whole.
 """
 
 from __future__ import annotations
 
+import difflib
 import math
 import numbers
 
-__all__ = ["check_number", "shorten"]
+__all__ = ["check_number", "closest_name", "shorten", "unknown_name_hint"]
 
 
 def shorten(value, limit: int = 80) -> str:
@@ -24,6 +27,29 @@ def shorten(value, limit: int = 80) -> str:
     text = value if isinstance(value, str) else repr(value)
     text = text.replace("\r", " ").replace("\n", " ")
     return text if len(text) <= limit else f"{text[:limit]}... ({len(text)} characters)"
+
+
+def closest_name(name: str, known) -> str | None:
+    """The name of ``known`` closest to the misspelt ``name`` (:mod:`difflib`'s ratio of
+    at least 0.6), or None when none is close."""
+    close = difflib.get_close_matches(name, sorted(known), n=1)
+    return close[0] if close else None
+
+
+def unknown_name_hint(name: str, known, limit: int = 240) -> str:
+    """``"; did you mean 'x'? (allowed: a, b, ...)"`` for a misspelt ``name``: the closest
+    of ``known``, then the names of ``known`` in order, whole, as many as fit in ``limit``
+    characters (``"and 7 more"`` for the rest), so that the message stays one line."""
+    close = closest_name(name, known)
+    names, shown, used = sorted(known), [], 0
+    for n in names:
+        if shown and used + len(n) + 2 > limit:
+            break
+        shown.append(n)
+        used += len(n) + 2
+    rest = f", and {len(names) - len(shown)} more" if len(shown) < len(names) else ""
+    return (f"; did you mean {close!r}?" if close else "") + (
+        f" (allowed: {', '.join(shown)}{rest})")
 
 
 def check_number(name: str, value, *, integer: bool = False, lo: float | None = None,

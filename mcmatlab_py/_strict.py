@@ -10,9 +10,10 @@ camelCase MCmatlab name, or saying that the MCmatlab feature is not built yet.
 from __future__ import annotations
 
 import dataclasses
-import difflib
 import re
 from typing import ClassVar
+
+from fem.checks import closest_name
 
 __all__ = ["NotBuiltError", "StrictAttributes", "camel_to_snake"]
 
@@ -109,8 +110,8 @@ class StrictAttributes:
         if snake != name and snake in methods:
             return AttributeError(f"{head}: MCmatlab's {name} is {label}.{snake}() here")
         candidates = sorted(known | methods)
-        close = difflib.get_close_matches(name, candidates, n=1)
-        if not close and snake != name:
-            close = difflib.get_close_matches(snake, candidates, n=1)
-        hint = f"; did you mean {close[0]!r}?" if close else ""
+        close = closest_name(name, candidates)
+        if close is None and snake != name:
+            close = closest_name(snake, candidates)
+        hint = f"; did you mean {close!r}?" if close else ""
         return AttributeError(f"{head}{hint}")

@@ -45,7 +45,7 @@ from pathlib import Path
 
 import numpy as np
 
-from fem.checks import check_number, shorten
+from fem.checks import check_number, shorten, unknown_name_hint
 
 from .media import Medium
 from .model import Model
@@ -104,13 +104,14 @@ def read_toml(path: str | Path) -> dict:
 
 
 def check_keys(section: str, table, allowed: set[str]) -> dict:
-    """Check that ``table`` is a table whose keys are all in ``allowed``."""
+    """Check that ``table`` is a table whose keys are all in ``allowed``; a ConfigError
+    names the first unknown key, the closest allowed one and the allowed keys."""
     if not isinstance(table, dict):
         raise ConfigError(f"[{section}] must be a table, got {shorten(repr(table))}")
     unknown = sorted(set(table) - allowed)
     if unknown:
-        raise ConfigError(
-            f"unknown key {section}.{shorten(unknown[0])} (allowed: {', '.join(sorted(allowed))})")
+        raise ConfigError(f"unknown key {section}.{shorten(unknown[0])}"
+                          f"{unknown_name_hint(unknown[0], allowed)}")
     return table
 
 

@@ -10,9 +10,9 @@ import numpy as np
 import pytest
 
 from enkf.app.cli import main
-from enkf.app.config import identify_config_from_dict, load_identify
+from enkf.app.config import _FILTER_KEYS, identify_config_from_dict, load_identify
 from enkf.app.readers import read_sensor_csv
-from mcmatlab_py.config import ConfigError, load_model, model_from_config
+from mcmatlab_py.config import _HS_KEYS, _MC_KEYS, ConfigError, load_model, model_from_config
 
 EX = Path(__file__).parents[1] / "examples"
 TINY = (EX / "tiny.toml").read_text()
@@ -115,6 +115,33 @@ def test_bad_config_raises_config_error_naming_key_and_value(path, value, messag
     with pytest.raises(ConfigError) as exc:
         identify_config_from_dict(cfg)
     assert message in str(exc.value)
+
+
+@pytest.mark.parametrize("path, typo, closest", [
+    ("filter.n_member", 20, "n_members"),  # the longest table, more than a line of keys
+    ("MC.n_photon_requested", 10, "n_photons_requested"),
+    ("HS.dt_s", 0.1, "dt"),
+])
+def test_a_misspelt_key_names_the_closest_and_whole_allowed_keys(path, typo, closest):
+    with pytest.raises(ConfigError) as exc:
+        identify_config_from_dict(with_(path, typo))
+    msg = str(exc.value)
+    assert msg.startswith(f"unknown key {path}; did you mean {closest!r}? (allowed: ")
+    # short enough for the command line's one-line cut (400), and every name whole
+    assert len(msg) < 400 and msg.endswith(")") and "..." not in msg
+    listed = msg.split("(allowed: ")[1][:-1].split(", ")
+    more = int(listed.pop().split()[1]) if listed[-1].endswith(" more") else 0
+    keys = {"filter": _FILTER_KEYS, "MC": _MC_KEYS, "HS": _HS_KEYS}[path.split(".")[0]]
+    assert listed == sorted(keys)[:len(listed)] and len(listed) + more == len(keys)
+
+
+def test_a_misspelt_key_on_the_command_line(tmp_path, capsys):
+    cfg = tmp_path / "typo.toml"
+    cfg.write_text(TINY.replace("n_members = 20", "n_member = 20"))
+    assert run("identify", cfg, "--out", tmp_path / "o") == 2
+    err = capsys.readouterr().err.strip()
+    assert err.startswith("error: unknown key filter.n_member; did you mean 'n_members'?")
+    assert err.endswith(" more)") and "..." not in err
 
 
 def test_config_errors_are_value_errors_and_one_line():
