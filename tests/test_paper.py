@@ -71,3 +71,24 @@ def test_truth_key_holds_the_heat_scheme():
     old = TruthConfig(heat_theta=1.0)
     assert TruthConfig().key() != old.key()
     assert old.key() == "256302e53539898f81bd"  # the constant truth's key before the scheme
+
+
+@pytest.mark.parametrize("hotter", [1.5, 2.5])  # 2.5: stopped at the first step
+def test_a_paper_run_stopped_by_the_health_check_says_so_as_identify(tmp_path, monkeypatch,
+                                                                     capsys, hotter):
+    """summary.json's "stopped" (identify's key), the parameter by name; no "diverged"."""
+    from enkf.paper import runner
+
+    real_identify, real_noisy = runner.identify, runner.noisy_sensor
+    monkeypatch.setattr(runner, "noisy_sensor",
+                        lambda truth, seed: real_noisy(truth, seed) * hotter)
+    monkeypatch.setattr(runner, "identify", lambda *a, **k: real_identify(
+        *a, **k, param_bounds=np.array([[0.5, 2.0], [10.0, 1000.0]])))
+    out = tmp_path / "run"
+    assert main(["paper", "constant", "--out", str(out), "--seed", "3",
+                 "--cache-dir", str(tmp_path / "cache"), *SMALL]) == 0
+    s = json.loads((out / "summary.json").read_text())
+    assert "diverged" not in s and s["stopped"].startswith("filter diverged at step ")
+    assert "parameter mua mean" in s["stopped"] or "parameter mus mean" in s["stopped"]
+    assert f"warning: the filter stopped early: {s['stopped']}" in capsys.readouterr().err
+    assert (out / "run.json").exists() and (out / "estimates.csv").exists()

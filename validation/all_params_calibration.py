@@ -36,7 +36,7 @@ def filter_row(seed: int, args) -> dict:
     s = run_experiment("all-params", seed, twin=True, progress=False,
                        model_error=args.model_error).summary
     p = s["parameters"]
-    return {"seed": seed, "stopped": s["diverged"],
+    return {"seed": seed, "stopped": s["stopped"],
             "logerr": {k: float(np.log(v["estimate_final"] / v["truth_final"]))
                        for k, v in p.items()},
             "covered": {k: bool(abs(v["estimate_final"] - v["truth_final"])

@@ -46,7 +46,7 @@ def checks(s: dict) -> dict[str, bool]:
         out[f"coverage {z} >= 0.9"] = t["coverage_2sd"] >= 0.9
     out["every coverage target"] = all(t["coverage_2sd"] >= 0.9 for t in s["temperatures"].values()) \
         and all(v["band_covers_truth_final"] for v in p.values())
-    out["ran to t = 15 s"] = not s["diverged"]
+    out["ran to t = 15 s"] = not s["stopped"]
     out["filter <= 15 s"] = s["timing"]["filter_wall_s"] <= 15
     out["max step <= 100 ms"] = s["timing"]["step_latency_max_s"] <= 0.1
     return out
@@ -100,7 +100,7 @@ def main(argv=None):
             temps = ", ".join(f"{z}: rmse {t['rmse']:.2f}, cov {t['coverage_2sd']:.2f}"
                               for z, t in s["temperatures"].items())
             tm = s["timing"]
-            stop = f" **stopped: {s['diverged']}**" if s["diverged"] else ""
+            stop = f" **stopped: {s['stopped']}**" if s["stopped"] else ""
             rows.append(f"| {seed} | {par}{stop} | {temps} | {tm['filter_wall_s']:.1f} s, max step "
                         f"{1e3 * tm['step_latency_max_s']:.0f} ms |")
             print(sc, "twin" if twin else "fine", seed, par, temps, flush=True)

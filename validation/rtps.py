@@ -41,7 +41,7 @@ def one(scenario: str, twin: bool, seed: int, alpha: float, adaptive: bool = Fal
             "rmse": [t["rmse"] for t in s["temperatures"].values()],
             "sd": np.nanmean(run.estimates.tracked_std[1:], axis=0).tolist(),
             "mus_err": p["mus"]["relative_error_final"], "mua_err": p["mua"]["relative_error_final"],
-            "stopped": bool(s["diverged"])}
+            "stopped": bool(s["stopped"])}
 
 
 def row(scenario: str, twin: bool, alpha: float | str, runs: list[dict]) -> str:

@@ -88,6 +88,7 @@ def _paper(args, paper, client, verbose) -> int:
     print(f"filter {tm['filter_wall_s']:.2f} s for {tm['steps']} steps, median step "
           f"{1e3 * tm['step_latency_median_s']:.1f} ms, max "
           f"{1e3 * tm['step_latency_max_s']:.1f} ms -> {args.out}")
-    if summary["diverged"]:
-        print(f"warning: {summary['diverged']}", file=sys.stderr)
+    if summary["stopped"]:
+        print(f"warning: the filter stopped early: {summary['stopped']} (estimates up to "
+              "then are written)", file=sys.stderr)
     return 0

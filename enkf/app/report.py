@@ -10,6 +10,7 @@ from pathlib import Path
 import numpy as np
 
 from ..tissue.identify import persistence_summary
+from ..tissue.outputs import readable_stop
 from ..tissue.parameters import ABSORPTION_INPUTS, PARAMETER_LABELS
 from .rundir import write_json
 
@@ -31,17 +32,6 @@ def _versions() -> dict:
 
 #: the command line of this run (set by enkf.cli.main; default sys.argv)
 command_line: list[str] | None = None
-
-
-def _readable_stop(message: str | None, names) -> str | None:
-    """The health check's message with parameter indices replaced by their names."""
-    if not message:
-        return message
-    import re
-
-    return re.sub(r"parameter (\d+)",
-                  lambda m: f"parameter {names[int(m.group(1))]}"
-                  if int(m.group(1)) < len(names) else m.group(0), message)
 
 
 def manifest(path: Path, *, command: str, config: dict | None, seed, timings: dict,
@@ -207,7 +197,7 @@ def write_identify_outputs(out: Path, setup, est, times, data, *, absorption=Non
                      "std_final": float(est.tracked_std[k, j])}
                     for j in range(est.tracked_mean.shape[1])],
         "steps": int(len(est.times) - 1), "analysed": int(np.sum(est.analysed)),
-        "stopped": _readable_stop(est.diverged, est.names),
+        "stopped": readable_stop(est.diverged, est.names),
         "stopped_at_s": float(est.times[-1]) if est.diverged else None,
         # members whose optics left the emulator's table (clamped to its edge), and what to do
         "emulator_clamped": getattr(est, "clamped", None),

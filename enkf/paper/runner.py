@@ -13,7 +13,7 @@ from mcmatlab_py.progress import Progress
 from ..problem import DEFAULT_METHOD
 from ..tissue.absorption import fill_prior_points
 from ..tissue.identify import identify, persistence_summary
-from ..tissue.outputs import write_estimates_csv, write_json
+from ..tissue.outputs import readable_stop, write_estimates_csv, write_json
 from ..tissue.parameters import PARAMETER_NAMES, TRACKED_DEPTHS
 from .figures import plot_data, plot_results
 from .filters import emulator_for, filter_setup
@@ -106,10 +106,19 @@ def write_run(run: PaperRun, out_dir: Path) -> None:
     plot_data(out_dir / "figures" / "data.png", run.scenario, truth, data)
 
 
+def _over_steps(f, values: np.ndarray) -> float:
+    """``f(mean(values))`` over the steps (``f`` None: the mean), NaN (null in
+    summary.json) when the health check stopped the filter at its first step."""
+    if not values.size:
+        return float("nan")
+    m = np.mean(values)
+    return float(m if f is None else f(m))
+
+
 def summarize(scenario: str, est, truth: Truth) -> dict:
     """The ``summary.json`` of a run: final errors, RMSE and coverage of the +-2 sd band."""
     # a filter stopped by its health check has NaN statistics at the failing step: the
-    # metrics cover the steps before it, and "diverged" says when and why
+    # metrics cover the steps before it, and "stopped" says when and why (identify's key)
     ok = np.all(np.isfinite(est.param_mean), axis=1) & np.all(np.isfinite(est.tracked_mean),
                                                                axis=1)
     k = int(np.argmin(ok)) if not ok.all() else len(est.times)
@@ -121,8 +130,8 @@ def summarize(scenario: str, est, truth: Truth) -> dict:
             "truth_final": float(tru[-1]), "estimate_final": float(mean[-1]),
             "std_final": float(sd[-1]),
             "relative_error_final": float(abs(mean[-1] - tru[-1]) / tru[-1]),
-            "rmse": float(np.sqrt(np.mean((mean[1:] - tru[1:]) ** 2))),
-            "coverage_2sd": float(np.mean(np.abs(mean[1:] - tru[1:]) <= 2 * sd[1:])),
+            "rmse": _over_steps(np.sqrt, (mean[1:] - tru[1:]) ** 2),
+            "coverage_2sd": _over_steps(None, np.abs(mean[1:] - tru[1:]) <= 2 * sd[1:]),
         }
         lo, hi = est.param_band(i)  # the members' 2.3-97.7% quantiles
         params[name]["band_final"] = [float(lo[k - 1]), float(hi[k - 1])]
@@ -132,9 +141,9 @@ def summarize(scenario: str, est, truth: Truth) -> dict:
         mean, sd = est.tracked_mean[1:k, j], est.tracked_std[1:k, j]
         tru = truth.temps[1:k, j]
         temps[f"z={z:.1f}"] = {
-            "rmse": float(np.sqrt(np.mean((mean - tru) ** 2))),
-            "coverage_2sd": float(np.mean(np.abs(mean - tru) <= 2 * sd)),
-            "truth_max": float(tru.max()),
+            "rmse": _over_steps(np.sqrt, (mean - tru) ** 2),
+            "coverage_2sd": _over_steps(None, np.abs(mean - tru) <= 2 * sd),
+            "truth_max": float(tru.max()) if tru.size else float("nan"),
         }
     lat = est.step_latency_s
     return {
@@ -144,7 +153,7 @@ def summarize(scenario: str, est, truth: Truth) -> dict:
                    "step_latency_max_s": float(np.max(lat)), "steps": int(len(lat)),
                    "ensemble_size": int(est.result.state_ensemble.shape[0])
                    if est.result is not None else None},
-        "diverged": est.diverged,
+        "stopped": readable_stop(est.diverged, est.names),
         "final_time": float(est.times[k - 1]),
         **({} if est.drift_weight is None else {"drift": {
             "behaviour": est.drift_behaviour, "weight_final": float(est.drift_weight[k - 1])}}),

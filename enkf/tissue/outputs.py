@@ -3,11 +3,23 @@
 from __future__ import annotations
 
 import json
+import re
 from pathlib import Path
 
 import numpy as np
 
-__all__ = ["jsonable", "write_estimates_csv", "write_json"]
+__all__ = ["jsonable", "readable_stop", "write_estimates_csv", "write_json"]
+
+
+def readable_stop(message: str | None, names) -> str | None:
+    """The health check's message (``est.diverged``) with parameter indices replaced by
+    their ``names``: summary.json's ``stopped``, of ``identify`` and ``paper`` alike."""
+    if not message:
+        return message
+    return re.sub(r"parameter (\d+)",
+                  lambda m: f"parameter {names[int(m.group(1))]}"
+                  if int(m.group(1)) < len(names) else m.group(0), message)
+
 
 def write_estimates_csv(path, est, truth=None, data=None) -> None:
     """``estimates.csv``: time; mean and std of each parameter (then, with damage-driven
