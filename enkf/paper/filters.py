@@ -30,10 +30,11 @@ def filter_setup(scenario: str, absorption, *, seed: int = 0, n_members: int = 5
     if drift == "auto":
         from ..tissue.drift import DriftBank
 
+        # the still filter: the constant scenario's (its walk goes on with the laser off)
         overrides.setdefault("drift", DriftBank())
         overrides.setdefault("random_walk_std", 0.002)
         overrides.setdefault("rtps", 0.0)
-        overrides.setdefault("random_walk_when_off", 0.0)
+        overrides.setdefault("random_walk_when_off", 1.0)
     P, on, off, n = PULSES[scenario]
     HS = HeatSimulation(P=P, duration_on=on, duration_off=off, n_pulses=n, dt=0.1)
     estimate = ESTIMATES[1] if scenario == "all-params" else ESTIMATES[0]
