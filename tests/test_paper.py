@@ -46,21 +46,37 @@ def test_paper_command_writes_the_contract(tmp_path, scenario):
         assert s["parameters"]["mua"]["relative_error_final"] < 0.3
 
 
-def test_paper_sensitivity(tmp_path):
+def test_paper_sensitivity(tmp_path, capsys):
     out = tmp_path / "sens"
     assert main(["paper", "sensitivity", "--out", str(out), "--fine", "8", "8", "4",
-                 "--truth-photons", "2000", "--quiet"]) == 0
+                 "--truth-photons", "2000", "--seed", "5", "--quiet"]) == 0
     table = np.genfromtxt(out / "sensitivity.csv", delimiter=",", names=True)
     peak = {k: table[k][50] for k in table.dtype.names if k != "time_s"}
     # more absorption heats the surface more; scattering matters less (the paper's Fig. 3)
     mua_peaks = [peak[f"T_mua_{v}"] for v in (1, 2, 3, 4, 5)]
     assert np.all(np.diff(mua_peaks) > 0)
+    assert {p.name for p in out.iterdir()} == {"sensitivity.csv", "figures", "run.json"}
+    man = json.loads((out / "run.json").read_text())
+    assert man["command"] == "paper sensitivity" and man["seed"] == 5
+    assert man["config"] == {"scenario": "sensitivity", "fine": [8, 8, 4],
+                             "truth_photons": 2000, "mua": [1, 2, 3, 4, 5],
+                             "mus": [100, 200, 300, 400, 500]}
+    # the result, even with --quiet: the peaks, as in the csv
+    printed = capsys.readouterr().out
+    peaks = {k: table[k].max() for k in table.dtype.names if k != "time_s"}
+    assert f"against mua (cm^-1; mus = 100): 1: {peaks['T_mua_1']:.2f}, 2: " in printed
+    assert f"against mus (cm^-1; mua = 1): 100: {peaks['T_mus_100']:.2f}, 200: " in printed
+    assert printed.rstrip().endswith(f"-> {out}")
 
 
 def test_paper_bad_input(tmp_path, capsys):
     assert main(["paper", "constant", "--out", str(tmp_path / "o"), "--members", "1",
                  "--quiet"]) == 2
     assert "--members must be >= 2, got 1" in capsys.readouterr().err
+    assert main(["paper", "sensitivity", "--out", str(tmp_path / "s"), "--truth-photons", "0",
+                 "--quiet"]) == 2
+    assert "--truth-photons must be >= 1, got 0" in capsys.readouterr().err
+    assert not (tmp_path / "s").exists()
 
 
 def test_truth_key_holds_the_heat_scheme():

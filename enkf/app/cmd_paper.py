@@ -36,18 +36,7 @@ def _paper(args, paper, client, verbose) -> int:
     from .rundir import atomic_dir
 
     if args.scenario == "sensitivity":
-        res = paper.sensitivity_study(tuple(args.fine), args.truth_photons or 10**6,
-                                      progress=verbose, client=client)
-        with atomic_dir(args.out, args.force) as tmp:
-            (tmp / "figures").mkdir()
-            paper.plot_sensitivity(tmp / "figures" / "sensitivity.png", res)
-            cols = [f"T_mua_{v:g}" for v in res["mua"]] + [f"T_mus_{v:g}" for v in res["mus"]]
-            import numpy as np
-
-            np.savetxt(tmp / "sensitivity.csv", np.column_stack(
-                [res["times"], *res["mua"].values(), *res["mus"].values()]), delimiter=",",
-                header="time_s," + ",".join(cols), comments="", fmt="%.8g")
-        return 0
+        return _sensitivity(args, paper, client, verbose)
     tcfg = paper.TruthConfig(scenario=args.scenario, grid=tuple(args.fine))
     if args.truth_photons is not None:
         if args.truth_photons < 1:
@@ -91,4 +80,40 @@ def _paper(args, paper, client, verbose) -> int:
     if summary["stopped"]:
         print(f"warning: the filter stopped early: {summary['stopped']} (estimates up to "
               "then are written)", file=sys.stderr)
+    return 0
+
+
+def _sensitivity(args, paper, client, verbose) -> int:
+    """The paper's sensitivity study: sensitivity.csv, figures/ and run.json; the peaks."""
+    import time
+
+    import numpy as np
+
+    from .report import manifest
+    from .rundir import atomic_dir
+
+    t0 = time.perf_counter()
+    n_photons = 10**6 if args.truth_photons is None else check_number(
+        "--truth-photons", args.truth_photons, integer=True, lo=1)
+    seed = 1 if args.seed is None else args.seed  # paper_model's Monte Carlo seed
+    res = paper.sensitivity_study(tuple(args.fine), n_photons, progress=verbose,
+                                  client=client, seed=seed)
+    with atomic_dir(args.out, args.force) as tmp:
+        (tmp / "figures").mkdir()
+        paper.plot_sensitivity(tmp / "figures" / "sensitivity.png", res)
+        cols = [f"T_mua_{v:g}" for v in res["mua"]] + [f"T_mus_{v:g}" for v in res["mus"]]
+        np.savetxt(tmp / "sensitivity.csv", np.column_stack(
+            [res["times"], *res["mua"].values(), *res["mus"].values()]), delimiter=",",
+            header="time_s," + ",".join(cols), comments="", fmt="%.8g")
+        manifest(tmp / "run.json", command="paper sensitivity",
+                 config={"scenario": "sensitivity", "fine": list(args.fine),
+                         "truth_photons": n_photons, "mua": [float(v) for v in res["mua"]],
+                         "mus": [float(v) for v in res["mus"]]},
+                 seed=seed, timings={"total": time.perf_counter() - t0})
+    # the result, even with --quiet (it hides the progress bars only)
+    for name, held in (("mua", "mus"), ("mus", "mua")):
+        peaks = ", ".join(f"{v:g}: {np.max(T):.2f}" for v, T in res[name].items())
+        print(f"peak T at the sensor (deg C) against {name} (cm^-1; {held} = "
+              f"{paper.TABLE[held]:g}): {peaks}")
+    print(f"-> {args.out}")
     return 0
