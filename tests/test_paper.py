@@ -108,3 +108,43 @@ def test_a_paper_run_stopped_by_the_health_check_says_so_as_identify(tmp_path, m
     assert "parameter mua mean" in s["stopped"] or "parameter mus mean" in s["stopped"]
     assert f"warning: the filter stopped early: {s['stopped']}" in capsys.readouterr().err
     assert (out / "run.json").exists() and (out / "estimates.csv").exists()
+
+
+def test_the_paper_runs_advice_names_what_paper_can_change(tmp_path, monkeypatch):
+    """A table too narrow for the members' mus (the paper's is fixed): the warning names
+    the paper command's options, not filter.emulator.mus_range, which it cannot take."""
+    import functools
+    import warnings
+
+    from enkf.paper import TruthConfig, runner
+
+    monkeypatch.setattr(runner, "emulator_for",
+                        functools.partial(runner.emulator_for, mus_range=(80.0, 150.0)))
+    tcfg = TruthConfig(scenario="constant", grid=(10, 10, 5))
+    tcfg.n_photons_constant = tcfg.n_photons_per_step = 3000
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        run = runner.run_experiment("constant", 3, n_members=12, truth_config=tcfg,
+                                    emulator_photons=1500, emulator_table=5,
+                                    cache_dir=tmp_path / "cache", progress=False)
+    assert run.estimates.clamped  # the filter's own advice names the config key
+    assert "filter.emulator.mus_range" in run.estimates.clamped["advice"]
+    text = [str(w.message) for w in caught]
+    clamp = [t for t in text if "clamped members' optics" in t]
+    assert len(clamp) == 1 and "members' mus below 80 and above 150 cm^-1" in clamp[0]
+    assert "mus [80.0, 150.0] cm^-1) and priors are fixed in `tissue-enkf paper`" in clamp[0]
+    assert "--exact" in clamp[0]
+    assert not any("filter.emulator" in t or "[filter.drift]" in t for t in text)
+    advice = run.summary["innovation_persistence"]["advice"] or ""
+    assert "[filter.drift]" not in advice
+
+
+def test_paper_advice_puts_drift_in_the_paper_options():
+    from enkf.paper.runner import paper_advice
+    from enkf.tissue.diagnose import ADVICE
+
+    text = ADVICE["drifting optics"].format(how="", r=0.5) + (
+        '. Set [filter.drift] mode = "auto" to let the data decide')
+    out = paper_advice(text)
+    assert "[filter.drift]" not in out and out.endswith("Run with --drift auto to let the "
+                                                       "data decide")

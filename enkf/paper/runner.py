@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import time
+import warnings
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -14,13 +15,13 @@ from ..problem import DEFAULT_METHOD
 from ..tissue.absorption import fill_prior_points
 from ..tissue.identify import identify, persistence_summary
 from ..tissue.outputs import readable_stop, write_estimates_csv, write_json
-from ..tissue.parameters import PARAMETER_NAMES, TRACKED_DEPTHS
+from ..tissue.parameters import PARAMETER_NAMES, PARAMETER_UNITS, TRACKED_DEPTHS
 from .figures import plot_data, plot_results
 from .filters import emulator_for, filter_setup
 from .scenarios import SCENARIOS, true_parameters
 from .truth import Truth, TruthConfig, generate_truth, noisy_sensor, twin_truth
 
-__all__ = ["PaperRun", "run_experiment", "summarize", "write_run"]
+__all__ = ["PaperRun", "paper_advice", "run_experiment", "summarize", "write_run"]
 
 @dataclass
 class PaperRun:
@@ -31,6 +32,49 @@ class PaperRun:
     data: np.ndarray
     estimates: object
     summary: dict
+
+
+#: the advice of the filter's warnings in config keys, as the ``paper`` command says it
+_PAPER_OPTIONS = (
+    ('. Set [filter.drift] mode = "auto" to let the data decide',
+     ". Run with --drift auto to let the data decide"),
+    ("the drifting filter of [filter.drift]", "the drifting filter of --drift auto"),
+)
+
+
+def _clamp_advice(report: dict) -> str:
+    """What to do about a clamp report (:meth:`TissueForwardModel.clamp_report`) in a paper
+    run, whose emulator table and priors are the paper's (no filter.emulator keys)."""
+    parts = []
+    for name, table in report["table"].items():
+        lo, hi = report["below_table"].get(name), report["above_table"].get(name)
+        if lo is None and hi is None:
+            continue
+        side = " and ".join(f"{word} {edge:.4g}" for word, v, edge in
+                            (("below", lo, table[0]), ("above", hi, table[1])) if v is not None)
+        parts.append(f"members' {name} {side} {PARAMETER_UNITS[name]} were computed at the "
+                     f"table's edge, which biases the {name} estimate towards it while they "
+                     f"matter")
+    ranges = ", ".join(f"{k} {list(v)}" for k, v in report["table"].items())
+    return "; ".join(parts + [
+        f"the paper's table ({ranges} cm^-1) and priors are fixed in `tissue-enkf paper` "
+        "(--emulator-table sets only its number of points): --exact runs each member's own "
+        "Monte Carlo instead (slow)"])
+
+
+def paper_advice(message: str, clamped: dict | None = None) -> str:
+    """``message``, a warning of the filter, with its advice put in what the ``paper``
+    command can change: the clamp advice of ``clamped`` (``est.clamped``: one report, or
+    one per filter of a drift bank) and [filter.drift] as --drift (the other config keys
+    it names are the paper's and fixed)."""
+    reports = [] if not clamped else [clamped] if "advice" in clamped else list(
+        clamped.values())
+    for r in reports:
+        if r.get("advice") and r["advice"] in message:
+            message = message.replace(r["advice"], _clamp_advice(r))
+    for config, option in _PAPER_OPTIONS:
+        message = message.replace(config, option)
+    return message
 
 
 def run_experiment(scenario: str, seed: int = 0, *, n_members: int = 50, method: str = DEFAULT_METHOD,
@@ -74,8 +118,12 @@ def run_experiment(scenario: str, seed: int = 0, *, n_members: int = 50, method:
     def step(r):  # a drift bank's two filters one after the other
         bar.update(min(n, r.step) if r.component in (None, "still") else n)
 
-    est = identify(setup, truth.times[1:], data[:, None], callback=step)
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")  # the outer filters decide when they are re-issued
+        est = identify(setup, truth.times[1:], data[:, None], callback=step)
     bar.close()
+    for w in caught:
+        warnings.warn(paper_advice(str(w.message), est.clamped), w.category, stacklevel=2)
     summary = summarize(scenario, est, truth)
     summary["truth"] = {"grid": list(tcfg.grid), "mc_seed": tcfg.mc_seed,
                         "wall_seconds_when_computed": truth.wall_seconds,
@@ -85,7 +133,10 @@ def run_experiment(scenario: str, seed: int = 0, *, n_members: int = 50, method:
                            "build_seconds": emu.build_seconds, "exact_mode": bool(exact)}
     summary["seed"] = seed
     # whether the innovations persist once the laser is off (docs/beyond.md), as identify's
-    summary["innovation_persistence"] = persistence_summary(est)
+    persistence = persistence_summary(est)
+    if persistence["advice"]:
+        persistence["advice"] = paper_advice(persistence["advice"])
+    summary["innovation_persistence"] = persistence
     summary["wall_seconds"] = time.perf_counter() - t0
     return PaperRun(scenario, truth, data, est, summary)
 
