@@ -27,7 +27,7 @@ filters). The paper uses the application (:mod:`enkf.tissue`), never the tool (:
 
 from .figures import plot_data, plot_results, plot_sensitivity
 from .filters import emulator_for, filter_setup
-from .runner import PaperRun, run_experiment, summarize, write_run
+from .runner import PaperRun, paper_advice, run_experiment, summarize, write_run
 from .scenarios import (
     CAMERA,
     PULSES,
@@ -64,6 +64,7 @@ __all__ = [
     "plot_data",
     "plot_results",
     "plot_sensitivity",
+    "paper_advice",
     "run_experiment",
     "sensitivity_study",
     "summarize",
