@@ -10,6 +10,10 @@ filter's own coarse model at the true parameters, no model error): where a targe
 met on the twin and missed on the fine truth, the coarse model is what misses it.
 
     python validation/paper_runs.py [--seeds 0 1 ... 19] [--scenarios constant ...] [--twin]
+        [--drift auto]
+
+``--drift auto`` runs identify's drift bank (a still and drifting filters weighed by the
+data) in place of each scenario's own walk (validation/reports/paper_runs_drift.md).
 
 Twenty seeds by default: with five, a pass count moves by one or two seeds when only the
 random numbers change (session 22 traced the session-3 table's "every target" to the
