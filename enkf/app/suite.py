@@ -41,6 +41,8 @@ SUITE: dict[str, tuple[list | None, list | None]] = {
     "image_vs_point": (None, []),
     # the innovations' persistence against the bands' coverage: the independent truths
     "persistence": (None, ["--seeds", *map(str, range(20))]),
+    # identify's default config (the drift bank) on still, drifting and pulsed optics
+    "drift_bank": (None, ["--seeds", "20", "--jobs", "2"]),
     "sensitivity": ([], []),
 }
 
