@@ -233,7 +233,8 @@ def test_the_likely_cause_from_the_innovations():
     """White innovations: no cause. Persistent ones while the laser is off: the model's
     physics. The same with the first readings all high: a sensor offset. Persistent while
     heated only, with no bank: drifting optics. A bank that supports a drift: drifting
-    optics, and no advice unless the innovations persist while cooling too."""
+    optics, and no advice; if the innovations persist while cooling too, the model's
+    physics (the optics act on nothing then)."""
     from enkf.tissue.identify import persistence_summary
 
     rng = np.random.default_rng(3)
@@ -251,8 +252,9 @@ def test_the_likely_cause_from_the_innovations():
     assert s["likely_cause"] == "drifting optics" and "[filter.drift]" in s["advice"]
     s = persistence_summary(_fake(white, on, drift=0.99))
     assert s["likely_cause"] == "drifting optics" and s["advice"] is None and not s["flagged"]
+    # persistent while the laser is off: the heat model's, whatever the bank says
     s = persistence_summary(_fake(slow, on, drift=0.99))
-    assert s["likely_cause"] == "drifting optics" and s["flagged"] and "P = 0.99" in s["advice"]
+    assert s["likely_cause"] == "model physics" and s["flagged"] and "P = 0.99" in s["advice"]
 
 
 def test_the_command_line_reports_the_drift(tmp_path):

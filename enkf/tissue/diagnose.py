@@ -5,8 +5,9 @@ forecasts, over the forecast's sd) that are not white. Their pattern points at t
 
 ``"drifting optics"``
     the data support a drift (a :class:`~enkf.tissue.drift.DriftBank`'s weight above one
-    half), or, with the filter alone, the innovations persist while the laser heats more
-    than while it is off: the optics change under the beam.
+    half) and the innovations are white while the laser is off, or, with the filter
+    alone, the innovations persist while the laser heats more than while it is off: the
+    optics change under the beam.
 ``"sensor offset"``
     the first readings, taken before the laser has raised the temperature by more than
     a few tenths of a degree, already miss on one side: the sensor's zero is off.
@@ -15,8 +16,9 @@ forecasts, over the forecast's sd) that are not white. Their pattern points at t
     alone: the heat model misses the tissue's shape, boundaries, perfusion or conduction
     (or the beam's size, which sets where the heat starts).
 
-:func:`likely_cause` returns the first that the evidence supports, in this order, and the
-advice for it; the command line writes both into summary.json and the warning.
+:func:`likely_cause` returns the first that the evidence supports (the offset first, then
+the physics: innovations that persist with the laser off are the heat model's, whatever
+else the data support), and the advice for it; the command line writes both into summary.json and the warning.
 """
 
 from __future__ import annotations
@@ -36,10 +38,9 @@ OFFSET_Z = 2.0
 ADVICE = {
     "drifting optics": (
         "the optics drift while heated (the data support it{how}): the estimates follow "
-        "the drifting filter of [filter.drift]; the bands below the surface rest on its "
-        "restarts from the smoother after each pulse. Innovations that persist while the "
-        "laser is off (lag-1 correlation {r:.2f}) after that also say the drift's form "
-        "or the heat model is off; see docs/enkf.md, 'Drifting optics'"),
+        "the drifting filters of [filter.drift], and the bands below the surface rest on "
+        "their restarts from the smoother after each pulse; see docs/enkf.md, 'Drifting "
+        "optics'"),
     "sensor offset": (
         "the first readings, before the laser has heated the tissue, already miss the "
         "known start temperature by {z:.1f} forecast sd on average: the sensor's zero is "
@@ -62,23 +63,26 @@ def likely_cause(est, r_off: float, n_off: int, r_on: float, n_on: int) -> tuple
     :class:`~enkf.tissue.TissueEstimates` or an :class:`~enkf.tissue.OnlineIdentifier`),
     given the innovations' lag-1 correlation while the laser is off (``r_off`` over
     ``n_off`` pairs) and on (``r_on``, ``n_on``); ``(None, None)`` when nothing is
-    flagged (module docstring)."""
+    flagged (module docstring). Innovations that persist while the laser is off are the
+    heat model's, whatever a drift bank says: with the laser off the optics act on
+    nothing."""
     w = drift_weight_of(est)
-    if w is not None and w > 0.5:
-        return "drifting optics", ADVICE["drifting optics"].format(
-            how=f", P = {w:.2g}", r=r_off if np.isfinite(r_off) else float("nan"))
     flagged_off = persistence_flagged(r_off, n_off)
+    flagged_on = persistence_flagged(r_on, n_on)
     z_early = _early_innovation(est)
-    if (flagged_off or persistence_flagged(r_on, n_on)) and np.isfinite(z_early) \
-            and abs(z_early) > OFFSET_Z and getattr(est, "sensor_offset_mean", None) is None:
+    if (flagged_off or flagged_on) and np.isfinite(z_early) and abs(z_early) > OFFSET_Z \
+            and getattr(est, "sensor_offset_mean", None) is None:
         return "sensor offset", ADVICE["sensor offset"].format(z=abs(z_early))
-    if w is None and persistence_flagged(r_on, n_on) and (
-            not np.isfinite(r_off) or r_on > r_off + 0.2):
-        return "drifting optics", ADVICE["drifting optics"].format(
-            how=": the innovations persist while heated", r=r_off) + (
-            ". Set [filter.drift] mode = \"auto\" to let the data decide")
     if flagged_off:
-        return "model physics", ADVICE["model physics"].format(r=r_off)
+        extra = "" if w is None else (f" (the data also support a drift of the optics while "
+                                      f"heated, P = {w:.2g})")
+        return "model physics", ADVICE["model physics"].format(r=r_off) + extra
+    if w is not None and w > 0.5:
+        return "drifting optics", ADVICE["drifting optics"].format(how=f", P = {w:.2g}")
+    if w is None and flagged_on and (not np.isfinite(r_off) or r_on > r_off + 0.2):
+        return "drifting optics", ADVICE["drifting optics"].format(
+            how=": the innovations persist while heated") + (
+            ". Set [filter.drift] mode = \"auto\" to let the data decide")
     return None, None
 
 
