@@ -1,7 +1,8 @@
 """One default config whether the optics hold still, drift, or the laser pulses (issue #45).
 
 ``examples/own_data.toml`` as shipped (its default ``[filter.drift] mode = "auto"``: a
-still and a drifting filter weighed by their evidence, ``enkf.tissue.drift``), only the
+still filter and drifting ones, their restarts through 2, 3 and 6 knots, weighed by their
+evidence, ``enkf.tissue.drift``), only the
 laser's schedule changed to the truth's, against the independent forward models of
 ``validation/independent_models.py`` (A: analog Monte Carlo and finite differences on
 the box; B: attenuation Monte Carlo and a finite-volume cylinder; C: B's light with a
@@ -97,9 +98,10 @@ def passes(r: dict) -> dict:
     (mua, mus), (tmua, tmus) = r["final"], r["final_truth"]
     ok = {"ran": r["diverged"] is None}
     if r["case"] in CONSTANT:
-        ok["estimates"] = abs(mua - tmua) <= 0.05 * tmua and abs(mus - tmus) <= 25
+        ok["mua"], ok["mus"] = abs(mua - tmua) <= 0.05 * tmua, abs(mus - tmus) <= 25
     else:
-        ok["estimates"] = r["mua_rmse"] <= 0.3 and abs(mus - tmus) <= 0.1 * tmus
+        ok["mua"], ok["mus"] = r["mua_rmse"] <= 0.3, abs(mus - tmus) <= 0.1 * tmus
+    ok["estimates"] = ok["mua"] and ok["mus"]
     ok["bands"] = all(lo <= t <= hi for (lo, hi), t in zip(r["band_final"], r["final_truth"],
                                                            strict=True))
     ok["T bands"] = min(r["cov_T"]) >= 0.9
@@ -112,7 +114,8 @@ def report(rows: list, path: Path, command: str) -> None:
              __doc__.split("\n\n")[2].replace("\n", " "), "",
              "Seeds passing each target (the issue asks >= 19 of 20 for the constant "
              "estimates, >= 18 of 20 elsewhere); the temperature coverage is the mean (worst) "
-             "over seeds; P(drift) the final drift weight (median over seeds).", "",
+             "over seeds; P(drift) the final drift weight (median over seeds). The wall "
+             "times were measured with two or three runs sharing the two cores.", "",
              "| truth | case | seeds | estimates | parameter bands | T bands >= 0.9 | "
              "T coverage z = 0, 0.1, 0.2 | mua, mus at 15 s (median) | truth | P(drift) | "
              "wall s (median) |", "|---|---|---|---|---|---|---|---|---|---|---|"]
@@ -127,7 +130,8 @@ def report(rows: list, path: Path, command: str) -> None:
         w = [r["drift_weight_final"] for r in rs if r["drift_weight_final"] is not None]
         cov = ", ".join(f"{m:.2f} ({lo:.2f})" for m, lo in zip(c.mean(0), c.min(0), strict=True))
         lines.append(
-            f"| {key[0]} | {key[1]} | {n} | {sum(o['estimates'] and o['ran'] for o in ok)} | "
+            f"| {key[0]} | {key[1]} | {n} | {sum(o['estimates'] and o['ran'] for o in ok)} "
+            f"(mua {sum(o['mua'] for o in ok)}, mus {sum(o['mus'] for o in ok)}) | "
             f"{sum(o['bands'] for o in ok)} | {sum(o['T bands'] for o in ok)} | {cov} | "
             f"{fin[0]:.3g}, {fin[1]:.4g} | {rs[0]['final_truth'][0]:.3g}, "
             f"{rs[0]['final_truth'][1]:.4g} | {np.median(w) if w else float('nan'):.3g} | "
