@@ -334,8 +334,8 @@ def test_summary_and_run_json_say_whether_the_innovations_persist(tmp_path, cach
     rising after the pulse it is (test_identify_from_an_npz_image_series)."""
     cfg, out, s = _identify_tiny(tmp_path, cache, "")
     pers = s["innovation_persistence"]
-    assert set(pers) == {"laser_off", "laser_off_pairs", "all", "all_pairs", "threshold",
-                         "flagged", "advice"}
+    assert set(pers) == {"laser_off", "laser_off_pairs", "laser_on", "laser_on_pairs", "all",
+                         "all_pairs", "threshold", "flagged", "likely_cause", "advice"}
     assert pers["laser_off_pairs"] == 9 and pers["all_pairs"] == 17  # the reading at 1 s is missing
     assert not pers["flagged"] and pers["advice"] is None and -1 <= pers["laser_off"] <= 1
     assert run("identify", cfg, "--follow", EX / "tiny_data.csv", "--out", tmp_path / "f",

@@ -145,7 +145,7 @@ def test_heat_maps_slice_through_their_maximum_unless_positions_are_set(model):
 def test_fmc_needs_its_run_and_bad_names_fail(model):
     with pytest.raises(ValueError, match=r"run model.run_monte_carlo\('fluorescence'\)"):
         model.plot("FMC")
-    with pytest.raises(ValueError, match="'G', 'MC', 'FMC' or 'HS'"):
+    with pytest.raises(ValueError, match="'G', 'MC', 'FMC', 'HS' or None"):
         model.plot("XX")
     empty = Model()
     empty.G.media = model.G.media

@@ -38,7 +38,7 @@ class PaperRun:
 _PAPER_OPTIONS = (
     ('. Set [filter.drift] mode = "auto" to let the data decide',
      ". Run with --drift auto to let the data decide"),
-    ("the drifting filter of [filter.drift]", "the drifting filter of --drift auto"),
+    ("the drifting filters of [filter.drift]", "the drifting filters of --drift auto"),
 )
 
 

@@ -87,7 +87,9 @@ class DriftBank:
         readings tell the optics' final values).
     restart_knots : tuple of int
         The forms of the drift, one drifting filter each: the knots of its restarts'
-        piecewise-linear paths in heated time (each >= 2).
+        piecewise-linear paths in heated time (each >= 2). A form with more free values
+        (every knot of every drifting parameter) than the ensemble has members is left
+        out (e.g. 6 knots of two media's four optics with 20 members).
     restart_discrepancy : float
         The restarts' model discrepancy (relative sd of the rise).
     rtps : float
@@ -160,7 +162,12 @@ class DriftBank:
                          (w[2] if n in ("VHC", "TC") else 0.0) for n in names])
         kw = dict(drift=None, random_walk_std=walk.tolist(), random_walk_when_off=0.0,
                   rtps=self.rtps)
-        for k in self.restart_knots:
+        drifting = sum(n in _WALKED or walk[i] > 0 for i, n in enumerate(names))
+        forms = [k for k in self.restart_knots if not setup.smoother_restart_gaussian
+                 or setup.n_members > len(names) + (k - 1) * drifting]
+        # forms with more free values than members cannot be redrawn: left out (the
+        # smallest is kept, restarted as the setup allows)
+        for k in forms or self.restart_knots[:1]:
             if setup.sensor_offset_std:  # the smoother does not estimate sensor offsets
                 out[f"drifting-{k}"] = replace(setup, **kw, smoother_restarts=())
                 break  # one drifting filter: without restarts the forms are the same

@@ -284,11 +284,7 @@ class TissueFilterSetup:
             raise ValueError(f"drift (a bank of a still and a drifting filter) needs "
                              f"parameter_model = 'random_walk', got {self.parameter_model!r}: "
                              "set drift = None for the trend or coagulation model")
-        if self.n_members < 2 * len(self.drift.restart_knots) or (
-                not self.sensor_offset_std and self.smoother_restart_gaussian and self.n_members
-                <= len(self.parameter_names) * max(self.drift.restart_knots)):
-            raise ValueError(f"drift's restarts need more members, got n_members = "
-                             f"{self.n_members}")
+
 
     def _check_restarts(self) -> None:
         r = self.smoother_restarts
