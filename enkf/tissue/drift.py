@@ -340,7 +340,7 @@ def mixture_estimates(parts: dict, weights: np.ndarray, predicted: np.ndarray,
     final = int(np.argmax(w_rows[-1]))
     alive_to_end = [e for e in ests if not e.diverged]
     latency = np.zeros(k_end - 1)
-    for e in ests:
+    for e in {id(e): e for e in ests}.values():  # a filter that stands for several: once
         latency[:len(e.step_latency_s)] += e.step_latency_s[:k_end - 1]
     still = names.index(STILL)
     return TissueEstimates(
