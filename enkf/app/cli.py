@@ -167,7 +167,7 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 #: the signals that end a run as Ctrl-C does: kill's default, a closed terminal or SSH
-#: session, Ctrl-\ (whose default, a core dump, would leave the partial outputs behind)
+#: connection, Ctrl-\ (whose default, a core dump, would leave the partial outputs behind)
 TERMINATING_SIGNALS = (signal.SIGTERM, signal.SIGHUP, signal.SIGQUIT)
 
 

@@ -42,7 +42,7 @@ from __future__ import annotations
 import time
 import warnings
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -261,15 +261,6 @@ def _mix_moments(means, stds, w):
     m = np.einsum("k,kn->n", w, means)
     second = np.einsum("k,kn->n", w, stds ** 2 + means ** 2)
     return m, np.sqrt(np.maximum(second - m ** 2, 0.0))
-
-
-@dataclass
-class _Component:
-    """One filter of the bank: its estimates and its log-densities (M,), -inf once stopped."""
-
-    name: str
-    est: object
-    loglik: np.ndarray = field(default=None)
 
 
 def _component_loglik(est, M: int) -> np.ndarray:
