@@ -41,8 +41,8 @@ decides which model the data prefer.
         [--model-error structured|white] [--mean-field-rel-std 0.25]
 
 Writes validation/reports/coagulation.md (``--out``), its ``.json`` and, named after it, the
-figures of seed 0: ``*_damage_seed0.png``, ``*_ramp_seed0.png`` (the optics) and
-``*_pulse_temps_seed0.png``, ``*_train_temps_seed0.png`` (the temperatures beneath the sensor).
+figure of seed 0, ``*_seed0.png``: the optics of the single pulse and of the paper's ramp,
+the temperatures beneath the sensor of the single pulse and of the pulse train.
 """
 
 from __future__ import annotations
@@ -184,13 +184,8 @@ def summarize(rows: list[dict]) -> dict:
             for k in keys}
 
 
-def plot_mus(path, case, truth, ests) -> None:
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    fig, axes = plt.subplots(1, 2, figsize=(10, 3.6), constrained_layout=True)
+def plot_optics(axes, case, truth, ests) -> None:
+    """mua and mus (a pair of axes) with each filter's band against the truth's."""
     for ax, i, name in ((axes[0], 0, "mua"), (axes[1], 1, "mus")):
         ax.plot(truth.times, truth.optics[:, i], "k-", lw=2, label="truth (effective)")
         for model, est in ests.items():
@@ -207,18 +202,10 @@ def plot_mus(path, case, truth, ests) -> None:
             ax.fill_between(est.times, lo, hi, alpha=0.2)
         ax.set(xlabel="time [s]", ylabel=f"{name} [cm$^{{-1}}$]", title=f"{case}, seed 0")
         ax.legend(fontsize=8)
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
 
 
-def plot_temps(path, case, truth, ests) -> None:
+def plot_temps(axes, case, truth, ests) -> None:
     """The temperature at 0.1 and 0.2 cm with each filter's +-2 sd band against the truth."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    fig, axes = plt.subplots(1, 2, figsize=(10, 3.6), constrained_layout=True)
     for ax, j, z in ((axes[0], 1, 0.1), (axes[1], 2, 0.2)):
         ax.plot(truth.times, truth.temps[:, j], "k-", lw=2, label="truth")
         for model, est in ests.items():
@@ -228,8 +215,30 @@ def plot_temps(path, case, truth, ests) -> None:
         ax.set(xlabel="time [s]", ylabel="temperature [deg C]", title=f"{case}, seed 0, "
                f"z = {z} cm (no sensor)")
         ax.legend(fontsize=8)
+
+
+def plot_seed0(path, truths: dict, first: dict) -> bool:
+    """One figure of seed 0, a row per panel pair: the optics of the single pulse and of the
+    paper's ramp, the temperatures beneath the sensor of the single pulse and of the train.
+    False (nothing written) when none of these cases ran."""
+    rows = [(plot, case) for plot, case in
+            ((plot_optics, "damage, single pulse"), (plot_optics, "ramp, paper"),
+             (plot_temps, "damage, single pulse"), (plot_temps, "damage, pulse train"))
+            if case in first]
+    if not rows:
+        return False
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, axes = plt.subplots(len(rows), 2, figsize=(10, 3.6 * len(rows)),
+                             constrained_layout=True, squeeze=False)
+    for ax_pair, (plot, case) in zip(axes, rows, strict=True):
+        plot(ax_pair, case, truths[case], first[case])
     fig.savefig(path, dpi=110)
     plt.close(fig)
+    return True
 
 
 def main(argv=None):
@@ -284,19 +293,14 @@ def main(argv=None):
         {"seeds": args.seeds, "n_members": args.n_members, "wall_s": wall,
          "model_error": args.model_error, "mean_field_rel_std": args.mean_field_rel_std,
          "results": results}, indent=1, default=float) + "\n")
-    for case in first:
-        if case in ("damage, single pulse", "ramp, paper"):
-            tag = "damage" if case.startswith("damage") else "ramp"
-            plot_mus(out.with_name(f"{out.stem}_{tag}_seed0.png"), case, truths[case],
-                     first[case])
-        if case.startswith("damage") and "twin" not in case:
-            tag = "train" if "train" in case else "pulse"
-            plot_temps(out.with_name(f"{out.stem}_{tag}_temps_seed0.png"), case,
-                       truths[case], first[case])
-    write_report(out, args, results, truths, wall)
+    figure = out.with_name(f"{out.stem}_seed0.png")
+    if not plot_seed0(figure, truths, first):
+        figure = None
+    write_report(out, args, results, truths, wall, figure)
 
 
-def write_report(out: Path, args, results: dict, truths: dict, wall: float) -> None:
+def write_report(out: Path, args, results: dict, truths: dict, wall: float,
+                 figure: Path | None = None) -> None:
     runs_wall = sum(r["wall_s"] for res in results.values() for rows in res.values()
                     for r in rows)
     cmd = "python validation/coagulation.py --seeds " + " ".join(map(str, args.seeds))
@@ -393,6 +397,9 @@ def write_report(out: Path, args, results: dict, truths: dict, wall: float) -> N
                 "mus 100, mua_coag 1.5, mus_coag 300 for the damage truths).")
         L.append("")
     L += summary_section(results)
+    if figure is not None:
+        L += [f"![seed 0: the optics and the temperatures beneath the sensor]({figure.name})",
+              ""]
     out.write_text("\n".join(L) + "\n")
     print(f"report: {out}")
 
@@ -456,8 +463,8 @@ def summary_section(results: dict) -> list[str]:
           "the optics follow the damage; docs/coagulation.md): run both models on the same "
           "data and compare `innovation_loglik.sum` in the two `summary.json` files, with "
           "the same model error for both: the damage-driven run with "
-          "`[filter.coagulation] mean_field_rel_std = 0` (`--mean-field-rel-std 0` here, "
-          "`coagulation_20seeds_mf0.md`). The mean-field term widens the damage-driven "
+          "`[filter.coagulation] mean_field_rel_std = 0` (`--mean-field-rel-std 0` here). "
+          "The mean-field term widens the damage-driven "
           "forecasts where the truth coagulates as a layer, and that costs it evidence "
           "wherever the surface reading does not need it (on the identical twin above all): "
           "the evidence measures the fit to the surface sensor only, and a surface sensor "
