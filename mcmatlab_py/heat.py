@@ -169,7 +169,7 @@ class HeatSimulation(StrictAttributes):
     mus_t: Callable | None = None  #: mus(t), cm^-1
     VHC_t: Callable | None = None  #: VHC(t), J cm^-3 K^-1
     TC_t: Callable | None = None  #: TC(t), W cm^-1 K^-1
-    varying_medium: int = 0  #: the medium that the *_t functions replace
+    varying_medium: int = 0  #: the medium that the ``*_t`` functions replace
     #: "monte_carlo" (direct MC when the optics change) or a callable (mua, mus) -> NA
     absorption: str | Callable = "monte_carlo"
     n_snapshots: int = 0  #: temperature fields to keep (evenly spaced), for VTU series

@@ -31,7 +31,8 @@ __all__ = ["ADVICE", "EARLY_READINGS", "OFFSET_Z", "drift_weight_of", "likely_ca
 
 #: readings at the start whose innovations tell a sensor's offset
 EARLY_READINGS = 5
-#: |mean normalized innovation| of the early readings above which an offset is likely
+#: the early readings' mean normalized innovation, in absolute value, above which an offset
+#: is likely
 OFFSET_Z = 2.0
 
 #: what to do about each cause ({r}: the lag-1 correlation while the laser is off)
