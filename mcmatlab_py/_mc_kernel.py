@@ -28,11 +28,10 @@ packet crosses. A packet reflected about it keeps its true direction: where that
 points into the new voxel, the packet travels on through the other medium's voxels
 (with their absorption and scattering, but its own refractive index ``npk``, as
 MCmatlab's ``P->RI``): a voxel of its own index is no interface to it, and another is
-one only where a smoothed normal says so. (Until session 20
-the component normal to the face was mirrored instead, which sent the light reflected
-off the rim of Example 17's droplet up instead of out and down: 0.00007 of the power
-through the sides below z = 0.0217 cm instead of the ray trace's 0.0072,
-``tests/test_mc_curved.py``.) A refracted direction that points back out of the new
+one only where a smoothed normal says so. (Mirroring the component normal to the face
+instead sends the light reflected off the rim of Example 17's droplet up instead of out and
+down: 0.00007 of the power through the sides below z = 0.0217 cm instead of the ray
+trace's 0.0072, ``tests/test_mc_curved.py``.) A refracted direction that points back out of the new
 voxel has that component mirrored, so that it enters the medium it refracted into.
 ``n = inf`` is a perfect reflector; ``g = 1`` (and -1) scatters without
 (with full) deflection; a medium with a tabulated phase function (``phase_idx >= 0``)

@@ -5,9 +5,9 @@ of a cuboid of air (MCmatlab's Example 17). The light reflected at the droplet's
 leaves the cuboid's side faces; near the rim it leaves them low, below z = 0.0217 cm. A
 ray trace of the first-surface reflection off the exact hemisphere (numpy, below; it
 shares nothing with the kernel) sends 0.0072 of the launched power through the sides
-below that depth and 0.0022 above. Until session 20 the kernel turned every reflected
-packet whose true direction still pointed into the droplet's voxel back up along the
-voxel face: 0.00007 below and 0.022 above (measured on 101 x 101 x 51 voxels).
+below that depth and 0.0022 above. A kernel that turns every reflected packet whose true
+direction still points into the droplet's voxel back up along the voxel face gives
+0.00007 below and 0.022 above (measured on 101 x 101 x 51 voxels).
 
 Tolerance: each packet leaves through one face with weight about 1 (air and water absorb
 almost nothing), so a fraction f from N packets has a standard error sqrt(f (1 - f) / N);

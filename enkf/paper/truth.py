@@ -34,8 +34,8 @@ class TruthConfig:
     camera: tuple | None = None
     #: the heat steps' time scheme (0.1 s steps): 0.5 Crank-Nicolson, within 0.06% of the
     #: peak of the solution converged in time (the pixels included) on the constant case;
-    #: backward Euler (1, before session 21) lagged by 0.57%, as the filter's own model did
-    #: then (validation/reports/coarse_model_error.md)
+    #: backward Euler (1) lags by 0.57%, as the filter's own model does with it
+    #: (validation/reports/coarse_model_error.md)
     heat_theta: float = 0.5
 
     def key(self) -> str:
