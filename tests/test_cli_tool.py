@@ -327,6 +327,7 @@ def _identify_tiny(tmp_path, cache, filter_lines: str):
     return cfg, out, json.loads((out / "summary.json").read_text())
 
 
+@pytest.mark.slow
 def test_summary_and_run_json_say_whether_the_innovations_persist(tmp_path, cache):
     """summary.json (and --follow's run.json) give the lag-1 persistence of the
     innovations while the laser is off, and whether it is flagged: on the tiny twin's
@@ -416,6 +417,7 @@ def test_identify_with_the_smoother_reports_it(tmp_path, cache):
         assert not (tmp_path / "b").exists()
 
 
+@pytest.mark.slow
 def test_identify_with_restarts_from_the_smoother(tmp_path, cache):
     """``[filter] smoother_restarts``: the filter restarts from the smoother after the
     pulse (summary.json lists the restart), also with --follow; bad values exit 2 with

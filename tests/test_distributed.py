@@ -122,6 +122,7 @@ def test_split_range_covers_every_batch_once():
         assert all(r[1] == s[0] for r, s in zip(ranges[:-1], ranges[1:], strict=True))
 
 
+@pytest.mark.slow
 def test_mc_command_on_a_local_cluster_writes_the_same_maps(tmp_path):
     from enkf.app.cli import main
 
@@ -135,6 +136,7 @@ def test_mc_command_on_a_local_cluster_writes_the_same_maps(tmp_path):
     assert not (tmp_path / "x").exists()
 
 
+@pytest.mark.slow
 def test_identify_batch_on_a_local_cluster_equals_this_machine(tmp_path):
     from enkf.app.cli import main
 

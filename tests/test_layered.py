@@ -351,6 +351,7 @@ def test_the_command_line_estimates_both_layers(tmp_path):
     assert 0 < points["built"] <= points["table"] == 16 * 16  # 4 x 4 nodes of 4 x 4 tables
 
 
+@pytest.mark.slow
 def test_two_media_emulator_between_nodes_agrees_with_direct_monte_carlo(tmp_path):
     """Off the nodes, at the edge of the second medium's prior and inside it: the absorbed
     power per depth layer agrees with direct Monte Carlo of the layered block within 4.5

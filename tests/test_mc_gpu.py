@@ -21,6 +21,8 @@ import pytest
 from mcmatlab_py import Medium, Model, NotBuiltError
 from mcmatlab_py.monte_carlo import gpu_available
 
+pytestmark = pytest.mark.slow  # the CUDA simulator and the PTX compile take half a minute
+
 pytest.importorskip("numba_cuda", reason="the gpu extra (numba-cuda) is not installed")
 
 N_PHOTONS = 2000

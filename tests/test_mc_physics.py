@@ -200,6 +200,7 @@ def test_moving_the_sums_often_changes_no_bit(monkeypatch):
 
 
 @pytest.mark.slow
+@pytest.mark.slow
 def test_a_run_past_int64_fixed_point_keeps_its_energy():
     """2^27 packets of weight W_ONE = 2^36 fill int64: a longer run (a GPU's second, two
     minutes on two cores of a slow kernel) must still balance. A thin absorbing slab with
