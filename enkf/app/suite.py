@@ -17,34 +17,21 @@ from pathlib import Path
 
 import numpy as np
 
-__all__ = ["SUITE", "load_script", "run_suite", "select", "validation_dir"]
+__all__ = ["IN_PROCESS", "load_script", "run_suite", "select", "suite", "validation_dir"]
 
-#: name -> (quick arguments, full arguments); None: not part of that suite.
-#: "{seed}" is replaced by --seed. "sensitivity" runs in this process (a figure).
-SUITE: dict[str, tuple[list | None, list | None]] = {
-    "mc_published": (["--photons", "300000"], ["--photons", "10000000"]),
-    "enkf_kalman_consistency": (["--reps", "40", "--N", "500"], []),
-    "enkf_lorenz96": (["--steps", "2000", "--burn-in", "300", "--seeds", "{seed}"],
-                      ["--seeds", "{seed}", "1", "2"]),
-    "fem_convergence": ([], []),
-    "fem_fd_reference": ([], []),
-    "coarse_model_error": (["--photons", "1000000"], ["--photons", "10000000"]),
-    "emulator_accuracy": (None, []),
-    "enkf_posterior": (None, []),
-    "identifiability": ([], []),
-    "paper_runs": (None, ["--twin"]),
-    "rtps": (None, []),  # the paper's scenarios with and without relaxation to prior spread
-    # builds the emulator of examples/own_data.toml (long on 2 cores): full suite only
-    "model_error_coverage": (None, ["--seeds", "20"]),
-    "sensor_offset": (None, []),  # the same emulator and the independent truths
-    "walk_bound": (None, []),  # the same emulator and the independent truths
-    "image_vs_point": (None, []),
-    # the innovations' persistence against the bands' coverage: the independent truths
-    "persistence": (None, ["--seeds", *map(str, range(20))]),
-    # identify's default config (the drift bank) on still, drifting and pulsed optics
-    "drift_bank": (None, ["--seeds", "20", "--jobs", "2"]),
-    "sensitivity": ([], []),
-}
+#: the checks that run in this process and have no script: "sensitivity" (a figure)
+IN_PROCESS: dict[str, tuple[list, list]] = {"sensitivity": ([], [])}
+
+
+def suite() -> dict[str, tuple[list | None, list]]:
+    """name -> (quick arguments, full arguments); quick None: only in the full suite.
+
+    The studies of ``validation/registry.toml`` as ``validation/registry.py`` reads them
+    (``args``: the command that made each report; ``quick``: the quick suite's, where a
+    study has them), then ``IN_PROCESS``. "{seed}" in the arguments stands for --seed.
+    """
+    studies = load_script(validation_dir(), "registry").load()
+    return {**{s["name"]: (s.get("quick"), s["args"]) for s in studies}, **IN_PROCESS}
 
 
 def validation_dir() -> Path:
@@ -60,13 +47,14 @@ def validation_dir() -> Path:
 def select(full: bool, only: list[str] | None) -> list[str]:
     """The checks to run; ValueError names a check that is not in the chosen suite."""
     col = 1 if full else 0
-    names = [n for n, a in SUITE.items() if a[col] is not None]
+    checks = suite()
+    names = [n for n, a in checks.items() if a[col] is not None]
     if not only:
         return names
     for n in only:
-        if n not in SUITE:
-            raise ValueError(f"--only {n!r}: no such check (choose from {', '.join(SUITE)})")
-        if SUITE[n][col] is None:
+        if n not in checks:
+            raise ValueError(f"--only {n!r}: no such check (choose from {', '.join(checks)})")
+        if checks[n][col] is None:
             raise ValueError(f"--only {n!r} runs only with --full (it takes hours)")
     return list(dict.fromkeys(only))
 
@@ -143,6 +131,7 @@ def run_suite(out: Path, *, full: bool = False, only: list[str] | None = None, s
     out = Path(out).resolve()
     root = validation_dir()
     names = select(full, only)
+    checks = suite()
     env = dict(os.environ)
     if threads is not None:
         env["NUMBA_NUM_THREADS"] = str(threads)
@@ -158,7 +147,7 @@ def run_suite(out: Path, *, full: bool = False, only: list[str] | None = None, s
                 body, status = [f"error: {err}"], f"error: {type(err).__name__}"
         else:
             report = out / f"{name}.md"
-            extra = [a.replace("{seed}", str(seed)) for a in SUITE[name][1 if full else 0]]
+            extra = [a.replace("{seed}", str(seed)) for a in checks[name][1 if full else 0]]
             cmd = [sys.executable, str(root / f"{name}.py"), *extra, "--out", str(report)]
             res = subprocess.run(cmd, capture_output=True, text=True, cwd=str(out), env=env)
             status = "ok" if res.returncode == 0 else f"exit status {res.returncode}"
