@@ -1,0 +1,104 @@
+"""Sphinx helpers of the tissue-enkf site: the gallery's coverage and the list of studies.
+
+* Every script in ``examples/mcmatlab/`` must have its page ``docs/gallery/<stem>.md``
+  and every such page its script: a missing one is a warning, so ``sphinx-build -W``
+  fails on it.
+* ``{validation-studies}`` lists the studies of ``validation/``: each script with a
+  report in ``validation/reports/``, the first sentence of its docstring, its command
+  and its reports (copied into the site as downloads). Nothing is run.
+"""
+
+from __future__ import annotations
+
+import ast
+import os
+import re
+import tomllib
+from pathlib import Path
+
+from docutils import nodes
+from docutils.statemachine import StringList
+from sphinx.application import Sphinx
+from sphinx.util import logging
+from sphinx.util.docutils import SphinxDirective
+
+logger = logging.getLogger(__name__)
+
+ROOT = Path(__file__).resolve().parents[2]
+EXAMPLES = ROOT / "examples" / "mcmatlab"
+VALIDATION = ROOT / "validation"
+
+
+def gallery_scripts() -> list[Path]:
+    """The gallery's scripts, as ``tests/test_gallery.py`` finds them."""
+    return sorted([*EXAMPLES.glob("ex*.py"), *EXAMPLES.glob("test1_*.py")])
+
+
+def check_gallery(app: Sphinx) -> None:
+    pages = {p.stem for p in (Path(app.srcdir) / "gallery").glob("*.md")}
+    scripts = {p.stem for p in gallery_scripts()}
+    for stem in sorted(scripts - pages):
+        logger.warning("examples/mcmatlab/%s.py has no gallery page docs/gallery/%s.md", stem, stem)
+    for stem in sorted(pages - scripts):
+        logger.warning("docs/gallery/%s.md names no script in examples/mcmatlab/", stem)
+
+
+def _first_sentence(path: Path) -> str:
+    doc = ast.get_docstring(ast.parse(path.read_text(encoding="utf-8"))) or ""
+    para = " ".join(doc.split("\n\n")[0].split())
+    return re.sub(r"\s*\(issues? #?\d+[^)]*\)", "", para)
+
+
+def _studies() -> list[dict]:
+    """The studies: from ``validation/registry.toml`` where it exists, else every script
+    of ``validation/`` with a report in ``validation/reports/``."""
+    registry = VALIDATION / "registry.toml"
+    if registry.exists():
+        with registry.open("rb") as f:
+            return tomllib.load(f)["study"]
+    reports = VALIDATION / "reports"
+    out = []
+    for script in sorted(VALIDATION.glob("*.py")):
+        found = [p.name for p in [*sorted(reports.glob(f"{script.stem}.md")),
+                                  *sorted(reports.glob(f"{script.stem}_*.md"))]]
+        if found:  # else a helper module (reference models, report writing), not a study
+            out.append({"name": script.stem, "group": "Studies", "args": [], "files": found,
+                        "establishes": _first_sentence(script)})
+    return out
+
+
+class ValidationStudies(SphinxDirective):
+    """The validation studies by group: what each establishes, its command, its report
+    (copied into the site as a download). Read when the site is built; nothing is run."""
+
+    has_content = False
+
+    def run(self) -> list[nodes.Node]:
+        here = Path(self.env.doc2path(self.env.docname)).parent
+        reports = VALIDATION / "reports"
+        lines: list[str] = []
+        group = None
+        for study in _studies():
+            if study.get("group") != group:
+                group = study.get("group")
+                lines += [f"```{{rubric}} {group}", "```", ""]
+            script = VALIDATION / f"{study['name']}.py"
+            self.env.note_dependency(str(script))
+            command = " ".join(["python", f"validation/{script.name}", *study.get("args", [])])
+            links = ", ".join(
+                f"{{download}}`{name} <{os.path.relpath(reports / name, here)}>`"
+                for name in study.get("files", []) if (reports / name).exists())
+            what = " ".join(str(study.get("establishes", "")).split())
+            lines += [f"`{study['name']}`", f": {what}", "",
+                      f"  `{command}`" + (f"; report: {links}" if links else ""), ""]
+        if not lines:
+            return [nodes.paragraph(text="No study with a report in validation/reports/.")]
+        container = nodes.container()
+        self.state.nested_parse(StringList(lines, source="validation/"), self.content_offset, container)
+        return container.children
+
+
+def setup(app: Sphinx) -> dict:
+    app.connect("builder-inited", check_gallery)
+    app.add_directive("validation-studies", ValidationStudies)
+    return {"parallel_read_safe": True, "parallel_write_safe": True}
