@@ -1,4 +1,4 @@
-"""Calibration of the all-params filter on identical-twin truths over 20 seeds (issue #18).
+"""Calibration of the all-params filter on identical-twin truths over 20 seeds.
 
 The paper's all-params experiment (mua, mus, VHC and TC drifting or unknown; one surface
 sensor) on the identical-twin truth, with the model error of ``--model-error``: per
@@ -8,7 +8,9 @@ of log(estimate / truth) over the seeds against the Cramér-Rao bounds of
 health check.
 
     python validation/all_params_calibration.py [--seeds 20] [--model-error structured]
-    python validation/all_params_calibration.py --smoother 8 --knots 2 --importance 3000
+    python validation/all_params_calibration.py --smoother 8 --knots 2 --importance 3000 \
+        --out runs/all_params_smoother.md    # the smoother's rows, beside the report
+
 """
 
 from __future__ import annotations
@@ -93,12 +95,9 @@ def main(argv=None) -> None:
                          "(enkf.modes), which seed the sampler beside the ensemble")
     ap.add_argument("--jobs", type=int, default=1,
                     help="seeds run side by side in this many processes (the same numbers)")
-    ap.add_argument("--out", default=None, help="default: reports/all_params_calibration.md, "
-                    "with --smoother all_params_smoother.md")
+    ap.add_argument("--out",
+                    default=str(ROOT / "validation" / "reports" / "all_params_calibration.md"))
     args = ap.parse_args(argv)
-    if args.out is None:
-        args.out = str(ROOT / "validation" / "reports" / (
-            "all_params_smoother.md" if args.smoother else "all_params_calibration.md"))
     row = smoother_row if args.smoother else filter_row
     seeds = range(args.seeds)
     with ProcessPoolExecutor(args.jobs) if args.jobs > 1 else nullcontext() as pool:
@@ -112,7 +111,7 @@ def main(argv=None) -> None:
     n = len(rows)
     names = list(rows[0]["logerr"])
     cmd = " ".join(sys.argv[1:] if argv is None else argv)
-    lines = ["# All-params calibration on identical twins (issue #18)", "",
+    lines = ["# All-params calibration on identical twins", "",
              f"Command: `python validation/all_params_calibration.py {cmd}`", "",
              __doc__.split("\n\n")[1].replace("\n", " "),
              "", f"Runs stopped by the health check: {sum(r['stopped'] is not None for r in rows)} "

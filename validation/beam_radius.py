@@ -1,4 +1,4 @@
-"""The beam radius as an input the ensemble carries (issue #18): the emulator over the
+"""The beam radius as an input the ensemble carries: the emulator over the
 radius against direct Monte Carlo, and the filter on truths lit by another radius.
 
 Part 1, the emulator. ``filter.estimate = ["mua", "mus", "beam_radius"]`` reads the
@@ -96,7 +96,7 @@ def study(node_counts, cache_dir=None) -> tuple[list[str], dict]:
 def report(lines, info, node_counts, command: str) -> str:
     nodes = "; ".join(f"{n} nodes: {', '.join(f'{v:.4f}' for v in info['nodes'][n])} cm"
                       for n in node_counts)
-    out = ["# The beam radius in the emulator (issue #18)", "", f"Command: `{command}`", "",
+    out = ["# The beam radius in the emulator", "", f"Command: `{command}`", "",
            "`examples/own_data.toml` with `filter.estimate = [\"mua\", \"mus\", \"beam_radius\"]`: "
            f"the emulator's node radii span {info['range'][0]:.4f}-{info['range'][1]:.4f} cm (the "
            "prior, 0.09-0.11 cm, widened 1.1 times each way), log-spaced ("

@@ -1,4 +1,4 @@
-"""Damage-driven optics against the random walk, on the same data (issue #21).
+"""Damage-driven optics against the random walk, on the same data.
 
 Two filters read the same noisy surface sensor (10 Hz, variance 0.01 deg C^2):
 
@@ -317,7 +317,7 @@ def write_report(out: Path, args, results: dict, truths: dict, wall: float,
     me = (f"the structured model error (its relative sd {BASE_REL:g} + {mf:g} sqrt(F) for the "
           "damage-driven filter, F its coagulated fraction)" if args.model_error == "structured"
           else "the white model error")
-    L = ["# Damage-driven optics against the random walk (issue #21)", "",
+    L = ["# Damage-driven optics against the random walk", "",
          f"Command: `{cmd}` ({len(args.seeds)} seeds; the filter runs took {runs_wall:.0f} s "
          "in all on the shared 2-core machine, the cached truths not counted).", "",
          f"Filters (the same data, N = {args.n_members}, ETKF, the paper's coarse model and "

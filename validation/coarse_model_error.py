@@ -78,8 +78,7 @@ def main(argv=None):
               "mus to absorb it. The averaged mass (fem.fastdiag.one_d_mass) cancels the "
               "leading error term on the same mesh: the 20 x 20 x 10 model is then closer to "
               "the truth than the lumped 50 x 50 x 25 one, and it is the filter's default "
-              "(TissueFilterSetup.heat_mass). (Before session 21 this table compared "
-              "backward Euler with backward Euler, which gave the same picture.)", ""]
+              "(TissueFilterSetup.heat_mass).", ""]
     lines += time_scheme(model, fine, truth.times)
     Path(args.out).parent.mkdir(parents=True, exist_ok=True)
     Path(args.out).write_text("\n".join(lines) + "\n")

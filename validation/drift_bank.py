@@ -1,4 +1,4 @@
-"""One default config whether the optics hold still, drift, or the laser pulses (issue #45).
+"""One default config whether the optics hold still, drift, or the laser pulses.
 
 ``examples/own_data.toml`` as shipped (its default ``[filter.drift] mode = "auto"``: a
 still filter and drifting ones, their restarts through 2, 3 and 6 knots, weighed by their
@@ -94,7 +94,7 @@ def run_one(args) -> dict:
 
 
 def passes(r: dict) -> dict:
-    """The issue's targets of one run."""
+    """The targets of one run."""
     (mua, mus), (tmua, tmus) = r["final"], r["final_truth"]
     ok = {"ran": r["diverged"] is None}
     if r["case"] in CONSTANT:
@@ -112,7 +112,7 @@ def report(rows: list, path: Path, command: str) -> None:
     lines = ["# One default config for still, drifting and pulsed optics", "",
              f"Command: `{command}`", "", __doc__.split("\n\n")[1].replace("\n", " "), "",
              __doc__.split("\n\n")[2].replace("\n", " "), "",
-             "Seeds passing each target (the issue asks >= 19 of 20 for the constant "
+             "Seeds passing each target (the targets: >= 19 of 20 for the constant "
              "estimates, >= 18 of 20 elsewhere); the temperature coverage is the mean (worst) "
              "over seeds; P(drift) the final drift weight (median over seeds). The wall "
              "times were measured with two or three runs sharing the two cores.", "",

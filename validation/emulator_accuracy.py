@@ -1,6 +1,6 @@
 """Emulator accuracy at off-grid points against direct Monte Carlo with many photons.
 
-Metric (issue 4): relative L2 error of NA over the voxels that hold 99% of the absorbed
+Metric: relative L2 error of NA over the voxels that hold 99% of the absorbed
 power, on the filter's 20 x 20 x 10 grid and on a finer 40 x 40 x 20 grid. The
 reference's own noise is estimated from two independent reference runs and reported
 beside the error (it inflates the measured error). Each table is built by the methods

@@ -14,7 +14,7 @@ the pulse (0 to 5 s, held after it): 2 knots is the paper's ramp with its shape 
 does. The paper's prior (uniform on [0.5, 2] x nominal) is added as a Gaussian of log-sd
 0.38 on the values it constrains (t = 0, VHC and TC), never on later knots, where the
 filter's random walk knows nothing. From the bound we draw the chance that an efficient,
-unbiased estimator meets the issue's targets on one seed.
+unbiased estimator meets the targets on one seed.
 Writes validation/reports/identifiability.md.
 
     python validation/identifiability.py [--draws 200000]
@@ -250,7 +250,7 @@ def main(argv=None):
              "of the parameters at the end of the pulse (t = 5 s, which is also their value "
              "at t = 15 s), from the paper's 150 surface readings (noise variance 0.01) and "
              "the paper's prior, with the filter's own coarse model (no model error). "
-             "'chance' is the probability that an efficient estimator meets the issue's "
+             "'chance' is the probability that an efficient estimator meets the "
              "target on one seed: mua within 5% and mus within 25 cm^-1 (constant), mus "
              "within 10% (time-varying), each of the four within 10% (all-params).", "",
              "| case | unknowns | mua(5 s) | mus(5 s) | VHC | TC | chance of meeting the target |",

@@ -113,7 +113,8 @@ def main(argv=None):
     ap.add_argument("--seeds", type=int, nargs="+", default=[0, 1, 2, 3, 4])
     ap.add_argument("--scenarios", nargs="+", default=["constant", "time-varying"])
     ap.add_argument("--model-error", choices=["white", "structured"], default="white",
-                    help="the filters' model error (white: the paper's C; structured: issue #18)")
+                    help="the filters' model error (white: the paper's C; structured: "
+                         "enkf.tissue.model_error)")
     ap.add_argument("--truth", choices=["fine", "A", "B", "C"], default="fine",
                     help="fine: the paper's fine grid; A, B, C: independent_models.py")
     ap.add_argument("--parameter-model", choices=["random_walk", "trend"], default="random_walk",
@@ -127,19 +128,19 @@ def main(argv=None):
                          "16 x 16 pixels; another one runs a new fine truth")
     ap.add_argument("--theta", type=float, default=0.5,
                     help="the filters' time scheme (TissueFilterSetup.theta; 1: backward "
-                         "Euler, the reports before session 21)")
+                         "Euler)")
     ap.add_argument("--truth-theta", type=float, default=0.5,
-                    help="the fine truth's time scheme (TruthConfig.heat_theta; 1 before "
-                         "session 21)")
+                    help="the fine truth's time scheme (TruthConfig.heat_theta; 1: backward "
+                         "Euler)")
     ap.add_argument("--rtps", type=float, default=0.0,
                     help="relaxation to prior spread of both filters' temperatures "
-                         "(TissueFilterSetup.rtps; 0 as the reports were written)")
+                         "(TissueFilterSetup.rtps; default 0, the report's setting)")
     ap.add_argument("--out", default=DEFAULT_OUT)
     args = ap.parse_args(argv)
     frame = CAMERA if args.window is None else (
         -args.window, args.window, -args.window, args.window, *CAMERA[4:])
-    # rtps 0 by default: as the reports were written (session 21); the paper's drifting
-    # scenario has relaxed its spread by 0.1 since session 22 (validation/rtps.py)
+    # rtps 0 by default, the report's setting, where the paper's drifting scenario relaxes
+    # its spread by 0.1 (validation/rtps.py): the two filters compared without it
     me = {"model_error": args.model_error, "theta": args.theta, "rtps": args.rtps}
     if args.parameter_model == "trend":
         me.update(parameter_model="trend", random_walk_std=TREND_WALK)

@@ -12,8 +12,8 @@ numpy and scipy, importing nothing from ``mcmatlab_py``, ``fem`` or ``enkf``:
     probability ``mua / mut``; no weights), scored on an axisymmetric ``(r, z)`` grid of
     0.0125 x 0.00625 cm, and a **cell-centred finite-difference** heat solver on a
     35 x 35 x 24 Cartesian grid of the box (insulated faces, backward Euler, 0.00625 s:
-    converged in time to 0.04% of the peak; at 0.05 s, before session 21, it lagged by
-    0.25-0.35% of the peak, 0.05-0.21 deg C at the surface).
+    converged in time to 0.04% of the peak; at 0.05 s it lags by 0.25-0.35% of the
+    peak, 0.05-0.21 deg C at the surface).
 ``"B"``
     **Attenuation (path-length) Monte Carlo** (packets scatter with ``mus`` only, their
     weight decays as ``exp(-mua s)`` along each flight; the lost weight is deposited at a
@@ -63,11 +63,11 @@ DEPTHS = (0.0, 0.1, 0.2)  # cm, the tracked points below the beam centre
 TIMES = np.round(0.1 * np.arange(151), 10)  # s, the 10 Hz sensor
 KNOTS = np.round(0.5 * np.arange(11), 10)  # s, Monte Carlo instants of the drifting case
 CACHE = Path.home() / ".cache" / "tissue-enkf" / "independent"
-MODELS = ("A", "B")  #: the two truths of the issue's studies (#18)
-#: every model here: C (B's Monte Carlo, a spectral solution on the box) added in session 25
+MODELS = ("A", "B")  #: the two truths the studies run by default
+#: every model here: C is B's Monte Carlo with a spectral solution on the box
 ALL_MODELS = ("A", "B", "C")
-DT_A = 0.00625  #: s, model A's backward-Euler step (16 per reading; 0.05 before session 21)
-#: the cache keys' versions: A's truths of steps of 0.05 s were "v1"
+DT_A = 0.00625  #: s, model A's backward-Euler step (16 per reading)
+#: the cache keys' versions (A's "v1", truths stepped at 0.05 s, is not read)
 VERSIONS = {"A": "v2", "B": "v1", "C": "v1"}
 
 

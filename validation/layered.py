@@ -1,4 +1,4 @@
-"""Identification under a known epidermis (issue #19): emulator, Cramér-Rao bounds, filter.
+"""Identification under a known epidermis: emulator, Cramér-Rao bounds, filter.
 
 The block of ``examples/two_layer.toml``: an 80 micrometre epidermis (mua 5, mus 150 cm^-1,
 g 0.8, known) over the dermis (the paper's tissue: mua 1, mus 100 cm^-1, g 0.9), whose
@@ -65,9 +65,9 @@ TRUTHS = {"A (centre)": {"mua": 1.0, "mus": 100.0}, "B (off-centre)": {"mua": 1.
 POINTS = [(1.0, 100.0), (0.7, 150.0), (1.6, 60.0), (0.5, 50.0), (2.0, 200.0), (0.5, 200.0),
           (2.0, 50.0)]
 DT, N_STEPS = 0.1, 150
-#: the fine truth's heat steps (DT): Crank-Nicolson. Backward Euler (1, the reports before
-#: session 21) lags the epidermis's fast rise: the camera's best fit of the filter's model
-#: moved by 2.8% in mus between truths stepped at 0.1 s and at 0.05 s
+#: the fine truth's heat steps (DT): Crank-Nicolson. Backward Euler (1) lags the
+#: epidermis's fast rise: the camera's best fit of the filter's model moves by 2.8% in mus
+#: between truths stepped by it at 0.1 s and at 0.05 s
 FINE_THETA = 0.5
 
 
@@ -352,10 +352,9 @@ def main(argv=None):
                     help="with --fine and --smoother: the smoother on the fine truth too")
     ap.add_argument("--theta", type=float, default=None,
                     help="the filter's time scheme (TissueFilterSetup.theta; default the "
-                         "config's, Crank-Nicolson; 1: backward Euler, the reports before "
-                         "session 21)")
+                         "config's, Crank-Nicolson; 1: backward Euler)")
     ap.add_argument("--fine-theta", type=float, default=FINE_THETA,
-                    help="the fine truth's time scheme (1: the reports before session 21)")
+                    help="the fine truth's time scheme (1: backward Euler)")
     ap.add_argument("--out", default=str(HERE / "reports" / "layered.md"))
     args = ap.parse_args(argv)
     ident = load_script(validation_dir(), "identifiability")

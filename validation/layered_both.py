@@ -1,4 +1,4 @@
-"""Both layers estimated (issue #19): the epidermis's optics beside the dermis's.
+"""Both layers estimated: the epidermis's optics beside the dermis's.
 
 The block of ``examples/two_layer.toml`` (an 80 micrometre epidermis over the dermis) with
 ``filter.medium = ["dermis", "epidermis"]``: the filter estimates the dermis's ``mua``,

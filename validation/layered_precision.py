@@ -1,4 +1,4 @@
-"""How precise must the filter's model be for the fine truth? (issue #19, known epidermis)
+"""How precise must the filter's model be for the fine truth? (known epidermis)
 
 One surface sensor determines the dermis's mua and mus under the known epidermis of
 ``examples/two_layer.toml`` to 0.5% and 1% (Cramér-Rao), along a ridge of correlation
@@ -10,8 +10,9 @@ least squares to the noise-free surface trace of a fine truth (direct Monte Carl
 heat simulation on the Monte Carlo's voxels, ``validation/layered.py``'s ``fine_data``) at
 the truth A = (1, 100) cm^-1: the pseudo-true optics that an efficient estimator with this
 model converges to. Its log error is the model's share of the error; ``floor``:
-``sqrt(bias^2 + CRB^2) / CRB``, which must stay below 1.3 for the issue's target to be
-within reach. The cases vary one source of model error at a time (the report's sections):
+``sqrt(bias^2 + CRB^2) / CRB``, which must stay below 1.3 for the target (an RMS error
+within 1.3 times the bound) to be within reach. The cases vary one source of model error
+at a time (the report's sections):
 
 1. the emulator's Monte Carlo draw (its seed) and photons, on the example's 20 x 20 x 10 FEM;
 2. the fine truth's own Monte Carlo draw and photons;

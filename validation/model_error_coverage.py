@@ -1,4 +1,4 @@
-"""Is the filter's uncertainty honest when the data come from another model? (issue #18)
+"""Is the filter's uncertainty honest when the data come from another model?
 
 The filter is set up as ``examples/own_data.toml`` (prior centred at mua 1, mus 100;
 emulator of 250 000 photons, 12 x 12; 20 x 20 x 10 FEM; N = 50, ETKF). The truths come
@@ -12,8 +12,8 @@ cooling, the parameter errors at 15 s, and the parameters' own coverage (the fra
 steps whose +-2 sd band holds the truth, and whether it holds it at 15 s).
 
 ``--variant`` compares the filter's model error settings: ``default`` (structured model
-error, no adaptive inflation: the config's defaults), ``white`` (the 0.002 deg C white
-noise: the filter of the issue), ``adaptive`` (structured, adaptive inflation on),
+error, no adaptive inflation: the config's defaults), ``white`` (the paper's white model
+noise of 0.002 deg C), ``adaptive`` (structured, adaptive inflation on),
 ``adapt-only`` (white noise, adaptive inflation on), ``rtps`` (structured, relaxation to
 prior spread 0.1 as the paper's drifting scenarios), ``restarts`` (structured, and the
 filter restarts from the smoother after the pulse: ``smoother_restarts = "laser_off"``,
@@ -46,7 +46,7 @@ CASES = ("constant", "time-varying")
 RESTARTS = {"smoother_restarts": "laser_off", "smoother_restart_discrepancy": 0.01}
 VARIANTS = {
     "default": {},  # examples/own_data.toml as shipped: structured model error, no adaptation
-    "white": {"model_error": "white"},  # the 0.002 deg C white noise: the filter of the issue
+    "white": {"model_error": "white"},  # the paper's white model noise of 0.002 deg C
     "adaptive": {"adaptive_inflation": True},  # structured error and adaptive inflation
     "adapt-only": {"model_error": "white", "adaptive_inflation": True},
     # structured error and relaxation to prior spread (the paper's drifting scenarios' 0.1)
@@ -58,7 +58,7 @@ VARIANTS = {
     # the restarts and relaxation to prior spread together (own_data.toml's advice for
     # drifting optics)
     "restarts-rtps": {**RESTARTS, "rtps": 0.1},
-    # the same with the drift through 2 or 4 knots (session 25: which form on A and C)
+    # the same with the drift through 2 or 4 knots (which form suits truths A and C)
     "restarts-rtps-k2": {**RESTARTS, "rtps": 0.1},
     "restarts-rtps-k4": {**RESTARTS, "rtps": 0.1},
     # the drift's form not known: an equal mixture of the 2- and 3-knot smoothers
@@ -125,7 +125,7 @@ def run_one(cfg, emulator, model: str, case: str, seed: int, variant: str,
 
 
 def passes(r: dict) -> dict:
-    """The issue's targets of one run."""
+    """The targets of one run."""
     mua, mus = r["final"]
     tmua, tmus = r["final_truth"]
     ok = {"ran": r["diverged"] is None}
@@ -139,7 +139,7 @@ def passes(r: dict) -> dict:
 
 
 def report(rows: list, path: Path, command: str) -> None:
-    lines = ["# Honest uncertainty against independent forward models (issue #18)", "",
+    lines = ["# Honest uncertainty against independent forward models", "",
              f"Command: `{command}`", "", __doc__.split("\n\n")[1].replace("\n", " "), "",
              "Coverage: the fraction of steps whose +-2 sd band holds the truth (mean over "
              "seeds, and the worst seed in brackets); target >= 0.9 each. Parameters at "

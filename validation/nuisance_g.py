@@ -1,4 +1,4 @@
-"""The anisotropy g and the beam radius as nuisance inputs (issue #18): what the filter
+"""The anisotropy g and the beam radius as nuisance inputs: what the filter
 identifies when the tissue's g, or the beam's radius, is not the model's.
 
 The filter's model has g = 0.9 (Table 1). The truths come from the independent forward
@@ -10,8 +10,7 @@ same mua and ``mus (1 - 0.9)`` whatever the truth's g, and its temperature bands
 mus is then the truth's mus times (1 - g) / (1 - 0.9), not the truth's mus.
 
     python validation/nuisance_g.py [--g 0.8 0.85 0.9 0.95] [--models B A] [--seeds 10]
-    python validation/nuisance_g.py --beam-radius 0.09 0.095 0.105 0.11 \
-        --out validation/reports/nuisance_beam_radius.md
+    python validation/nuisance_g.py --beam-radius 0.09 0.095 0.105 0.11 --out runs/radius.md
 
 With ``--beam-radius`` the truths keep g = 0.9 and mus = 100 and their top-hat beam has
 the radius given (cm; the filter's model: 0.1 cm, the same power), to measure how well
@@ -20,7 +19,7 @@ as an uncertain input (``filter.estimate = ["mua", "mus", "beam_radius"]``, its 
 0.09-0.11 cm; ``validation/beam_radius.py``):
 
     python validation/nuisance_g.py --beam-radius 0.09 0.095 0.1 0.105 0.11 \
-        --estimate-radius --out validation/reports/nuisance_beam_radius_estimated.md
+        --estimate-radius --out runs/radius_estimated.md
 
 The filter: ``examples/own_data.toml`` (the config a user starts from), the default variant
 of ``validation/model_error_coverage.py``. Each g's truths are cached beside the standard
@@ -127,7 +126,7 @@ def report(rows: list[dict], command: str) -> str:
     def triple(v):
         return ", ".join(f"{x:.2f}" for x in v)
 
-    lines = ["# Nuisance inputs: the anisotropy g and the beam radius (issue #18)", "",
+    lines = ["# Nuisance inputs: the anisotropy g and the beam radius", "",
              f"Command: `{command}`", "",
              "Truths from the independent models with the tissue's g and the beam's radius below, "
              "mus = 10 / (1 - g) (reduced scattering 10 cm^-1, mua 1 cm^-1, constant); the "

@@ -1,4 +1,4 @@
-"""The paper's three experiments over several seeds, checked against the targets of issue 5.
+"""The paper's three experiments over several seeds, checked against the targets.
 
 Targets: constant: mua within 5% and mus within 25 cm^-1 at t = 15 s; time-varying:
 mua RMSE <= 0.3 cm^-1, mus within 10% at t = 15 s; all-params: each of the four within
@@ -13,11 +13,10 @@ met on the twin and missed on the fine truth, the coarse model is what misses it
         [--drift auto]
 
 ``--drift auto`` runs identify's drift bank (a still and drifting filters weighed by the
-data) in place of each scenario's own walk (validation/reports/paper_runs_drift.md).
+data) in place of each scenario's own walk.
 
 Twenty seeds by default: with five, a pass count moves by one or two seeds when only the
-random numbers change (session 22 traced the session-3 table's "every target" to the
-draws of seeds 0-4, validation/reports/paper_runs.md).
+random numbers change (seeds 0-4 alone can meet a target that 20 seeds miss).
 """
 
 from __future__ import annotations

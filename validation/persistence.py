@@ -1,4 +1,4 @@
-"""Does the filter know when its model misses the truth's physics? (issue #18)
+"""Does the filter know when its model misses the truth's physics?
 
 The whole-image filter's bands below the surface fail against independent model B (a
 finite-volume cylinder for the box, docs/beyond.md) and hold against model A and the
@@ -35,14 +35,14 @@ TRUTHS = {"fine": "the paper's fine grid (our Monte Carlo and FEM on 100 x 100 x
           "A": "model A (analog Monte Carlo, finite-difference box)",
           "B": "model B (attenuation Monte Carlo, finite-volume cylinder)",
           "C": "model C (B's attenuation Monte Carlo, spectral solution on the box)"}
-#: the truths of the report's default run (C, added in session 25, on request)
+#: the truths of the report's default run (C, model B's light on the box: --truths C)
 DEFAULT_TRUTHS = ["fine", "A", "B"]
 
 
 def run_one(kind: str, truth, scenario: str, emu, camera, seed: int) -> dict:
     """One filter run's persistence (laser off, on), its flag, and its coverage metrics."""
-    # rtps 0: as the report was written (session 21); the paper's drifting scenario has
-    # relaxed its spread by 0.1 since session 22 (validation/rtps.py)
+    # rtps 0, the report's setting, where the paper's drifting scenario relaxes its spread
+    # by 0.1 (validation/rtps.py): the innovations' persistence without it
     if kind == "image":
         setup = filter_setup(scenario, emu, seed=seed, sensor_positions=np.zeros((0, 3)),
                              image=camera, model_error="structured", rtps=0.0)

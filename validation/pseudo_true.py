@@ -1,4 +1,4 @@
-"""What the filter's model can say about the independent truths: its best fit (issue #18).
+"""What the filter's model can say about the independent truths: its best fit.
 
 The filter's coarse model (examples/own_data.toml: emulator absorption on the 20 x 20 x
 10 FEM) is fitted by least squares to the noise-free surface trace of each independent
@@ -97,7 +97,7 @@ def main(argv=None) -> None:
         tk = np.linspace(0.0, T_ON, knots)
         return np.log(np.column_stack([1.0 + 0.6 * tk, 100.0 + 80.0 * tk])).ravel()
 
-    lines = ["# The filter's model fitted to the independent truths (issue #18)", "",
+    lines = ["# The filter's model fitted to the independent truths", "",
              "Command: `python validation/pseudo_true.py" + "".join(f" {a}" for a in
                                                                  (argv or sys.argv[1:])) + "`",
              "", f"Readings fitted: up to {TIMES[m]:g} s; discrepancy {args.discrepancy:g} (the "
@@ -141,8 +141,9 @@ def main(argv=None) -> None:
               "the best fit's, the filter (its random walk, not the model) is what limits it. "
               "The drifting rows differ with the form the drift is given: the same model error "
               "moves the fitted end of mus by several percent between 2, 3 and 5 knots, so no "
-              "one form puts both truths' mus near 500 (`model_error_coverage_restarts.md`, "
-              "3 knots, and `model_error_coverage_restarts_linear.md`, 2)."]
+              "one form puts both truths' mus near 500 (the filter's restarts through 3 knots "
+              "and through 2: `python validation/model_error_coverage.py --variant restarts "
+              "restarts-linear`)."]
     out.write_text("\n".join(lines) + "\n")
     print(f"report written to {out}")
 

@@ -1,4 +1,4 @@
-"""Relaxation to prior spread (RTPS) in the paper's experiments (issue #18, honest bands).
+"""Relaxation to prior spread (RTPS) in the paper's experiments: honest bands.
 
 With N = 50 members the analysis takes too much spread out of the temperatures beneath the
 surface while the optics drift: on identical twins (data from the filter's own model, so
@@ -95,7 +95,7 @@ def main(argv=None):
     if args.out != DEFAULT_OUT:
         cmd += f" --out {args.out}"
     lines = [
-        "# Relaxation to prior spread in the paper's experiments (issue #18)", "",
+        "# Relaxation to prior spread in the paper's experiments", "",
         f"Command: `{cmd}` ({time.perf_counter() - t0:.0f} s)", "",
         __doc__.split("\n\n")[1].replace("\n", " "), "",
         f"Seeds 0-{args.seeds - 1} per row; the paper's filter (N = 50, ETKF, 20 x 20 x 10 "

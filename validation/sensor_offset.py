@@ -1,4 +1,4 @@
-"""A sensor that reads high: its offset carried by the ensemble (issue #18, nuisance inputs).
+"""A sensor that reads high: its offset carried by the ensemble (a nuisance input).
 
 A thermocouple or a camera is calibrated to a few tenths of a degree; the filter that
 takes its readings as the surface temperature then moves the optics until its model
@@ -7,8 +7,8 @@ config) each point sensor's offset is a parameter of the members, N(0, sd^2) at 
 and constant, added to the model's readings. The data are the independent truths A and B
 of ``validation/independent_models.py`` (constant optics, mua 1, mus 100 cm^-1) plus an
 offset and the sensor noise (variance 0.01); the filter is ``examples/own_data.toml``'s.
-For each offset of the data and each setting we record, over the seeds, the targets of
-issue #18 for constant optics (mua within 5%, mus within 25 cm^-1 at 15 s), the coverage
+For each offset of the data and each setting we record, over the seeds, the targets for
+constant optics (mua within 5%, mus within 25 cm^-1 at 15 s), the coverage
 of the +-2 sd temperature band at z = 0, 0.1, 0.2 cm, and the estimated offset. Writes
 ``validation/reports/sensor_offset.md``.
 
@@ -59,7 +59,7 @@ def main(argv=None):
     args = ap.parse_args(argv)
     cfg = load_identify(ROOT / "examples" / "own_data.toml")
     emulator = cfg.emulator(progress=False)
-    lines = ["# A sensor that reads high: its offset estimated with the optics (issue #18)", "",
+    lines = ["# A sensor that reads high: its offset estimated with the optics", "",
              f"Command: `python validation/sensor_offset.py --seeds {args.seeds} --offsets "
              f"{' '.join(f'{o:g}' for o in args.offsets)}`", "",
              " ".join(__doc__.split("\n\n")[1].split()), "",

@@ -1,4 +1,4 @@
-"""The ES-MDA smoother against the independent truths of issue #18 (constant and drifting).
+"""The ES-MDA smoother against the independent truths (constant and drifting optics).
 
 The same set-up as ``validation/model_error_coverage.py`` (``examples/own_data.toml``; the
 truths of ``validation/independent_models.py``, which share no code with the filter's
@@ -14,7 +14,7 @@ after the pulse), ``--drift-log-std`` sets the drift prior's sd over the window 
 units), ``--importance`` follows ES-MDA with that many samples of the exact posterior
 (adaptive importance sampling, ``enkf.amis``).
 
-Reported per truth: the issue's targets (constant: mua within 5%, mus within 25 cm^-1;
+Reported per truth: the targets (constant: mua within 5%, mus within 25 cm^-1;
 drifting: mua RMSE over the readings <= 0.3 cm^-1, mus within 10% at 15 s; on at least 18
 of 20 seeds), and the parameters' own coverage: the seeds whose +-2 sd band (the 2.3% and
 97.7% quantiles of the ensemble) holds the truth at 15 s.
@@ -78,7 +78,7 @@ def passes(r: dict) -> dict:
 
 
 def report(rows: list, path: Path, command: str) -> None:
-    lines = ["# The smoother against independent truths (issue #18)", "",
+    lines = ["# The smoother against independent truths", "",
              f"Command: `{command}`", "", __doc__.split("\n\n")[1].replace("\n", " "), "",
              __doc__.split("\n\n")[2].replace("\n", " "), "",
              "| discrepancy | case | truth | seeds | targets (seeds passing) | mean estimate at "

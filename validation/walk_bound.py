@@ -1,4 +1,4 @@
-"""What can a random-walk filter know about drifting optics? A Bayesian bound (issue #18).
+"""What can a random-walk filter know about drifting optics? A Bayesian bound.
 
 The filter follows drifting optics with a random walk: log mua and log mus take a step of
 sd ``q`` (per 0.1 s reading) while the laser is on. That walk is a prior on the whole
@@ -20,7 +20,7 @@ optics: zero for an identical twin, the model error for the independent truths A
 curve towards a constant, and the paper's ramps (mua 1 -> 4, mus 100 -> 500 cm^-1 over the
 pulse) are not constant. From the error's mean and covariance at t = 5 s (= 15 s) we
 compute the chance that one seed ends with mus within 10% and has mua's RMS error over the
-run within 0.3 cm^-1 (issue #18's targets for drifting optics), for several walk sizes.
+run within 0.3 cm^-1 (the targets for drifting optics), for several walk sizes.
 Writes ``validation/reports/walk_bound.md``.
 
     python validation/walk_bound.py [--draws 200000]
@@ -145,7 +145,7 @@ def main(argv=None):
             p = chances(mean, cov, 2 * k - 1, np.arange(k), truth[:, 0], args.draws)
             rows.append((q_mua, q_mus, name, mean[k - 1], sd[k - 1], mean[-1], sd[-1], *p))
             print(rows[-1][:3], np.round(rows[-1][3:], 3), flush=True)
-    lines = ["# What a random-walk filter can know about drifting optics (issue #18)", "",
+    lines = ["# What a random-walk filter can know about drifting optics", "",
              f"Command: `python validation/walk_bound.py --draws {args.draws}`", "",
              " ".join(__doc__.split("\n\n")[1].split()), "",
              "    error = (F + J)^-1 [S^T r / sigma^2 - J (x_true - x_prior)] + noise,",
