@@ -1,0 +1,657 @@
+"""MCmatlab's own engine against ours, example by example, number for number.
+
+For every MCmatlab example that the gallery mirrors (``examples/mcmatlab/``), both
+engines run the same reduced model (fewer voxels, a fixed photon count) in ``K``
+independent batches:
+
+* MCmatlab: its own example script, run by GNU Octave with MCmatlab's C engines
+  (``../shared/tools/mcmatlab-octave``). The script is taken from the MCmatlab checkout
+  at run time and edited on the fly (its local functions moved to the top, as Octave
+  wants; plotting removed; ``G.nx``/``ny``/``nz`` set to the reduced grid); every
+  ``runMonteCarlo`` and ``simulateHeatDistribution`` call of the script is wrapped so
+  that it runs the reduced photon count on one thread with a batch's seed and its
+  outputs are recorded. Nothing of MCmatlab is kept but the numbers.
+* ours: the gallery script's own ``run()``, with the same two changes made by hooks:
+  the grid's ``nx``/``ny``/``nz`` take the reduced values whenever the script sets them,
+  and every top-level Monte Carlo, fluorescence and heat call is given the photon count
+  and a batch's seed, and recorded.
+
+Each recorded stage is summarised by the same function (:func:`summarize`): absorbed
+fraction, per medium and per depth slab, the escape through each face, the normalised
+fluence rate averaged over blocks of the cuboid, the far field, the light collector's
+image and time bins, the heat sensors' temperature rises and the damage. The batch means
+give a mean and a standard error per number on each side; two numbers agree when they lie
+within 3 combined standard errors (heat sensors: or within 1% of the rise, the issue's
+target for the heat solvers' own discretisation difference).
+
+    # MCmatlab's side (Octave; writes validation/data/mcmatlab/<example>.json)
+    MCM_ROOT=/tmp/mcm/mcm python validation/mcmatlab_agreement.py mcmatlab [ex01 ex04 ...]
+    # ours against the stored references (writes validation/reports/mcmatlab_agreement.md)
+    python validation/mcmatlab_agreement.py compare [ex01 ex04 ...]
+
+``tests/test_mcmatlab_agreement.py`` holds one batch of ours, with fewer photons, against
+the stored references (:func:`ci_check`).
+"""
+
+from __future__ import annotations
+
+import argparse
+import contextlib
+import dataclasses
+import importlib.util
+import json
+import math
+import os
+import re
+import subprocess
+import sys
+import tempfile
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[1]
+GALLERY = ROOT / "examples" / "mcmatlab"
+DATA = ROOT / "validation" / "data" / "mcmatlab"
+REPORT = ROOT / "validation" / "reports" / "mcmatlab_agreement.md"
+#: |ours - MCmatlab| within this many combined standard errors counts as agreement
+Z_AGREE = 3.0
+#: heat sensors: a difference within this fraction of the rise also counts (the issue's target)
+HEAT_REL = 0.01
+FACES = ("xpos", "xneg", "ypos", "yneg", "zpos", "zneg")
+
+
+@dataclass(frozen=True)
+class Case:
+    """One MCmatlab example, reduced the same way on both sides."""
+
+    name: str  #: short name, e.g. "ex01"
+    script: str  #: the gallery script's stem
+    mcmatlab: str  #: MCmatlab's script (without .m)
+    grid: tuple[int, int, int]  #: the reduced nx, ny, nz
+    photons: int  #: photons per Monte Carlo call and batch
+    fmc_photons: int = 0  #: photons per fluorescence call and batch
+    batches: int = 10
+    #: the CI test runs one batch of ours with photons / ci_divisor
+    ci_divisor: int = 4
+    #: which of our recorded stages are MCmatlab's, in MCmatlab's order (None: all)
+    ours_stages: tuple[int, ...] | None = None
+    #: extra (regex, replacement) edits of MCmatlab's script, applied after the generic ones
+    edits: tuple[tuple[str, str], ...] = ()
+    #: extra (attribute path, value) set on our models before each call (e.g. to mirror a
+    #: MCmatlab default our script leaves out); documented in ``note``
+    note: str = ""
+    #: quantities whose name matches this regex are left out of the comparison (reason in note)
+    skip: str = ""
+    #: (regex, reason): numbers that differ for a reason measured and stated in the report
+    explained: tuple[tuple[str, str], ...] = ()
+    ours_run: str = "run"  #: the gallery function that runs it
+    kw: dict = field(default_factory=dict)  #: keyword arguments of ``ours_run`` besides quick
+
+
+AIR_NA = ("absorbed in medium 1$|depth slab 1/6",
+          "the air's absorption (mua = 1e-8 cm^-1): MCmatlab's NA is mua x NFR from the track "
+          "length, ours scores absorption where packets interact, and in this air none do "
+          "(the same expectation, 3e-10 of the power; ours is 0 at any feasible count)")
+
+CASES: dict[str, Case] = {c.name: c for c in [
+    Case("ex01", "ex01_standard_tissue", "Example1_StandardTissue", (21, 21, 30), 100_000,
+         explained=(AIR_NA,)),
+    Case("ex02", "ex02_beam_definitions", "Example2_BeamDefinitions", (41, 41, 20), 100_000),
+    Case("ex03", "ex03_refraction_reflection", "Example3_RefractionReflection", (20, 20, 20),
+         20_000),
+    Case("ex04", "ex04_blood_vessel", "Example4_BloodVessel", (30, 30, 30), 100_000),
+    Case("ex05", "ex05_fluorescence_and_imaging", "Example5_FluorescenceAndImaging",
+         (20, 20, 20), 100_000, fmc_photons=100_000),
+    Case("ex06", "ex06_time_tagging", "Example6_TimeTagging", (20, 20, 20), 20_000,
+         ours_stages=(0,)),
+    Case("ex07", "ex07_far_field", "Example7_FarField", (21, 21, 21), 100_000,
+         fmc_photons=100_000),
+    Case("ex08", "ex08_collected_fluence_rate", "Example8_CollectedFluenceRate", (20, 20, 20),
+         200_000),
+    Case("ex09", "ex09_geometry_parametric_sweep", "Example9_GeometryParametricSweep",
+         (11, 21, 21), 20_000),
+    Case("ex10", "ex10_media_property_parametric_sweep", "Example10_MediaPropertyParametricSweep",
+         (21, 21, 21), 20_000),
+    Case("ex11", "ex11_multiple_heat_sims", "Example11_MultipleHeatSims", (30, 30, 30),
+         100_000),
+    Case("ex12", "ex12_saturable_absorber", "Example12_SaturableAbsorber", (20, 20, 40),
+         100_000),
+    Case("ex13", "ex13_t_dependent_vhc", "Example13_TdependentVHC", (24, 24, 24), 100_000),
+    Case("ex14", "ex14_thermochromism", "Example14_Thermochromism", (24, 24, 24), 50_000),
+    Case("ex15", "ex15_thermally_induced_scattering", "Example15_ThermallyInducedScattering",
+         (24, 24, 24), 50_000),
+    Case("ex16", "ex16_cuda_acceleration", "Example16_CUDAacceleration", (30, 30, 30), 100_000),
+    Case("ex17", "ex17_curved_refraction_reflection", "Example17_CurvedRefractionReflection",
+         (41, 41, 21), 50_000),
+    Case("ex19", "ex19_deposition_criteria", "Example19_DepositionCriteria", (21, 21, 30),
+         100_000),
+    Case("ex20", "ex20_reflectance_statistics", "Example20_ReflectanceStatisticsAndCyclicBoundaries",
+         (21, 21, 20), 20_000),
+    Case("ex21", "ex21_custom_phase_functions", "Example21_CustomPhaseFunctions", (21, 21, 30),
+         100_000, ours_stages=(0,)),
+    Case("ex22", "ex22_combining_model_objects", "Example22_CombiningModelObjects", (21, 21, 30),
+         100_000),
+    Case("ex23", "ex23_broadband_monte_carlo", "Example23_BroadbandMonteCarlo", (20, 20, 20),
+         100_000, fmc_photons=100_000),
+    Case("ex24", "ex24_az_fz_reflectance_transmittance", "Example24_AzFzReflectanceTransmittance",
+         (21, 21, 30), 100_000, ours_stages=(0,)),
+    Case("ex25", "ex25_deposition_criteria2", "Example25_DepositionCriteria2", (30, 30, 30),
+         100_000, ours_stages=(0,)),
+    Case("ex26", "ex26_distributed_source", "Example26_DistributedSource", (21, 21, 30),
+         100_000),
+    Case("test1", "test1_all_frt_dependences", "Test1_AllFRTDependences", (20, 20, 20), 50_000,
+         fmc_photons=50_000),
+]}
+
+
+# ----------------------------------------------------------------------------- summaries
+
+def _blocks(n: int, k: int) -> list[slice]:
+    """``k`` contiguous index ranges covering 0..n-1 as evenly as possible."""
+    edges = np.linspace(0, n, min(k, n) + 1).round().astype(int)
+    return [slice(a, b) for a, b in zip(edges[:-1], edges[1:], strict=True)]
+
+
+def summarize(rec: dict) -> dict[str, float]:
+    """The numbers compared, from one stage record (MCmatlab's layout and units)."""
+    if rec["kind"] == "HS":
+        return _summarize_heat(rec)
+    q: dict[str, float] = {}
+    dV = rec["dx"] * rec["dy"] * rec["dz"]
+    NA = np.asarray(rec["NA"], dtype=np.float64)
+    NFR = np.asarray(rec["NFR"], dtype=np.float64)
+    waves = NA.shape[3] if NA.ndim == 4 else 0
+    if waves:
+        for k in range(waves):
+            q[f"absorbed λ{k}"] = float(NA[..., k].sum() * dV)
+        NA, NFR = NA.sum(axis=3), NFR.sum(axis=3)
+    q["absorbed"] = float(NA.sum() * dV)
+    M = np.asarray(rec["M_raw"]).astype(int)
+    media = np.unique(M)
+    if media.size > 1:
+        for m in media:
+            q[f"absorbed in medium {m}"] = float(NA[M == m].sum() * dV)
+    for k, s in enumerate(_blocks(NA.shape[2], 6)):
+        q[f"absorbed, depth slab {k + 1}/6"] = float(NA[:, :, s].sum() * dV)
+    nx, ny, nz = NFR.shape
+    for i, sx in enumerate(_blocks(nx, 3)):
+        for k, sz in enumerate(_blocks(nz, 4)):
+            sy = _blocks(ny, 3)[1] if ny >= 3 else slice(None)
+            q[f"NFR block x{i + 1}/3 z{k + 1}/4"] = float(NFR[sx, sy, sz].mean())
+    area = {"x": rec["dy"] * rec["dz"], "y": rec["dx"] * rec["dz"], "z": rec["dx"] * rec["dy"]}
+    for face in FACES:
+        NI = rec.get(f"NI_{face}")
+        if NI is not None and np.size(NI) > 1 and np.all(np.isfinite(NI)):
+            q[f"escaped {face}"] = float(np.asarray(NI, dtype=np.float64).sum() * area[face[0]])
+    FF = rec.get("farField")
+    if FF is not None and np.size(FF) > 1:
+        FF = np.asarray(FF, dtype=np.float64)
+        FF = FF.sum(axis=2) if FF.ndim == 3 else FF
+        q["far field total"] = float(FF.sum())
+        for k, s in enumerate(_blocks(FF.shape[0], 6)):
+            q[f"far field, theta band {k + 1}/6"] = float(FF[s].sum())
+    img = rec.get("image")
+    if img is not None and np.all(np.isfinite(img)):
+        img = np.asarray(img, dtype=np.float64)
+        if waves and img.ndim >= 1 and img.shape[-1] == waves:
+            img = img.sum(axis=-1)
+        if img.ndim == 0 or img.size == 1:
+            q["light collector power"] = float(img)
+        elif img.ndim == 1:  # a fiber, time-resolved
+            for k in range(img.size):
+                q[f"light collector, time bin {k}"] = float(img[k])
+        else:
+            sp = img if img.ndim == 2 else img.sum(axis=2)
+            q["light collector image mean"] = float(sp.mean())
+            for i, sx in enumerate(_blocks(sp.shape[0], 3)):
+                for j, sy in enumerate(_blocks(sp.shape[1], 3)):
+                    q[f"image block {i + 1},{j + 1}"] = float(sp[sx, sy].mean())
+            if img.ndim == 3:
+                for k in range(img.shape[2]):
+                    q[f"image, time bin {k}"] = float(img[:, :, k].mean())
+    return q
+
+
+def _summarize_heat(rec: dict) -> dict[str, float]:
+    q: dict[str, float] = {}
+    T = np.atleast_2d(np.asarray(rec["sensorTemps"], dtype=np.float64))
+    t = np.atleast_1d(np.asarray(rec["sensorsTimeVector"], dtype=np.float64))
+    if T.size and t.size > 1:
+        for s in range(T.shape[0]):
+            for frac in (0.25, 0.5, 0.75, 1.0):
+                j = round(frac * (t.size - 1))
+                q[f"sensor {s + 1} rise at t = {t[j]:.4g} s"] = float(T[s, j] - T[s, 0])
+    Tmap = np.asarray(rec["T"], dtype=np.float64)
+    M = np.asarray(rec["M_raw"]).astype(int)
+    T0 = float(rec["T0"])
+    for m in np.unique(M):
+        q[f"mean rise in medium {m}"] = float(Tmap[M == m].mean() - T0)
+    Om = np.asarray(rec.get("Omega", 0.0), dtype=np.float64)
+    if Om.size > 1 and Om.max() > 0:
+        dV = rec["dx"] * rec["dy"] * rec["dz"]
+        q["damaged volume (sum of 1 - exp(-Omega)) dV"] = float((1 - np.exp(-Om)).sum() * dV)
+    return q
+
+
+def batch_statistics(summaries: list[list[dict]]) -> list[dict]:
+    """Per stage, per number: mean and standard error over the batches
+    (``summaries[batch][stage]``)."""
+    out = []
+    for stage in range(len(summaries[0])):
+        names = summaries[0][stage].keys()
+        st = {}
+        for name in names:
+            v = np.array([s[stage][name] for s in summaries if name in s[stage]])
+            se = float(v.std(ddof=1) / math.sqrt(v.size)) if v.size > 1 else float("nan")
+            st[name] = {"mean": float(v.mean()), "se": se}
+        out.append(st)
+    return out
+
+
+# ----------------------------------------------------------------------------- MCmatlab side
+
+#: Octave functions put at the top of every edited MCmatlab script (this project's code:
+#: they call MCmatlab's own runMonteCarlo/simulateHeatDistribution and save the outputs)
+OCTAVE_PRELUDE = r"""
+function model = mcmrec_run(model, varargin)
+  global MCMREC
+  simType = 'MC';
+  if numel(varargin) && strcmpi(varargin{1}, 'fluorescence'); simType = 'FMC'; end
+  if strcmp(simType, 'MC'); n = MCMREC.photons; else; n = MCMREC.fmc_photons; end
+  model.(simType).nPhotonsRequested = n;
+  model.(simType).useAllCPUs = false;
+  model.(simType).useGPU = false;
+  model.(simType).silentMode = true;
+  model = runMonteCarlo(model, varargin{:});
+  mcmrec_save(model, simType);
+end
+
+function model = mcmrec_heat(model, varargin)
+  model.HS.silentMode = true;   % no live plots (Octave here has no graphics toolkit)
+  model.HS.makeMovie = false;
+  model.HS.useAllCPUs = false;
+  model.HS.useGPU = false;
+  global MCMREC
+  if isnan(MCMREC.T0); MCMREC.T0 = double(model.HS.T(1)); end  % the first heat run's start
+  model = simulateHeatDistribution(model, varargin{:});
+  mcmrec_save(model, 'HS', MCMREC.T0);
+end
+
+function v = mcmrec_get(obj, name)
+  try; v = obj.(name); catch; v = NaN; end
+end
+
+function mcmrec_save(model, kind, T0)
+  global MCMREC
+  MCMREC.count = MCMREC.count + 1;
+  G = model.G;
+  s = struct('kind', kind, 'dx', G.dx, 'dy', G.dy, 'dz', G.dz, 'M_raw', double(G.M_raw));
+  if strcmp(kind, 'HS')
+    s.T = model.HS.T; s.T0 = T0;
+    s.sensorTemps = model.HS.sensorTemps; s.sensorsTimeVector = model.HS.sensorsTimeVector;
+    s.Omega = model.HS.Omega; s.maxMediaTemps = model.HS.maxMediaTemps;
+  else
+    S = model.(kind);
+    s.NFR = S.NFR; s.NA = S.NA; s.nPhotons = S.nPhotons;
+    s.farField = mcmrec_get(S, 'farField');
+    for f = {'xpos','xneg','ypos','yneg','zpos','zneg'}
+      s.(['NI_' f{1}]) = mcmrec_get(S, ['NI_' f{1}]);
+    end
+    if S.useLightCollector; s.image = S.LC.image; else; s.image = NaN; end
+  end
+  save('-v7', fullfile(MCMREC.out, sprintf('stage_%03d.mat', MCMREC.count)), '-struct', 's');
+end
+"""
+
+#: lines of MCmatlab's scripts that only draw (Octave here has no graphics toolkit) or wait
+_DRAWING = re.compile(
+    r"^\s*(\w+\s*=\s*)?(plot|plotMCmatlab\w*|MCmatlab\.plot\w*|MCmatlab\.closeMCmatlabFigures"
+    r"|figure|clf|set|xlabel|ylabel|title|legend|hold|grid|axis|pause|drawnow|colorbar)\b"
+    r"|^\s*fprintf\('Press enter")
+
+
+def edit_mcmatlab_script(text: str, case: Case) -> str:
+    """MCmatlab's example script, made to run the reduced model under Octave and record it."""
+    lines = text.splitlines()
+    first = next(i for i, ln in enumerate(lines) if re.match(r"^function\b", ln))
+    body, functions = lines[:first], lines[first:]
+    body = [ln for ln in body if not _DRAWING.match(ln)]
+    out = "\n".join(body)
+    for axis, n in zip("xyz", case.grid, strict=True):
+        out = re.sub(rf"(\w+\.G\.n{axis}\s*=\s*)[^;%\n]+;", rf"\g<1>{n};", out)
+    out = re.sub(r"\brunMonteCarlo\(", "mcmrec_run(", out)
+    out = re.sub(r"\bsimulateHeatDistribution\(", "mcmrec_heat(", out)
+    for pattern, repl in case.edits:
+        out, k = re.subn(pattern, repl, out)
+        if not k:
+            raise ValueError(f"{case.name}: the edit {pattern!r} matched nothing")
+    setup = ("global MCMREC\n"
+             "MCMREC = struct('out', getenv('MCMREC_OUT'), 'count', 0, "
+             "'photons', str2double(getenv('MCMREC_PHOTONS')), "
+             "'fmc_photons', str2double(getenv('MCMREC_FMC_PHOTONS')), 'T0', NaN);\n"
+             "mcmRoot = getenv('MCM_ROOT'); cd(mcmRoot); addpath(fullfile(mcmRoot, 'octave_compat'));"
+             " mcmatlab_octave_setup(mcmRoot);\n")
+    return "\n".join(["1;", *functions, OCTAVE_PRELUDE, setup, out, ""])
+
+
+def _loadmat(path: Path) -> dict:
+    from scipy.io import loadmat
+
+    d = loadmat(path, squeeze_me=True)
+    rec = {k: v for k, v in d.items() if not k.startswith("__")}
+    rec["kind"] = str(rec["kind"])
+    for k in ("dx", "dy", "dz", "T0"):
+        if k in rec:
+            rec[k] = float(rec[k])
+    return rec
+
+
+def mcmatlab_commit(mcm_root: Path) -> str:
+    """The MCmatlab commit, from ``MCMATLAB_COMMIT`` or the bare repository ``MCMATLAB_GIT``."""
+    if os.environ.get("MCMATLAB_COMMIT"):
+        return os.environ["MCMATLAB_COMMIT"]
+    git = os.environ.get("MCMATLAB_GIT")
+    if git:
+        return subprocess.run(["git", f"--git-dir={git}", "rev-parse", "HEAD"], check=True,
+                              capture_output=True, text=True).stdout.strip()
+    return "unknown"
+
+
+def run_mcmatlab(case: Case, mcm_root: Path, batch: int, log) -> list[dict]:
+    """One batch of MCmatlab's own run of the example (seed ``batch + 1``): the stage records."""
+    script = edit_mcmatlab_script((mcm_root / f"{case.mcmatlab}.m").read_text(), case)
+    with tempfile.TemporaryDirectory(prefix=f"mcm_{case.name}_") as tmp:
+        tmp = Path(tmp)
+        (tmp / "run_case.m").write_text(script)
+        env = {**os.environ, "MCM_ROOT": str(mcm_root), "MCMREC_OUT": str(tmp),
+               "MCMREC_PHOTONS": str(case.photons), "MCMREC_FMC_PHOTONS": str(case.fmc_photons),
+               "MCMATLAB_SEED": str(batch + 1), "OMP_NUM_THREADS": "1"}
+        p = subprocess.run(["nice", "-n", "10", "octave-cli", "--norc", str(tmp / "run_case.m")],
+                           env=env, capture_output=True, text=True)
+        log.write(p.stdout + p.stderr)
+        stages = sorted(tmp.glob("stage_*.mat"))
+        if p.returncode != 0 or not stages:
+            raise RuntimeError(f"{case.name}: Octave failed (exit {p.returncode}):\n"
+                               f"{p.stderr[-3000:]}")
+        return [_loadmat(s) for s in stages]
+
+
+def mcmatlab_reference(case: Case, mcm_root: Path) -> dict:
+    """MCmatlab's batches of one example, summarised: what ``validation/data/mcmatlab`` keeps."""
+    t0 = time.perf_counter()
+    summaries = []
+    with open(Path(tempfile.gettempdir()) / f"mcmatlab_{case.name}.log", "w") as log:
+        for b in range(case.batches):
+            summaries.append([summarize(r) for r in run_mcmatlab(case, mcm_root, b, log)])
+    return {
+        "example": case.name, "mcmatlab_script": f"{case.mcmatlab}.m",
+        "mcmatlab_commit": mcmatlab_commit(mcm_root),
+        "engine": "MCmatlab's C engines (MCmatlab.c, finiteElementHeatPropagator.c) built for "
+                  "GNU Octave by ../shared/tools/mcmatlab-octave, one thread",
+        "settings": {"grid": list(case.grid), "photons_per_call": case.photons,
+                     "fmc_photons_per_call": case.fmc_photons, "batches": case.batches,
+                     "seeds": "MCMATLAB_SEED = batch + 1"},
+        "wall_s": round(time.perf_counter() - t0, 1),
+        "stages": batch_statistics(summaries),
+    }
+
+
+# ----------------------------------------------------------------------------- our side
+
+def load_gallery(stem: str):
+    """Import a gallery script by path (it is not part of a package)."""
+    path = GALLERY / f"{stem}.py"
+    spec = importlib.util.spec_from_file_location(f"gallery_{stem}", path)
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+def _record(model, kind: str, T0: float | None = None) -> dict:
+    """Our model's outputs in MCmatlab's layout (M_raw 1-based, as MCmatlab's media)."""
+    G = model.G
+    rec = {"kind": kind, "dx": G.dx, "dy": G.dy, "dz": G.dz, "M_raw": G.medium_map() + 1}
+    if kind == "HS":
+        HS = model.HS
+        temps = np.zeros((0, 0)) if HS.sensor_temps is None else np.asarray(HS.sensor_temps).T
+        rec.update(T=np.asarray(HS.T_voxels), T0=T0, sensorTemps=temps,
+                   sensorsTimeVector=np.asarray(HS.sensor_times),
+                   Omega=np.asarray(HS.Omega_voxels if HS.Omega_voxels is not None else 0.0))
+        return rec
+    S = model.MC if kind == "MC" else model.FMC
+    rec.update(NFR=S.NFR, NA=S.NA, farField=S.far_field)
+    for f in FACES:
+        rec[f"NI_{f}"] = getattr(S, f"NI_{f}")
+    rec["image"] = S.light_collector.image if S.use_light_collector else None
+    return rec
+
+
+@contextlib.contextmanager
+def reduced_and_recorded(case: Case, photons: int, fmc_photons: int, seed: int,
+                         records: list):
+    """While active: grids take ``case.grid`` whenever a script sets ``nx``/``ny``/``nz``,
+    and each top-level Monte Carlo, fluorescence and heat call gets the photon count and a
+    seed (``seed + call number``), and appends its record to ``records``."""
+    from mcmatlab_py import Model
+    from mcmatlab_py.geometry import Geometry
+
+    grid = dict(zip(("nx", "ny", "nz"), case.grid, strict=True))
+    saved = {(Geometry, "__setattr__"): Geometry.__setattr__,
+             (Model, "run_monte_carlo"): Model.run_monte_carlo,
+             (Model, "run_fluorescence_monte_carlo"): Model.run_fluorescence_monte_carlo,
+             (Model, "simulate_heat_distribution"): Model.simulate_heat_distribution}
+    depth = [0]
+    calls = [0]
+    T0: list[float] = []
+
+    def set_grid(self, name, value):
+        saved[Geometry, "__setattr__"](self, name, grid.get(name, value))
+
+    def prepare(S, n):
+        S.n_photons_requested, S.simulation_time_requested = n, None
+        S.seed = seed + calls[0]
+        S.progress = False
+        S.n_threads = 1
+        S.calc_normalized_irradiance = True
+        calls[0] += 1
+
+    def wrap(name, kind):
+        orig = saved[Model, name]
+
+        def call(self, *args, **kw):
+            if depth[0] or (kind == "MC" and args and args[0] == "fluorescence"):
+                return orig(self, *args, **kw)
+            if kind == "MC":
+                prepare(self.MC, photons)
+            elif kind == "FMC":
+                prepare(self.FMC, fmc_photons)
+            else:
+                self.HS.progress = False
+                if not T0:  # the start temperature of the first heat run
+                    T0.append(float(np.ravel(self.HS.T if self.HS.T is not None
+                                             else self.HS.T_initial)[0]))
+            depth[0] += 1
+            try:
+                out = orig(self, *args, **kw)
+            finally:
+                depth[0] -= 1
+            records.append(_record(self, kind, T0[0] if T0 else None))
+            return out
+        return call
+
+    Geometry.__setattr__ = set_grid
+    Model.run_monte_carlo = wrap("run_monte_carlo", "MC")
+    Model.run_fluorescence_monte_carlo = wrap("run_fluorescence_monte_carlo", "FMC")
+    Model.simulate_heat_distribution = wrap("simulate_heat_distribution", "HS")
+    try:
+        yield
+    finally:
+        for (cls, name), f in saved.items():
+            setattr(cls, name, f)
+
+
+def run_ours(case: Case, batch: int, photons: int | None = None,
+             fmc_photons: int | None = None) -> list[dict]:
+    """One batch of our gallery script on the reduced model: the stage records."""
+    module = load_gallery(case.script)
+    records: list = []
+    with reduced_and_recorded(case, photons or case.photons, fmc_photons or case.fmc_photons,
+                              10_007 * (batch + 1), records):
+        getattr(module, case.ours_run)(quick=False, **case.kw)
+    if case.ours_stages is not None:
+        records = [records[i] for i in case.ours_stages]
+    return records
+
+
+def ours_statistics(case: Case) -> list[dict]:
+    summaries = [[summarize(r) for r in run_ours(case, b)] for b in range(case.batches)]
+    return batch_statistics(summaries)
+
+
+# ----------------------------------------------------------------------------- comparison
+
+def compare(ref_stages: list[dict], our_stages: list[dict], case: Case) -> list[dict]:
+    """One row per number: ours, MCmatlab's, their combined standard error and the verdict."""
+    if len(ref_stages) != len(our_stages):
+        raise ValueError(f"{case.name}: MCmatlab recorded {len(ref_stages)} stages, ours "
+                         f"{len(our_stages)}")
+    rows = []
+    for k, (ref, ours) in enumerate(zip(ref_stages, our_stages, strict=True)):
+        for name, r in ref.items():
+            if case.skip and re.search(case.skip, name):
+                continue
+            o = ours.get(name)
+            if o is None:
+                rows.append({"stage": k + 1, "name": name, "mcmatlab": r["mean"], "ours": None,
+                             "verdict": "missing in ours"})
+                continue
+            se = math.hypot(r["se"], o["se"])
+            d = o["mean"] - r["mean"]
+            # float32 maps: a number that does not vary is still only good to ~1e-6
+            tol = max(Z_AGREE * se, 1e-5 * abs(r["mean"]), 1e-12)
+            heat = "rise" in name
+            ok = abs(d) <= tol or (heat and abs(d) <= HEAT_REL * abs(r["mean"]))
+            verdict = "agree" if ok else "DIFFER"
+            why = next((i for i, (pat, _) in enumerate(case.explained) if re.search(pat, name)),
+                       None)
+            if not ok and why is not None:
+                verdict = f"explained ({why + 1})"
+            rows.append({"stage": k + 1, "name": name, "mcmatlab": r["mean"],
+                         "se_mcmatlab": r["se"], "ours": o["mean"], "se_ours": o["se"],
+                         "z": d / se if se > 0 else (0.0 if d == 0 else math.inf),
+                         "tol": tol, "verdict": verdict})
+    return rows
+
+
+def ci_check(case: Case) -> list[tuple[str, float, float, float]]:
+    """One batch of ours with ``photons / ci_divisor`` against the stored reference:
+    ``(name, ours, MCmatlab's, tolerance)`` per number. The tolerance is 4 combined standard
+    errors, ours scaled from MCmatlab's by the photon count (the per-photon variance is
+    the same when the two agree)."""
+    ref = json.loads((DATA / f"{case.name}.json").read_text())
+    n_ref = ref["settings"]["photons_per_call"] * ref["settings"]["batches"]
+    n_ci = case.photons // case.ci_divisor
+    ours = [summarize(r) for r in run_ours(case, 0, n_ci, case.fmc_photons // case.ci_divisor)]
+    out = []
+    for k, (st, o) in enumerate(zip(ref["stages"], ours, strict=True)):
+        for name, r in st.items():
+            if case.skip and re.search(case.skip, name):
+                continue
+            se_ours = r["se"] * math.sqrt(n_ref / n_ci)
+            tol = max(4.0 * math.hypot(r["se"], se_ours), 1e-5 * abs(r["mean"]), 1e-12)
+            if "rise" in name:
+                tol = max(tol, HEAT_REL * abs(r["mean"]))
+            out.append((f"stage {k + 1}: {name}", o.get(name, math.nan), r["mean"], tol))
+    return out
+
+
+# ----------------------------------------------------------------------------- report
+
+def _fmt(v) -> str:
+    return "–" if v is None or (isinstance(v, float) and math.isnan(v)) else f"{v:.5g}"
+
+
+def report(results: dict[str, tuple[Case, dict, list[dict]]], command: str) -> list[str]:
+    lines = ["# MCmatlab's engine against ours, example by example", "",
+             f"Made by `{command}` (MCmatlab's side: `MCM_ROOT=... python "
+             "validation/mcmatlab_agreement.py mcmatlab`, stored in "
+             "`validation/data/mcmatlab/`). Each row: the mean over the batches on each side, "
+             f"the combined standard error (SE) and `z` = (ours - MCmatlab) / SE; agreement: "
+             f"|z| <= {Z_AGREE:g} (heat rises: or within {HEAT_REL:.0%} of the rise).", ""]
+    total = bad = 0
+    summary = ["| example | MCmatlab script | grid | photons/call x batches | numbers | agree |",
+               "|---|---|---|---|---:|---:|"]
+    body = []
+    for name, (case, ref, rows) in results.items():
+        n_ok = sum(r["verdict"] == "agree" for r in rows)
+        total += len(rows)
+        bad += len(rows) - n_ok
+        summary.append(f"| {name} | {case.mcmatlab} | {'x'.join(map(str, case.grid))} | "
+                       f"{case.photons:.0e} x {case.batches} | {len(rows)} | {n_ok} |")
+        body += [f"## {name}: {case.mcmatlab}", "",
+                 f"MCmatlab commit `{ref['mcmatlab_commit'][:12]}`, grid "
+                 f"{'x'.join(map(str, case.grid))}, {case.photons:g} photons per call"
+                 + (f" ({case.fmc_photons:g} per fluorescence call)" if case.fmc_photons else "")
+                 + f", {case.batches} batches per side.", ""]
+        if case.note:
+            body += [case.note, ""]
+        body += ["| stage | number | ours | MCmatlab | SE | z | verdict |",
+                 "|---:|---|---:|---:|---:|---:|---|"]
+        for r in rows:
+            se = math.hypot(r.get("se_mcmatlab", 0.0), r.get("se_ours", 0.0))
+            body.append(f"| {r['stage']} | {r['name']} | {_fmt(r['ours'])} | "
+                        f"{_fmt(r['mcmatlab'])} | {_fmt(se)} | {_fmt(r.get('z'))} | "
+                        f"{r['verdict']} |")
+        body.append("")
+    lines += summary + ["", f"{total - bad} of {total} numbers agree.", ""] + body
+    return lines
+
+
+def main(argv=None) -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("side", choices=("mcmatlab", "compare"))
+    ap.add_argument("examples", nargs="*", help=f"default: all ({', '.join(CASES)})")
+    ap.add_argument("--batches", type=int, help="fewer batches, for a trial (not stored)")
+    args = ap.parse_args(argv)
+    names = args.examples or list(CASES)
+    if args.batches:
+        for name in names:
+            CASES[name] = dataclasses.replace(CASES[name], batches=args.batches)
+    if args.side == "mcmatlab":
+        mcm_root = Path(os.environ["MCM_ROOT"])
+        DATA.mkdir(parents=True, exist_ok=True)
+        for name in names:
+            ref = mcmatlab_reference(CASES[name], mcm_root)
+            out = DATA / f"{name}.json" if not args.batches else Path(tempfile.gettempdir()) / f"mcmatlab_{name}.json"
+            out.write_text(json.dumps(ref, indent=1) + "\n")
+            print(f"{name}: {len(ref['stages'])} stages in {ref['wall_s']} s", flush=True)
+        return
+    results = {}
+    for name in names:
+        case = CASES[name]
+        ref_path = DATA / f"{name}.json"
+        if args.batches:
+            ref_path = Path(tempfile.gettempdir()) / f"mcmatlab_{name}.json"
+        ref = json.loads(ref_path.read_text())
+        rows = compare(ref["stages"], ours_statistics(case), case)
+        results[name] = (case, ref, rows)
+        n_bad = sum(r["verdict"] != "agree" for r in rows)
+        print(f"{name}: {len(rows) - n_bad}/{len(rows)} agree", flush=True)
+        for r in rows:
+            if r["verdict"] != "agree":
+                print(f"   stage {r['stage']} {r['name']}: ours {_fmt(r['ours'])} MCmatlab "
+                      f"{_fmt(r['mcmatlab'])} z {_fmt(r.get('z'))}")
+    if not args.examples:
+        command = "python validation/mcmatlab_agreement.py compare"
+        REPORT.write_text("\n".join(report(results, command)) + "\n")
+    else:
+        out = ROOT / "validation" / "reports" / "mcmatlab_agreement_partial.json"
+        out.write_text(json.dumps({n: r for n, (_, _, r) in results.items()}, indent=1))
+
+
+if __name__ == "__main__":
+    sys.path.insert(0, str(ROOT))
+    main()
