@@ -106,7 +106,8 @@ class BatchedPCG:
     def solve(self, r: np.ndarray, a: np.ndarray, b: np.ndarray, x0=None) -> np.ndarray:
         """Solve for all members; r (N, nfree) -> (N, nfree); x0 the initial guess."""
         B = np.ascontiguousarray(r.T)
-        X = np.zeros_like(B) if x0 is None else np.ascontiguousarray(x0.T, dtype=float)
+        # a copy: for one member x0.T is contiguous already, and X is updated in place
+        X = np.zeros_like(B) if x0 is None else np.array(x0.T, dtype=float, order="C")
         if self.precond is None:
             dinv = 1.0 / (self.m_diag[:, None] * a + self.k_diag[:, None] * b
                           + self.r_diag[:, None])

@@ -203,3 +203,29 @@ def test_march_is_the_loop_of_steps_with_probes_and_callback():
     assert T1.shape == T0[0].shape and r1 is None
     with pytest.raises(ValueError, match="times must increase"):
         march(lambda T, t0, t1: T, T0, [0.0, 0.2, 0.1])
+
+
+@pytest.mark.parametrize("method", ["fast", "direct", "pcg"])
+@pytest.mark.parametrize("shape", ["one", "member", "ensemble"])
+def test_a_step_leaves_its_input_unchanged(method, shape):
+    """The step returns new temperatures; the caller's (the previous step's, used for the
+    damage integral) stay as they were, on every solver path and for one member too."""
+    mesh = box_mesh(5, 4, 3, 0.5, 0.4, 0.3)
+    T, f, _, _ = _ensemble(mesh, 3)
+    T = {"one": T[0], "member": T[:1], "ensemble": T}[shape]
+    kept = T.copy()
+    new = HeatStepper(mesh, C, K, 0.2, method=method).step(T, f[0])
+    np.testing.assert_array_equal(T, kept)
+    assert np.abs(new - kept).max() > 1e-3
+
+
+def test_a_step_of_another_length_by_the_mass_scale():
+    """A stepper built for dt steps dt' when VHC is scaled by dt / dt' (the error-controlled
+    heat run takes every step length on one stepper)."""
+    mesh = box_mesh(5, 4, 3, 0.5, 0.4, 0.3)
+    T, f, _, _ = _ensemble(mesh, 1)
+    for method in ("fast", "direct", "pcg"):
+        ref = HeatStepper(mesh, C, K, 0.05, method=method, rtol=1e-14).step(T[0], f[0])
+        other = HeatStepper(mesh, C, K, 0.2, method=method, rtol=1e-14)
+        got = other.step(T, f[:1], vhc_scale=np.array([0.2 / 0.05]))[0]
+        np.testing.assert_allclose(got, ref, rtol=0, atol=1e-9 * np.abs(ref).max())
