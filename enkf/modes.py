@@ -5,8 +5,8 @@ its prior ensemble's mean leads to by linear updates. Where the readings leave s
 modes or a long curved valley with several minima (one surface sensor, two layers: the
 dermis's scattering traded against the epidermis's; the drifting all-parameters twin),
 importance sampling seeded by that ensemble (:func:`enkf.importance.amis`) stays near the
-mode it was given (``validation/reports/all_params_smoother.md``, seed 16: mus 58% low
-with a band 6% wide, where the search finds the truth's mode).
+mode it was given (on the drifting all-parameters twin, seed 16: mus 58% low with a band
+6% wide, where the search finds the truth's mode).
 
 :func:`find_modes` looks for the others. Its cost is a least-squares one,
 :math:`\tfrac12 \lVert r(u) \rVert^2` with whitened residuals ``r`` (readings and any

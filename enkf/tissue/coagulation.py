@@ -68,7 +68,7 @@ the native's, where uniform optics, even the fully coagulated ones, keep 0.93 an
 of it). At the true optics the coarse model's rise of
 the temperature at 0.1 and 0.2 cm is then about 20 % too large at the end of the single
 pulse, and already 5-10 % off while the first layer forms
-(``validation/reports/coagulation_20seeds.md``, "The mean field at the true optics").
+(``validation/reports/coagulation.md``, "The mean field at the true optics").
 With the structured model error (:class:`~enkf.tissue.StructuredModelError`, the default
 of ``tissue-enkf identify``) each member's relative sd of a step's tendency is therefore
 ``model_error_rel_std + mean_field_rel_std * sqrt(F_n)``: nothing before the damage,

@@ -300,7 +300,7 @@ def assemble(setup: TissueFilterSetup, param_bounds=None, warm_dt: float | None 
     # stop on non-finite values, a parameter mean beyond the bounds, a collapsed spread
     # (below 1e-6 of the nominal value: the data can no longer move it), or a temperature
     # no tissue reaches (a runaway state: adaptive inflation compounding on the deep
-    # temperatures with drifting optics reached 1e8 deg C, validation/reports/rtps_adaptive.md)
+    # temperatures with drifting optics reached 1e8 deg C)
     min_std = np.concatenate([1e-6 * nominal, np.zeros(len(bounds_extra))])
     health = HealthCheck(param_bounds=np.vstack([param_bounds, bounds_extra]),
                          min_param_std=min_std, state_bounds=STATE_BOUNDS)

@@ -145,8 +145,8 @@ class TissueFilterSetup:
     #: temperature by up to 0.6% of the peak (0.11 deg C at the paper's surface, 0.43 in its
     #: drifting case), an error the optics then take up: on data from independent model A
     #: the camera's mus came out 4.1% off with backward Euler, 1.5% with Crank-Nicolson
-    #: (validation/reports/coarse_model_error.md, "The time scheme"; image_vs_point_A.md;
-    #: docs/enkf.md). Crank-Nicolson has the same cost per step
+    #: (validation/reports/coarse_model_error.md, "The time scheme"; docs/enkf.md).
+    #: Crank-Nicolson has the same cost per step
     theta: float = 0.5
     #: s, the longest heat step of the forecast (``[HS] dt`` in a config): an interval between
     #: readings longer than this is split into equal sub-steps. None: one step per interval
