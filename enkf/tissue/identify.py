@@ -566,6 +566,13 @@ def identify(setup: TissueFilterSetup, times: np.ndarray, data: np.ndarray, *,
     (:func:`enkf.tissue.drift.identify_bank`; ``drift_weight`` says, per reading, how
     probable the drift is).
 
+    With ``setup.smoother_restarts`` the filter restarts from the smoother after the
+    readings :func:`restart_points` names (:func:`restart_ensemble`; ``docs/enkf.md``,
+    "Restarts"). After each restart the callback sees the restarted members' re-run again
+    from step 0 (``StepReport.replayed``), then the filter's steps go on: a
+    :class:`~enkf.tissue.risk.RiskTracker` (step 0 starts it afresh) so integrates each
+    member's damage along its own history.
+
     Parameters
     ----------
     times : (M,) s, strictly increasing, after 0 (the prior is at t = 0)
@@ -575,13 +582,6 @@ def identify(setup: TissueFilterSetup, times: np.ndarray, data: np.ndarray, *,
         is step 0)
     param_bounds : (n_par, 2), physical range of each parameter's ensemble mean;
         leaving it stops the run (default: :meth:`TissueFilterSetup.default_param_bounds`)
-
-    With ``setup.smoother_restarts`` the filter restarts from the smoother after the
-    readings :func:`restart_points` names (:func:`restart_ensemble`; ``docs/enkf.md``,
-    "Restarts"). After each restart the callback sees the restarted members' re-run again
-    from step 0 (``StepReport.replayed``), then the filter's steps go on: a
-    :class:`~enkf.tissue.risk.RiskTracker` (step 0 starts it afresh) so integrates each
-    member's damage along its own history.
 
     Returns
     -------
