@@ -40,10 +40,8 @@ from .model import Geometry, MonteCarloSimulation
 __all__ = [
     "EMULATED_SOURCES",
     "AbsorptionEmulator",
-    "DirectMonteCarloAbsorption",
     "EmulatorSpec",
     "default_cache_dir",
-    "direct_member",
     "cache_key",
     "check_emulated",
     "interpolate_log_na",
@@ -736,5 +734,15 @@ def _load(path: Path, spec: EmulatorSpec, key: str, quiet: bool = False):
     return data
 
 
-# the exact mode lives in its own module; its names stay importable from here
-from .exact import DirectMonteCarloAbsorption, direct_member  # noqa: E402
+def __getattr__(name: str):
+    """The exact mode lives in :mod:`mcmatlab_py.exact`; its names stay importable from here.
+
+    Looked up on first use rather than imported at the end of this module: ``exact``
+    imports this module, so ``import mcmatlab_py.exact`` on its own would otherwise meet a
+    half-initialised ``exact``.
+    """
+    if name in ("DirectMonteCarloAbsorption", "direct_member"):
+        from . import exact
+
+        return getattr(exact, name)
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
