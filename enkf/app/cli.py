@@ -18,6 +18,7 @@ from .. import __version__
 from .cmd_identify import cmd_identify
 from .cmd_model import cmd_heat, cmd_mc
 from .cmd_paper import cmd_paper
+from .cmd_port import cmd_port
 from .cmd_validate import cmd_validate
 from .common import EXIT_BAD_INPUT, EXIT_UNEXPECTED, MAX_SEED, shorten
 
@@ -163,6 +164,20 @@ def build_parser() -> argparse.ArgumentParser:
     p_val.set_defaults(full=False)
     _common(p_val)
     p_val.set_defaults(func=cmd_validate)
+
+    p_port = sub.add_parser(
+        "port", help="convert a MCmatlab model script (.m) into a Python script",
+        description="Convert a MCmatlab model script into a Python script that uses "
+                    "mcmatlab_py (docs/porting.md); the lines it cannot convert are kept as "
+                    "comments and listed on stderr. Needs the MATLAB parser: pip install "
+                    "'tissue-enkf[port]'.")
+    p_port.add_argument("model", metavar="MODEL.m", help="the MCmatlab model script")
+    p_port.add_argument("-o", "--output", default=None, metavar="OUT.py",
+                        help="write the script here (default: standard output)")
+    p_port.add_argument("--force", action="store_true", help="replace an existing OUT.py")
+    p_port.add_argument("--debug", action="store_true", default=argparse.SUPPRESS,
+                        help="show the traceback of an error instead of one line")
+    p_port.set_defaults(func=cmd_port)
     return parser
 
 
