@@ -3,9 +3,11 @@
 * Every script in ``examples/mcmatlab/`` must have its page ``docs/gallery/<stem>.md``
   and every such page its script: a missing one is a warning, so ``sphinx-build -W``
   fails on it.
-* ``{validation-studies}`` lists the studies of ``validation/``: each script with a
-  report in ``validation/reports/``, the first sentence of its docstring, its command
-  and its reports (copied into the site as downloads). Nothing is run.
+* ``{validation-studies}`` lists the studies of ``validation/`` from its registry
+  (``validation/registry.toml``: group, what each establishes, its arguments, its report
+  files, which are copied into the site as downloads); without a registry, each script
+  with a report in ``validation/reports/`` and the first sentence of its docstring.
+  Nothing is run.
 """
 
 from __future__ import annotations
@@ -84,6 +86,7 @@ class ValidationStudies(SphinxDirective):
                 lines += [f"```{{rubric}} {group}", "```", ""]
             script = VALIDATION / f"{study['name']}.py"
             self.env.note_dependency(str(script))
+            self.env.note_dependency(str(VALIDATION / "registry.toml"))
             command = " ".join(["python", f"validation/{script.name}", *study.get("args", [])])
             links = ", ".join(
                 f"{{download}}`{name} <{os.path.relpath(reports / name, here)}>`"
