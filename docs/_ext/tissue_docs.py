@@ -78,6 +78,8 @@ class ValidationStudies(SphinxDirective):
     def run(self) -> list[nodes.Node]:
         here = Path(self.env.doc2path(self.env.docname)).parent
         reports = VALIDATION / "reports"
+        if (VALIDATION / "registry.toml").exists():
+            self.env.note_dependency(str(VALIDATION / "registry.toml"))
         lines: list[str] = []
         group = None
         for study in _studies():
@@ -86,7 +88,6 @@ class ValidationStudies(SphinxDirective):
                 lines += [f"```{{rubric}} {group}", "```", ""]
             script = VALIDATION / f"{study['name']}.py"
             self.env.note_dependency(str(script))
-            self.env.note_dependency(str(VALIDATION / "registry.toml"))
             command = " ".join(["python", f"validation/{script.name}", *study.get("args", [])])
             links = ", ".join(
                 f"{{download}}`{name} <{os.path.relpath(reports / name, here)}>`"
