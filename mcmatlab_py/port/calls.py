@@ -327,13 +327,17 @@ class CallTranslator(ExprTranslator):
         return E(f"{np_('full')}({shape}, {fill})", PRIMARY, "bool" if fill in (
             "True", "False") else kind)
 
-    def formatted(self, nodes, scope, escapes: bool = True) -> E:
-        """``sprintf(fmt, args...)`` -> ``fmt % (args,)``."""
+    def formatted(self, nodes, scope, escapes: bool = True, strip_newline: bool = False) -> E:
+        """``sprintf(fmt, args...)`` -> ``fmt % (args,)`` (``strip_newline``: without the
+        format's final ``\\n``)."""
         from miss_hit_core import m_ast
 
         fmt_node, rest = nodes[0], nodes[1:]
         if isinstance(fmt_node, m_ast.Char_Array_Literal | m_ast.String_Literal):
-            fmt = py_string(fmt_node.t_string.value.replace("''", "'"), escapes=escapes)
+            text = fmt_node.t_string.value.replace("''", "'")
+            if strip_newline:
+                text = text[:-2]
+            fmt = py_string(text, escapes=escapes)
         else:
             fmt = self.ex(fmt_node, scope)
         args = self.args(rest, scope)

@@ -9,7 +9,7 @@ that cannot be converted is kept as a comment and listed (line, text, why).
 from __future__ import annotations
 
 from .calls import CallTranslator, selection_chain
-from .expr import ATOM, PRIMARY, E, Scope, _minus_one, int_literal, py_name, wrap
+from .expr import PRIMARY, E, Scope, _minus_one, int_literal, py_name, wrap
 from .media import MediaTranslator
 from .names import Unconvertible
 
@@ -31,6 +31,7 @@ class Translator(CallTranslator, MediaTranslator):
         self.media_funcs: dict[str, str] = {}  # model variable -> its media function
         self.roles: dict[str, str] = {}
         self.events: list[tuple[int, str, str]] = []  # (line, "mc" | "hs", model variable)
+        self.param_lines: list[tuple[int, str]] = []  # where G.mediaPropParams is set
         self.preamble: list[str] = []
 
     # -- comments ------------------------------------------------------------------------
@@ -174,6 +175,12 @@ class Translator(CallTranslator, MediaTranslator):
             if fname not in self.functions:
                 raise Unconvertible(f"the media function {fname} is not in this file")
             self.media_funcs[m] = fname
+            line = self.src.span(node)[0]
+            later = any(ln > line and v == m for ln, v in self.param_lines)
+            if later and _uses_last_input(self.functions[fname]):
+                # MCmatlab calls it at run time with mediaPropParams, set further down
+                return [f"{indent}# {m}.G.media is set below, where G.mediaPropParams is  # "
+                        f"({fname} reads its parameters)"]
             return [f"{indent}{m}.G.media = {self.media_call(fname, '[]', m)}"]
         if special == "media_params":
             fname = self.media_funcs.get(m)
@@ -181,7 +188,7 @@ class Translator(CallTranslator, MediaTranslator):
                 raise Unconvertible("mediaPropParams before mediaPropertiesFunc")
             params = self.ex(rhs, scope).code
             return [f"{indent}{m}.G.media = {self.media_call(fname, params, m)}  "
-                    "# MCmatlab calls the media function with mediaPropParams"]
+                    "# (MCmatlab calls the media function with mediaPropParams)"]
         if special == "silent":
             e = self.ex(rhs, scope)
             value = {"True": "False", "False": "True"}.get(e.code, f"not {wrap(e, 5)}")
@@ -264,20 +271,17 @@ class Translator(CallTranslator, MediaTranslator):
         if name == "warning" and len(args) == 2 and isinstance(args[0], m_ast.Char_Array_Literal) \
                 and args[0].t_string.value.lower() in ("on", "off"):
             raise Unconvertible("MATLAB's warning switches: Python's warnings.filterwarnings")
-        e = self.formatted(args, scope)
+        newline = False
+        if name == "fprintf" and isinstance(args[0], m_ast.Char_Array_Literal) and \
+                args[0].t_string.value.endswith("\\n") and args[0].t_string.value.count("\\n") == 1:
+            newline = True  # print's own newline stands for the format's last \n
+        e = self.formatted(args, scope, strip_newline=newline)
         if name == "error":
             return [f"{indent}raise RuntimeError({e.code})"]
         if name == "warning":
             self.imports.add("warnings")
             return [f"{indent}warnings.warn({e.code}, stacklevel=1)"]
-        code = e.code
-        if code.endswith('\\n"') and code.count("\\n") == 1 and e.prec == ATOM:
-            return [f"{indent}print({code[:-3]}\")"]
-        if code.endswith('\\n"') and code.count("\\n") == 1:
-            # "...\n" % (a, b): drop the newline that print adds
-            fmt, rest = code.split('\\n"', 1)
-            return [f"{indent}print({fmt}\"{rest})"]
-        return [f'{indent}print({code}, end="")']
+        return [f"{indent}print({e.code})" if newline else f'{indent}print({e.code}, end="")']
 
     def _st_Break_Statement(self, node, scope, indent):
         return [f"{indent}break"]
@@ -373,6 +377,14 @@ class Translator(CallTranslator, MediaTranslator):
                         translator.roles[fname.value] = "geometry"
                     elif fname is not None and field == "mediaPropertiesFunc":
                         translator.roles[fname.value] = "media"
+                if isinstance(n, m_ast.Simple_Assignment_Statement) and isinstance(
+                        n.n_lhs, m_ast.Selection):
+                    try:
+                        chain = selection_chain(n.n_lhs)
+                    except Unconvertible:
+                        return
+                    if chain[-1] == "mediaPropParams":
+                        translator.param_lines.append((n.loc().line, py_name(chain[0])))
                 if isinstance(n, m_ast.Reference) and isinstance(n.n_ident, m_ast.Identifier):
                     name = n.n_ident.t_ident.value
                     kind = {"runMonteCarlo": "mc", "simulateHeatDistribution": "hs"}.get(name)
@@ -488,6 +500,25 @@ def _comment(text: str, indent: str) -> str:
     if text.startswith("%"):
         return f"{indent}# %{text}".rstrip()
     return f"{indent}# {text.lstrip()}".rstrip() if text.strip() else f"{indent}#"
+
+
+def _uses_last_input(fn) -> bool:
+    """Whether ``fn``'s body reads its last input (a media function's ``parameters``)."""
+    from miss_hit_core import m_ast
+
+    inputs = fn.n_sig.l_inputs
+    if not inputs:
+        return False
+    name = inputs[-1].t_ident.value
+    found = []
+
+    class V(m_ast.AST_Visitor):
+        def visit(self, n, parent, relation):
+            if isinstance(n, m_ast.Identifier) and n.t_ident.value == name and n is not inputs[-1]:
+                found.append(n)
+
+    fn.n_body.visit(None, V(), "root")
+    return bool(found)
 
 
 def _compound(node) -> bool:
