@@ -411,7 +411,7 @@ _UNKNOWN = {
     "pause": "pause waits for a key in MATLAB: the converted script does not stop (run it with "
              "python -i, or add input())",
     "axis": "axis(...): use plt.axis(...)",
-    "MCmatlab.NdimSliderPlot": "use mcmatlab_py.plotting.slice_viewer.slice_viewer",
+    "MCmatlab.NdimSliderPlot": "use mcmatlab_py.plotting.slice_viewer.slice_viewer(data, G)",
 }
 
 
