@@ -63,7 +63,8 @@ class CallTranslator(ExprTranslator):
             self.imports.add("np")
             return E(f"np.ravel({base.code}, order=\"F\")", PRIMARY, "vector")
         subs = [self.index(a, scope, base, k, len(args)) for k, a in enumerate(args)]
-        if len(args) == 1 and base.kind == "voxels" and not self._is_bool(args[0], scope):
+        if len(args) == 1 and base.kind in ("voxels", "array", "matrix") and \
+                not self._is_bool(args[0], scope):
             # MATLAB's linear index runs down the columns: x fastest, as in base.T's rows
             return E(f"{wrap(base, PRIMARY)}.T.flat[{subs[0]}]", PRIMARY, None)
         kind = base.kind if any(":" in s for s in subs) or any(

@@ -355,6 +355,10 @@ class ExprTranslator:
 
         if isinstance(node, m_ast.Identifier) and node.t_ident.value == "end":
             return _END
+        if (isinstance(node, m_ast.Binary_Operation) and node.t_op.value == "-"
+                and isinstance(node.n_lhs, m_ast.Identifier) and node.n_lhs.t_ident.value == "end"
+                and int_literal(node.n_rhs) is not None and int_literal(node.n_rhs) > 0):
+            return E(f"-{int_literal(node.n_rhs)}", ATOM, "int")  # end-k: Python's -k
         if not _contains_end(node):
             return self.ex(node, scope)
         saved = self._end
