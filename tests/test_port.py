@@ -126,7 +126,7 @@ def test_own_model_converts_and_runs(tmp_path, quick):
         in script
     assert "model.HS.P = 3" in script and "model.MC.P" not in script
     assert "min_medium_idx_to_consider = 1" in script
-    assert "model.HS.T_initial = 37" in script
+    assert "model.HS.T_initial = model.MC.T = 37" in script
     assert "M = np.zeros(X.shape, dtype=int)" in script and "M[:, :, -1] = 2" in script
     assert "lambda wavelength, FR, T, FD: 200 / (1 + FR / 1e4)" in script
     # the figure-styling line is kept as a comment and listed with its line number

@@ -226,6 +226,10 @@ def compare(conv, at: str, hand_name: str, np) -> dict:
         MC.wavelength = hand.MC.wavelength  # the hand port's quick run has fewer wavelengths
         if MC.source_distribution is not None and hand.MC.source_distribution is not None:
             MC.source_distribution = hand.MC.source_distribution
+    for name in ("FR", "T", "FD"):  # voxel states made at the script's grid: the hand port's
+        if np.ndim(getattr(MC, name)) == 3 and np.shape(getattr(MC, name)) != (
+                hand.G.nx, hand.G.ny, hand.G.nz):
+            setattr(MC, name, getattr(hand.MC, name))
     MC.progress = hand.MC.progress = False
     conv.run_monte_carlo()
     hand.run_monte_carlo()

@@ -204,6 +204,10 @@ class Translator(CallTranslator, MediaTranslator):
             e = self._ex_Matrix_Expression(rhs, scope, as_setting=True)
         else:
             e = self.ex(rhs, scope)
+        if special == "hs_T":
+            # MCmatlab's HS.T is the start temperature, also what the Monte Carlo's T-dependent
+            # media see before a heat run
+            return [f"{indent}{target} = {m}.MC.T = {e.code}"]
         if special == "medium_index":
             e = _minus_one(e)  # MCmatlab's media are numbered from 1
             return [f"{indent}{target} = {e.code}  # (0-based: MCmatlab's index minus 1)"]
