@@ -259,7 +259,7 @@ def report(rows: list[dict], command: str, out: Path) -> None:
     ran = sum(r.get("ran", False) for r in rows)
     same = sum(r.get("agrees") == "identical" for r in rows)
     lines = ["# MCmatlab's examples through `tissue-enkf port`", "",
-             f"Command: `{command}` (MCmatlab {rows[0].get('mcmatlab', '')}).".replace(" ()", ""),
+             f"Command: `{command}`.",
              "",
              f"**{conv} of {n} convert, {ran} of {n} run unchanged** at reduced size "
              "(`MCMATLAB_PY_QUICK=1`: at most 61 voxels a side, 2000 photons a run, 5 heat "
