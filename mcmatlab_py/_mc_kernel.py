@@ -168,8 +168,9 @@ def transport_batch(
         iz = _clamp(int(math.floor(pz / dz)), nz)
         m = M[(ix * ny + iy) * nz + iz]
         if not matched:
-            if surface:
+            if surface and n_out > 0.0:
                 # specular reflection at the top face, Fresnel at the ray's angle; refraction
+                # (n_out = 0: MCmatlab's faces, which neither reflect nor refract)
                 spec, ux, uy, uz = _enter_top(n_out, nref[m], ux, uy, uz, w)
                 tally[T_SPECULAR] += spec
                 w -= spec
@@ -375,7 +376,8 @@ def transport_batch(
                             O.path_point(paths, path_n, ip, px, py, pz, w / W_ONE)
                     continue
                 if escaping:
-                    if not matched:
+                    faces = n_out > 0.0  # 0: MCmatlab's faces, no Fresnel at the cuboid
+                    if not matched and faces:
                         ua = ux if axis == 0 else (uy if axis == 1 else uz)
                         rf, cat = _fresnel(npk, n_out, abs(ua))
                         s0, s1, s2, s3, r1 = next_double(s0, s1, s2, s3)
@@ -390,10 +392,14 @@ def transport_batch(
                     if oi is not None:
                         if record_path:
                             O.path_point(paths, path_n, ip, px, py, pz, w / W_ONE)
+                        # without face Fresnel the packet goes on in its own medium, and, as
+                        # MCmatlab's, reaches far field and collector only from n = 1
                         fate = O.record_escape(
                             oi, of, ext, cnt, px, py, pz, ux, uy, uz, w, t_opl,
-                            1.0 if matched else n_out, axis, sgn, ix, iy, iz, nx, ny, nz,
-                            px + wrap_x * Lx - of[O.OF_X0], py + wrap_y * Ly - of[O.OF_Y0])
+                            1.0 if matched else (n_out if faces else npk), axis, sgn,
+                            ix, iy, iz, nx, ny, nz,
+                            px + wrap_x * Lx - of[O.OF_X0], py + wrap_y * Ly - of[O.OF_Y0],
+                            matched or faces or npk == 1.0)
                     if top:
                         tally[T_TOP] += w
                     elif bottom:

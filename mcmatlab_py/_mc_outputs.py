@@ -201,17 +201,20 @@ def collect(oi, of, x, y, z, ux, uy, uz, t_opl, n_out):
 
 @numba.njit(cache=True, fastmath=_FASTMATH)
 def record_escape(oi, of, ext, cnt, x, y, z, ux, uy, uz, w, t_opl, n_out, axis, sgn,
-                  ix, iy, iz, nx, ny, nz, xr, yr):
+                  ix, iy, iz, nx, ny, nz, xr, yr, visible=True):
     """Tally a packet of weight ``w`` (fixed point) leaving through a cuboid face.
 
     ``axis``, ``sgn``: the face (0, 1, 2 for x, y, z; sign of the direction); ``ix, iy,
     iz`` its voxel; ``xr, yr`` the exit point relative to the source (unfolded across
-    cyclic sides), for the radial tallies. Returns the packet's fate (escaped or
-    collected), which the deposition criteria of its absorbed weight depend on.
+    cyclic sides), for the radial tallies. ``visible``: False for a packet that leaves
+    through a face without Fresnel (``MC.n_outside = None``) from a medium of n != 1: as
+    MCmatlab's, it counts in ``NI_*`` only, not in the far field or the collector, and its
+    fate is "killed". Returns the packet's fate (escaped or collected), which the
+    deposition criteria of its absorbed weight depend on.
     """
-    fate = FATE_ESCAPED
+    fate = FATE_ESCAPED if visible else FATE_KILLED
     pix = -1
-    if oi[OI_LC] != 0:
+    if visible and oi[OI_LC] != 0:
         pix = collect(oi, of, x, y, z, ux, uy, uz, t_opl, n_out)
         if pix >= 0:
             fate = FATE_COLLECTED
@@ -221,7 +224,7 @@ def record_escape(oi, of, ext, cnt, x, y, z, ux, uy, uz, w, t_opl, n_out, axis, 
         ext[oi[OI_OFF_IMG] + pix] += w
         ext[EXT_COLLECTED] += 1
     res = oi[OI_FF_RES]
-    if res > 0:
+    if visible and res > 0:
         th = (1.0 - 1e-12) * math.acos(max(-1.0, min(1.0, uz)))
         ph = (1.0 - 1e-12) * (math.pi + math.atan2(uy, ux))
         ith = min(res - 1, int(th / math.pi * res))

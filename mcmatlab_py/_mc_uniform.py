@@ -82,7 +82,7 @@ def transport_uniform_batch(
         if not (ok and 0.0 <= px <= Lx and 0.0 <= py <= Ly and 0.0 <= pz <= Lz):
             tally[T_MISSED] += w
             continue
-        if not matched and surface:
+        if not matched and surface and n_out > 0.0:  # n_out = 0: MCmatlab's faces
             # specular reflection at the top face, Fresnel at the ray's angle; refraction
             spec, ux, uy, uz = _enter_top(n_out, nm, ux, uy, uz, w)
             tally[T_SPECULAR] += spec
@@ -104,7 +104,7 @@ def transport_uniform_batch(
                     pz = qz
                     break
                 axis, dmin, ua, px, py, pz = _cut_at_face(px, py, pz, ux, uy, uz, Lx, Ly, Lz)
-                if not matched:
+                if not matched and n_out > 0.0:
                     rf, cat = _fresnel(nm, n_out, abs(ua))
                     s0, s1, s2, s3, r1 = next_double(s0, s1, s2, s3)
                     if r1 < rf:  # reflected back in: go on with the optical depth left

@@ -138,7 +138,13 @@ class MonteCarloSimulation(StrictAttributes):
     seed: int | None = None  #: None draws a fresh seed (stored in ``seed_used``)
     matched_interfaces: bool = True
     boundary_type: int = 1
-    n_outside: float = 1.0  #: refractive index of the surrounding medium
+    #: refractive index of the surrounding medium: with ``matched_interfaces = False`` a packet
+    #: entering or leaving the cuboid meets Fresnel's reflection and refraction against it.
+    #: None: MCmatlab's faces, which neither reflect nor refract (the medium at a face goes on
+    #: beyond it): beams enter the top face unrefracted, packets leave every escaping face,
+    #: and only those leaving from a medium of n = 1 reach ``far_field`` and the light
+    #: collector (MCmatlab's "escaped"); ``NI_*`` counts them all
+    n_outside: float | None = 1.0
     russian_roulette: bool = True
     weight_threshold: float = 0.01  #: roulette below this weight (MCmatlab's THRESHOLD)
     roulette_chance: float = 0.1  #: survival probability in roulette (MCmatlab's CHANCE)
@@ -266,10 +272,12 @@ class MonteCarloSimulation(StrictAttributes):
             raise ValueError(
                 f"{o}.boundary_type must be one of {sorted(BOUNDARY_TYPES)}, "
                 f"got {self.boundary_type!r}")
-        n_out = check_positive(o, "n_outside", self.n_outside)
-        if n_out < 1:
-            raise ValueError(f"{o}.n_outside must be >= 1, got {self.n_outside!r}")
-        self.n_outside = n_out
+        if self.n_outside is not None:
+            n_out = check_positive(o, "n_outside", self.n_outside)
+            if n_out < 1:
+                raise ValueError(f"{o}.n_outside must be >= 1 or None (MCmatlab's faces), got "
+                                 f"{self.n_outside!r}")
+            self.n_outside = n_out
         self.weight_threshold = check_positive(o, "weight_threshold", self.weight_threshold)
         c = check_positive(o, "roulette_chance", self.roulette_chance)
         if c >= 1:

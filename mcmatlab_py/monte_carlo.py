@@ -304,6 +304,10 @@ def _simulate_gpu(G, MC, M, mua, mus, g, nref, *, seed, n_photons, time_limit_s,
             "fractions): the optional outputs (normalized irradiance, far field, light "
             "collector, radial bins, deposition criteria, example paths) are not built for the "
             "GPU; set MC.use_gpu = False for them")
+    if MC.n_outside is None and not MC.matched_interfaces:
+        raise NotBuiltError(
+            "MC.use_gpu with MC.n_outside = None (MCmatlab's faces) is not built for the GPU: "
+            "set MC.n_outside to a refractive index, or MC.use_gpu = False")
     if not gpu_available():
         raise RuntimeError(
             "MC.use_gpu = True needs numba-cuda (pip install 'tissue-enkf[gpu]') and an NVIDIA "
@@ -436,7 +440,8 @@ def _kernel_args(G, MC, M, mua, mus, g, nref, seed, n_total):
     if use_normals:
         normals = interface_normals(np.asarray(M), nref, (G.dx, G.dy, G.dz), smoothing)
     return (Mf, mua, mus, g, nref, uniform, nx, ny, nz, G.dx, G.dy, G.dz,
-            int(MC.boundary_type), float(MC.n_outside), bool(MC.matched_interfaces),
+            # n_outside None (MCmatlab's faces: no Fresnel at the cuboid) reaches the kernels as 0
+            int(MC.boundary_type), float(MC.n_outside or 0.0), bool(MC.matched_interfaces),
             bool(MC.russian_roulette), float(MC.weight_threshold), float(MC.roulette_chance),
             *source, *phase, normals, bool(use_normals), np.uint64(seed), MC.batch_size, n_total)
 

@@ -115,6 +115,9 @@ def white_absorbed(spec, mua, mus: float, *, n_photons: int, seed: int,
     args = _kernel_args(m.G, m.MC, M, mua_m, mus_m, g_m, n_m, seed, int(n_photons))
     (Mf, _, _, _, _, _, nx, ny, nz, dx, dy, dz, boundary_type, n_out, matched, roulette,
      w_thr, chance, si, sf, stab, svox, *_rest) = args
+    if n_out == 0.0 and not matched:
+        raise ValueError("the white Monte Carlo needs MC.n_outside, the refractive index "
+                         "outside the cuboid: None (MCmatlab's faces) is not built for it")
     # one medium in the grid, every face escaping: the kernel that walks no voxel faces
     uniform = int(present[0]) if (present.size == 1 and boundary_type == 1
                                   and np.isfinite(n_m[present[0]])) else -1
