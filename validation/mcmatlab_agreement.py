@@ -78,6 +78,8 @@ class Case:
     ci_divisor: int = 4
     #: which of our recorded stages are MCmatlab's, in MCmatlab's order (None: all)
     ours_stages: tuple[int, ...] | None = None
+    #: which of MCmatlab's recorded stages the gallery script mirrors (None: all)
+    mcmatlab_stages: tuple[int, ...] | None = None
     #: extra (regex, replacement) edits of MCmatlab's script, applied after the generic ones
     edits: tuple[tuple[str, str], ...] = ()
     #: extra (attribute path, value) set on our models before each call (e.g. to mirror a
@@ -102,7 +104,7 @@ CASES: dict[str, Case] = {c.name: c for c in [
     Case("ex02", "ex02_beam_definitions", "Example2_BeamDefinitions", (41, 41, 20), 100_000),
     Case("ex03", "ex03_refraction_reflection", "Example3_RefractionReflection", (20, 20, 20),
          20_000),
-    Case("ex04", "ex04_blood_vessel", "Example4_BloodVessel", (30, 30, 30), 100_000),
+    Case("ex04", "ex04_blood_vessel", "Example4_BloodVessel", (20, 20, 20), 100_000),
     Case("ex05", "ex05_fluorescence_and_imaging", "Example5_FluorescenceAndImaging",
          (20, 20, 20), 100_000, fmc_photons=100_000),
     Case("ex06", "ex06_time_tagging", "Example6_TimeTagging", (20, 20, 20), 20_000,
@@ -115,15 +117,16 @@ CASES: dict[str, Case] = {c.name: c for c in [
          (11, 21, 21), 20_000),
     Case("ex10", "ex10_media_property_parametric_sweep", "Example10_MediaPropertyParametricSweep",
          (21, 21, 21), 20_000),
-    Case("ex11", "ex11_multiple_heat_sims", "Example11_MultipleHeatSims", (30, 30, 30),
+    Case("ex11", "ex11_multiple_heat_sims", "Example11_MultipleHeatSims", (20, 20, 20),
          100_000),
     Case("ex12", "ex12_saturable_absorber", "Example12_SaturableAbsorber", (20, 20, 40),
          100_000),
-    Case("ex13", "ex13_t_dependent_vhc", "Example13_TdependentVHC", (24, 24, 24), 100_000),
+    Case("ex13", "ex13_t_dependent_vhc", "Example13_TdependentVHC", (20, 20, 20), 100_000),
     Case("ex14", "ex14_thermochromism", "Example14_Thermochromism", (24, 24, 24), 50_000),
     Case("ex15", "ex15_thermally_induced_scattering", "Example15_ThermallyInducedScattering",
          (24, 24, 24), 50_000),
-    Case("ex16", "ex16_cuda_acceleration", "Example16_CUDAacceleration", (30, 30, 30), 100_000),
+    Case("ex16", "ex16_cuda_acceleration", "Example16_CUDAacceleration", (20, 20, 20), 100_000,
+         mcmatlab_stages=(0, 1)),
     Case("ex17", "ex17_curved_refraction_reflection", "Example17_CurvedRefractionReflection",
          (41, 41, 21), 50_000),
     Case("ex19", "ex19_deposition_criteria", "Example19_DepositionCriteria", (21, 21, 30),
@@ -131,11 +134,27 @@ CASES: dict[str, Case] = {c.name: c for c in [
     Case("ex20", "ex20_reflectance_statistics", "Example20_ReflectanceStatisticsAndCyclicBoundaries",
          (21, 21, 20), 20_000),
     Case("ex21", "ex21_custom_phase_functions", "Example21_CustomPhaseFunctions", (21, 21, 30),
-         100_000, ours_stages=(0,)),
+         100_000, ours_stages=(0,),
+         # the scatterer is the centre column: M(51,51,:) of the 101 x 101 grid
+         edits=((r"M\(51,51,:\)", "M((end+1)/2,(end+1)/2,:)"),)),
     Case("ex22", "ex22_combining_model_objects", "Example22_CombiningModelObjects", (21, 21, 30),
-         100_000),
+         100_000,
+         # Octave cannot make an array of classdef objects: the two runs are compared, and
+         # their combination (a weighted sum) is not
+         edits=((r"\n\s*combinedModel = combineModels[^\n]*", ""),)),
     Case("ex23", "ex23_broadband_monte_carlo", "Example23_BroadbandMonteCarlo", (20, 20, 20),
-         100_000, fmc_photons=100_000),
+         100_000, fmc_photons=100_000,
+         # Octave has no readtable, and the nested spectrum functions read the tables of their
+         # parent: they read the same columns through mcmrec_col
+         edits=((r"(absorption|emission) = readtable[^\n]*", ""),
+                (r"absorption\.x__Wavelength_nm_",
+                 'mcmrec_col("helperfuncs/LuciferYellowCHinWater-abs.txt", 1)'),
+                (r"absorption\.MolarExtinction_cm_1_M_",
+                 'mcmrec_col("helperfuncs/LuciferYellowCHinWater-abs.txt", 2)'),
+                (r"emission\.x__Wavelength_nm_",
+                 'mcmrec_col("helperfuncs/LuciferYellowCHinWater-ems.txt", 1)'),
+                (r"emission\.Emission_AU_",
+                 'mcmrec_col("helperfuncs/LuciferYellowCHinWater-ems.txt", 2)'))),
     Case("ex24", "ex24_az_fz_reflectance_transmittance", "Example24_AzFzReflectanceTransmittance",
          (21, 21, 30), 100_000, ours_stages=(0,)),
     Case("ex25", "ex25_deposition_criteria2", "Example25_DepositionCriteria2", (30, 30, 30),
@@ -160,10 +179,37 @@ def summarize(rec: dict) -> dict[str, float]:
     if rec["kind"] == "HS":
         return _summarize_heat(rec)
     q: dict[str, float] = {}
-    dV = rec["dx"] * rec["dy"] * rec["dz"]
     NA = np.asarray(rec["NA"], dtype=np.float64)
     NFR = np.asarray(rec["NFR"], dtype=np.float64)
     waves = NA.shape[3] if NA.ndim == 4 else 0
+    if rec["kind"] == "FMC":
+        q["fluorescence emitted"] = float(np.sum(rec["emitted"]))
+    scale = rec.get("source_scale")
+    if scale is not None:  # MCmatlab's maps carry the emitted power twice (see report)
+        rec = {**rec, **_rescaled(rec, np.atleast_1d(scale), waves)}
+        NA = np.asarray(rec["NA"], dtype=np.float64)
+        NFR = np.asarray(rec["NFR"], dtype=np.float64)
+    if NA.ndim >= 3:
+        _summarize_maps(q, rec, NA, NFR, waves)
+    _summarize_outputs(q, rec, waves)
+    return q
+
+
+def _rescaled(rec: dict, scale: np.ndarray, waves: int) -> dict:
+    """The maps of ``rec`` times ``scale`` (one number, or one per wavelength on the last axis)."""
+    out = {}
+    for k in ("NA", "NFR", "farField", "image", *(f"NI_{f}" for f in FACES)):
+        v = rec.get(k)
+        if v is None or np.size(v) <= 1:
+            continue
+        v = np.asarray(v, dtype=np.float64)
+        out[k] = v * (scale if waves and v.shape[-1] == waves else scale[0] if scale.size == 1
+                      else scale.sum() / scale.size)
+    return out
+
+
+def _summarize_maps(q: dict, rec: dict, NA: np.ndarray, NFR: np.ndarray, waves: int) -> None:
+    dV = rec["dx"] * rec["dy"] * rec["dz"]
     if waves:
         for k in range(waves):
             q[f"absorbed λ{k}"] = float(NA[..., k].sum() * dV)
@@ -181,6 +227,9 @@ def summarize(rec: dict) -> dict[str, float]:
         for k, sz in enumerate(_blocks(nz, 4)):
             sy = _blocks(ny, 3)[1] if ny >= 3 else slice(None)
             q[f"NFR block x{i + 1}/3 z{k + 1}/4"] = float(NFR[sx, sy, sz].mean())
+
+
+def _summarize_outputs(q: dict, rec: dict, waves: int) -> None:
     area = {"x": rec["dy"] * rec["dz"], "y": rec["dx"] * rec["dz"], "z": rec["dx"] * rec["dy"]}
     for face in FACES:
         NI = rec.get(f"NI_{face}")
@@ -200,9 +249,9 @@ def summarize(rec: dict) -> dict[str, float]:
             img = img.sum(axis=-1)
         if img.ndim == 0 or img.size == 1:
             q["light collector power"] = float(img)
-        elif img.ndim == 1:  # a fiber, time-resolved
-            for k in range(img.size):
-                q[f"light collector, time bin {k}"] = float(img[k])
+        elif img.ndim == 1:  # a fiber, time-resolved: the time bins in up to 12 groups
+            for k, s in enumerate(_blocks(img.size, 12)):
+                q[f"light collector, time bins {s.start}-{s.stop - 1}"] = float(img[s].sum())
         else:
             sp = img if img.ndim == 2 else img.sum(axis=2)
             q["light collector image mean"] = float(sp.mean())
@@ -210,9 +259,8 @@ def summarize(rec: dict) -> dict[str, float]:
                 for j, sy in enumerate(_blocks(sp.shape[1], 3)):
                     q[f"image block {i + 1},{j + 1}"] = float(sp[sx, sy].mean())
             if img.ndim == 3:
-                for k in range(img.shape[2]):
-                    q[f"image, time bin {k}"] = float(img[:, :, k].mean())
-    return q
+                for s in _blocks(img.shape[2], 12):
+                    q[f"image, time bins {s.start}-{s.stop - 1}"] = float(img[:, :, s].mean(axis=(0, 1)).sum())
 
 
 def _summarize_heat(rec: dict) -> dict[str, float]:
@@ -220,10 +268,13 @@ def _summarize_heat(rec: dict) -> dict[str, float]:
     T = np.atleast_2d(np.asarray(rec["sensorTemps"], dtype=np.float64))
     t = np.atleast_1d(np.asarray(rec["sensorsTimeVector"], dtype=np.float64))
     if T.size and t.size > 1:
+        # the two solvers step differently: the sensors are read at fixed fractions of the run
+        T_start = float(rec["T0"])
         for s in range(T.shape[0]):
-            for frac in (0.25, 0.5, 0.75, 1.0):
-                j = round(frac * (t.size - 1))
-                q[f"sensor {s + 1} rise at t = {t[j]:.4g} s"] = float(T[s, j] - T[s, 0])
+            for frac in (0.1, 0.25, 0.5, 1.0):
+                tq = t[0] + frac * (t[-1] - t[0])
+                q[f"sensor {s + 1} rise at {frac:.0%} of the time"] = float(
+                    np.interp(tq, t, T[s]) - T_start)
     Tmap = np.asarray(rec["T"], dtype=np.float64)
     M = np.asarray(rec["M_raw"]).astype(int)
     T0 = float(rec["T0"])
@@ -280,6 +331,18 @@ function model = mcmrec_heat(model, varargin)
   mcmrec_save(model, 'HS', MCMREC.T0);
 end
 
+function v = mcmrec_col(file, k)
+  % column k of a numeric text table with '#' comment lines (stands in for readtable)
+  persistent cache
+  if isempty(cache); cache = struct(); end
+  key = ['f' num2str(sum(double(file)))];
+  if ~isfield(cache, key)
+    fid = fopen(file); c = textscan(fid, '%f %f', 'CommentStyle', '#'); fclose(fid);
+    cache.(key) = [c{1} c{2}];
+  end
+  v = cache.(key)(:, k);
+end
+
 function v = mcmrec_get(obj, name)
   try; v = obj.(name); catch; v = NaN; end
 end
@@ -296,6 +359,9 @@ function mcmrec_save(model, kind, T0)
   else
     S = model.(kind);
     s.NFR = S.NFR; s.NA = S.NA; s.nPhotons = S.nPhotons;
+    if strcmp(kind, 'FMC') || numel(S.sourceDistribution) > 1  % emitted, per wavelength
+      s.emitted = squeeze(sum(sum(sum(double(S.sourceDistribution), 1), 2), 3)) * G.dx*G.dy*G.dz;
+    end
     s.farField = mcmrec_get(S, 'farField');
     for f = {'xpos','xneg','ypos','yneg','zpos','zneg'}
       s.(['NI_' f{1}]) = mcmrec_get(S, ['NI_' f{1}]);
@@ -313,21 +379,41 @@ _DRAWING = re.compile(
     r"|^\s*fprintf\('Press enter")
 
 
+def _unnest(lines: list[str]) -> list[str]:
+    """MATLAB's nested functions (an indented ``function`` ... ``end`` inside another), which
+    Octave's scripts cannot hold, moved out to the top level. MCmatlab's examples nest
+    only self-contained functions of the wavelength (or FR, T, FD), so nothing changes."""
+    out: list[str] = []
+    moved: list[str] = []
+    i = 0
+    while i < len(lines):
+        m = re.match(r"^(\s+)function\b", lines[i])
+        if not m:
+            out.append(lines[i])
+            i += 1
+            continue
+        indent = m.group(1)
+        j = next(k for k in range(i + 1, len(lines)) if re.match(rf"^{indent}end\b", lines[k]))
+        moved += [ln[len(indent):] if ln.startswith(indent) else ln for ln in lines[i:j + 1]]
+        i = j + 1
+    return out + moved
+
+
 def edit_mcmatlab_script(text: str, case: Case) -> str:
     """MCmatlab's example script, made to run the reduced model under Octave and record it."""
+    for pattern, repl in case.edits:
+        text, k = re.subn(pattern, repl, text)
+        if not k:
+            raise ValueError(f"{case.name}: the edit {pattern!r} matched nothing")
     lines = text.splitlines()
     first = next(i for i, ln in enumerate(lines) if re.match(r"^function\b", ln))
-    body, functions = lines[:first], lines[first:]
+    body, functions = lines[:first], _unnest(lines[first:])
     body = [ln for ln in body if not _DRAWING.match(ln)]
     out = "\n".join(body)
     for axis, n in zip("xyz", case.grid, strict=True):
         out = re.sub(rf"(\w+\.G\.n{axis}\s*=\s*)[^;%\n]+;", rf"\g<1>{n};", out)
     out = re.sub(r"\brunMonteCarlo\(", "mcmrec_run(", out)
     out = re.sub(r"\bsimulateHeatDistribution\(", "mcmrec_heat(", out)
-    for pattern, repl in case.edits:
-        out, k = re.subn(pattern, repl, out)
-        if not k:
-            raise ValueError(f"{case.name}: the edit {pattern!r} matched nothing")
     setup = ("global MCMREC\n"
              "MCMREC = struct('out', getenv('MCMREC_OUT'), 'count', 0, "
              "'photons', str2double(getenv('MCMREC_PHOTONS')), "
@@ -346,7 +432,56 @@ def _loadmat(path: Path) -> dict:
     for k in ("dx", "dy", "dz", "T0"):
         if k in rec:
             rec[k] = float(rec[k])
+    if "emitted" in rec:
+        # MCmatlab.c normalises the outputs of a source distribution (fluorescence, or
+        # MC.sourceDistribution) by nPhotons / power twice: normalizeDepositionAndResetO gets
+        # Pfraction = power and divides by power again. Its maps come out multiplied by the
+        # emitted power (per wavelength); undone here, measured in the report.
+        rec["source_scale"] = 1.0 / np.atleast_1d(rec["emitted"])
     return rec
+
+
+#: stand-ins that MCmatlab's copy of MATLAB's imfilter (interface normals of mismatched
+#: media) needs under Octave: plain char arguments, and MATLAB's own non-IPP code path
+OCTAVE_STAND_INS = {
+    "+matlab/+images/+internal/stringToChar.m":
+        "function c = stringToChar(c)\n  % Octave has no string class: arguments are char\nend\n",
+    "+images/+internal/useIPPLibrary.m":
+        "function tf = useIPPLibrary()\n  % no Intel IPP: MATLAB's own fallback path\n"
+        "  tf = false;\nend\n",
+}
+
+
+def adapt_build(mcm_root: Path) -> None:
+    """Two adaptations of the Octave build (``../shared/tools/mcmatlab-octave``) found by
+    these examples, made in the build folder, not in MCmatlab's numerics:
+
+    * ``OCTAVE_STAND_INS`` in ``octave_compat/`` (examples with mismatched interfaces);
+    * ``mxGetProperty`` of a property that the object lacks returns NULL, as MATLAB's does
+      (the fluorescence run asks ``FMC`` for ``LS``, which it has not, and never uses it);
+      the build's struct shim raised an error instead. MCmatlab_octave.mex is rebuilt.
+    """
+    for rel, text in OCTAVE_STAND_INS.items():
+        f = mcm_root / "octave_compat" / rel
+        f.parent.mkdir(parents=True, exist_ok=True)
+        f.write_text(text)
+    src = mcm_root / "+MCmatlab" / "src"
+    shim = src / "octave_mex_shim.h"
+    text = shim.read_text()
+    if "octshim_getprop_or_null" in text:
+        return
+    text = text.replace(
+        "#define mxGetProperty(a,i,n)         octshim_getprop((a),(i),(n))",
+        "static mxArray *octshim_getprop_or_null(const mxArray *a, mwIndex i, const char *n) {\n"
+        "  return (mxIsStruct(a) && mxGetFieldNumber(a, n) < 0) ? NULL : octshim_getprop(a, i, n);\n"
+        "}\n#define mxGetProperty(a,i,n)         octshim_getprop_or_null((a),(i),(n))")
+    shim.write_text(text)
+    flags = f"-Ofast -fopenmp -std=c11 -Wall -fPIC -include {shim}"
+    ld = subprocess.run(["mkoctfile", "-p", "LDFLAGS"], capture_output=True, text=True,
+                        check=True).stdout.strip()
+    subprocess.run(["mkoctfile", "--mex", "-o", "@model/private/MCmatlab_octave.mex",
+                    "src/MCmatlab.c", "-lgomp"], cwd=mcm_root / "+MCmatlab", check=True,
+                   env={**os.environ, "CFLAGS": flags, "LDFLAGS": f"{ld} -fopenmp"})
 
 
 def mcmatlab_commit(mcm_root: Path) -> str:
@@ -362,7 +497,7 @@ def mcmatlab_commit(mcm_root: Path) -> str:
 
 def run_mcmatlab(case: Case, mcm_root: Path, batch: int, log) -> list[dict]:
     """One batch of MCmatlab's own run of the example (seed ``batch + 1``): the stage records."""
-    script = edit_mcmatlab_script((mcm_root / f"{case.mcmatlab}.m").read_text(), case)
+    script = edit_mcmatlab_script((mcm_root / f"{case.mcmatlab}.m").read_text(encoding="latin-1"), case)
     with tempfile.TemporaryDirectory(prefix=f"mcm_{case.name}_") as tmp:
         tmp = Path(tmp)
         (tmp / "run_case.m").write_text(script)
@@ -376,7 +511,10 @@ def run_mcmatlab(case: Case, mcm_root: Path, batch: int, log) -> list[dict]:
         if p.returncode != 0 or not stages:
             raise RuntimeError(f"{case.name}: Octave failed (exit {p.returncode}):\n"
                                f"{p.stderr[-3000:]}")
-        return [_loadmat(s) for s in stages]
+        recs = [_loadmat(s) for s in stages]
+        if case.mcmatlab_stages is not None:
+            recs = [recs[i] for i in case.mcmatlab_stages]
+        return recs
 
 
 def mcmatlab_reference(case: Case, mcm_root: Path) -> dict:
@@ -423,6 +561,8 @@ def _record(model, kind: str, T0: float | None = None) -> dict:
         return rec
     S = model.MC if kind == "MC" else model.FMC
     rec.update(NFR=S.NFR, NA=S.NA, farField=S.far_field)
+    if kind == "FMC":
+        rec["emitted"] = S.emitted_power
     for f in FACES:
         rec[f"NI_{f}"] = getattr(S, f"NI_{f}")
     rec["image"] = S.light_collector.image if S.use_light_collector else None
@@ -622,6 +762,7 @@ def main(argv=None) -> None:
             CASES[name] = dataclasses.replace(CASES[name], batches=args.batches)
     if args.side == "mcmatlab":
         mcm_root = Path(os.environ["MCM_ROOT"])
+        adapt_build(mcm_root)
         DATA.mkdir(parents=True, exist_ok=True)
         for name in names:
             ref = mcmatlab_reference(CASES[name], mcm_root)

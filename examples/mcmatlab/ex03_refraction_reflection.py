@@ -19,15 +19,11 @@ top escape that the Monte Carlo must reproduce.
 
 Differences from MCmatlab: a fixed photon count instead of 0.1 min (``useAllCPUs``
 is not a setting: numba uses every core); ``quick`` uses 10^3 voxels (the layers lie
-on voxel faces either way, the result does not depend on it). At the cuboid's faces
-the kernel applies Fresnel's reflectance against ``MC.n_outside = 1``, where MCmatlab
-lets a packet leave and counts it as escaped only from a medium of n = 1: here the
-side faces of the water reflect too, and the 2% of directions that are totally
-reflected at every face (water) stay trapped until absorbed, which takes ~10^4 cm of
-path, most of the run time (the photon counts are kept small for that reason: the
-full run, 10^4 photons on 100^3 voxels, took 12 min on 2 shared cores). NA and
-NFR are zero in the air, where MCmatlab shows the rays: the kernel deposits weight only
-where a packet interacts (mua + mus = 2e-8 cm^-1 in air).
+on voxel faces either way, the result does not depend on it). The cuboid's faces are
+MCmatlab's (``MC.n_outside = None``): they neither reflect nor refract, a packet that
+reaches one leaves, and only one leaving the air (n = 1) counts in the far field. NA is
+zero in the air: the kernel deposits weight only where a packet interacts (mua + mus =
+2e-8 cm^-1 in air); NFR there is the track length, as MCmatlab's.
 """
 
 from __future__ import annotations
@@ -75,6 +71,7 @@ def build(quick: bool = False) -> Model:
     MC.progress = not quick
     MC.n_example_paths = 100
     MC.matched_interfaces = False  # Fresnel at every change of n
+    MC.n_outside = None  # MCmatlab's cuboid faces: no Fresnel where packets leave
     MC.boundary_type = 1
     MC.wavelength = 532  # nm
     src = MC.light_source
@@ -99,18 +96,21 @@ def fresnel_reflectance(n1: float, n2: float, cos_in: np.ndarray) -> np.ndarray:
     return np.where(sin2_out >= 1.0, 1.0, 0.5 * (rs + rp))
 
 
-def ray_traced_top_escape(n_mu: int = 400, n_phi: int = 400, w_min: float = 1e-9) -> float:
+def ray_traced_top_escape(n_mu: int = 400, n_phi: int = 400, w_min: float = 1e-9,
+                          sides_reflect: bool = False) -> float:
     """Fraction of the source's power leaving through the top face, by ray tracing.
 
     Directions on an ``n_mu x n_phi`` midpoint grid of (cos theta, phi), each weighted
     1 / (n_mu n_phi). A ray bounces in the water slab ``[-h, h]^2 x [Z_WATER,
-    Z_REFLECTOR]``: the mirror reflects it whole; a side face (water to n_outside = 1)
-    and the water surface reflect the fraction R of Fresnel at its incidence and pass
-    the rest. What passes the surface refracts into the air and counts if it reaches
-    z = 0 inside the top face (else it leaves through a side of the air layer). Along
-    the way the weight falls by exp(-mua s). A ray stops when its weight is below
-    ``w_min``; directions totally reflected at every face carry nothing out. Converged
-    to 3e-4 at 400 x 400 (0.21311, 0.21345 at 800 x 800).
+    Z_REFLECTOR]``: the mirror reflects it whole; the water surface reflects the
+    fraction R of Fresnel at its incidence and passes the rest; a side face passes all
+    (MCmatlab's faces, ``MC.n_outside = None``), or with ``sides_reflect`` reflects as the
+    surface does (water to ``MC.n_outside = 1``). What passes the surface refracts into
+    the air and counts if it reaches z = 0 inside the top face (else it leaves through a
+    side of the air layer). Along the way the weight falls by exp(-mua s). A ray stops
+    when its weight is below ``w_min``; directions totally reflected at every face carry
+    nothing out. Converged to 3e-4 at 400 x 400 (with ``sides_reflect``: 0.21311, 0.21345
+    at 800 x 800).
     """
     h = HALF_WIDTH
     mu = -1.0 + (np.arange(n_mu) + 0.5) * 2.0 / n_mu
@@ -119,6 +119,8 @@ def ray_traced_top_escape(n_mu: int = 400, n_phi: int = 400, w_min: float = 1e-9
     s = np.sqrt(1.0 - MU**2)
     u = np.stack([s * np.cos(PHI), s * np.sin(PHI), MU]).reshape(3, -1)
     R = np.stack([fresnel_reflectance(N_WATER, 1.0, np.abs(u[i])) for i in range(3)])
+    if not sides_reflect:
+        R[:2] = 0.0
     u, R = u[:, R.min(axis=0) < 1.0], R[:, R.min(axis=0) < 1.0]
     p = np.zeros_like(u)
     p[2] = Z_SOURCE

@@ -13,9 +13,10 @@ reflects more. ``n_example_paths = 100`` stores paths to draw.
 
 Differences from MCmatlab: a fixed photon count instead of 0.1 min; the light leaving
 the faces (``NI_*``, which MCmatlab always computes) is requested here for the check
-and the figure. NA and NFR are zero in the air, where MCmatlab shows the rays: the
-kernel deposits weight only where a packet interacts (mua + mus = 2e-8 cm^-1 in air);
-inside the droplet (mus = 10 cm^-1, g = 1) it does. ``quick`` keeps odd nx and ny so
+and the figure. The cuboid's faces are MCmatlab's (``MC.n_outside = None``): the light
+that reaches the droplet's base leaves without Fresnel reflection. NA is zero in the
+air: the kernel deposits weight only where a packet interacts (mua + mus = 2e-8 cm^-1 in
+air); NFR there is the track length, as MCmatlab's. ``quick`` keeps odd nx and ny so
 that the grid stays symmetric about the droplet's axis.
 """
 
@@ -56,6 +57,7 @@ def build(quick: bool = False) -> Model:
     MC.progress = not quick
     MC.n_example_paths = 100
     MC.matched_interfaces = False
+    MC.n_outside = None  # MCmatlab's cuboid faces: the droplet's base does not reflect
     MC.smoothing_length_scale = G.Lx * 10  # cm, as MCmatlab's example
     MC.boundary_type = 1
     MC.wavelength = 532  # nm

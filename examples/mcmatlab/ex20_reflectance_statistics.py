@@ -57,6 +57,7 @@ def build(quick: bool = False) -> Model:
     MC.n_photons_requested = 2_000 if quick else 100_000
     MC.progress = False
     MC.boundary_type = 3  # top and bottom escape, the sides are cyclic
+    MC.n_outside = None  # MCmatlab's cuboid faces: the tissue's bottom face does not reflect
     MC.wavelength = 532  # nm
     MC.calc_normalized_irradiance = True  # NI_zneg: MCmatlab computes it always
     src = MC.light_source
