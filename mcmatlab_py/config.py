@@ -50,7 +50,8 @@ from fem.checks import check_number, shorten, unknown_name_hint
 from .media import Medium
 from .model import Model
 
-__all__ = ["ConfigError", "check_keys", "load_model", "model_from_config", "read_toml"]
+__all__ = ["MAX_CONFIG_BYTES", "ConfigError", "check_keys", "load_model", "model_from_config",
+           "read_toml"]
 
 
 class ConfigError(ValueError):
@@ -88,15 +89,19 @@ _HS_KEYS = {
 }
 
 
+#: bytes: the largest config file read (the longest example is 8 kB; tomllib needs about ten
+#: times a file's size in memory)
+MAX_CONFIG_BYTES = 16 * 2**20
+
+
 def read_toml(path: str | Path) -> dict:
-    """Read a TOML file; a missing, unreadable or malformed file raises ConfigError."""
+    """Read a TOML file; a missing, unreadable or malformed file, one that is not a regular
+    file (a pipe, a FIFO, a device) or one over :data:`MAX_CONFIG_BYTES` raises ConfigError."""
+    from .files import read_regular
+
     path = Path(path)
-    try:
-        data = path.read_bytes()
-    except FileNotFoundError:
-        raise ConfigError(f"config file {str(path)!r} does not exist") from None
-    except OSError as err:
-        raise ConfigError(f"config file {str(path)!r} cannot be read: {err.strerror}") from None
+    # not a pipe, FIFO or device (/dev/zero never ends), and no larger than a config can be
+    data = read_regular(path, "config file", MAX_CONFIG_BYTES, error=ConfigError)
     try:
         return tomllib.loads(data.decode("utf-8-sig"))  # a byte-order mark is dropped
     except (UnicodeDecodeError, tomllib.TOMLDecodeError) as err:

@@ -275,37 +275,50 @@ def _batch_task(cfg, absorption, seed, item):
     return _identify_one(cfg, absorption, seed, data_path, out_dir)
 
 
-def _clear_outputs(out: Path) -> None:
-    """Remove what ``identify`` writes at the top of ``out`` (and nothing else: the
-    directory is written in place, so other files there are left alone)."""
-    import shutil
+def _set_aside_outputs(out: Path) -> Path:
+    """Move what ``identify`` writes at the top of ``out`` (and nothing else: the directory
+    is written in place, so other files there are left alone) into a hidden
+    ``.replaced.PID.old`` inside it, removed once the new run has its run.json (or by the
+    next run, if this one is killed first). run.json goes last: while an old output is in
+    place, so is the run.json that says whose it is."""
+    import os
 
-    for name in _OUTPUTS:
+    trash = out / f".replaced.{os.getpid()}.old"
+    trash.mkdir()
+    for name in sorted(_OUTPUTS, key=lambda n: n == "run.json"):
         p = out / name
-        if p.is_dir() and not p.is_symlink():
-            shutil.rmtree(p)
-        elif p.exists() or p.is_symlink():
-            p.unlink()
+        if p.exists() or p.is_symlink():
+            os.rename(p, trash / name)
+    return trash
+
+
+#: bad lines of a --follow stream listed in run.json (all are counted)
+_LISTED_SKIPS = 100
 
 
 def _follow(args, cfg, absorption, seed, t_emu) -> int:
     """Online mode: --out is written as the data come (not atomically: it is live).
 
-    With --force the outputs of an earlier run in --out are removed first (no old
+    It holds a run.json from the start (``"running": true``), rewritten when the stream
+    ends, whatever ends it: the readings assimilated, the lines skipped, and why it
+    stopped (``"interrupted"``, ``"stopped"``). A stream that ends in an error before
+    its first reading leaves nothing. With --force the outputs of an earlier run in
+    --out are set aside first and removed once the new run.json is written (no old
     summary.json or fields/final.vtu beside the new estimates). Interrupted (Ctrl-C,
-    SIGTERM), the estimates so far stay, with a run.json that says so; the exception
-    carries ``outcome``, the line that ``main`` prints.
+    SIGTERM), the estimates so far stay; the exception carries ``outcome``, the line
+    that ``main`` prints.
     """
+    import shutil
+
     from ..tissue import OnlineIdentifier
     from ..tissue.absorption import fill_prior_points
     from ..tissue.identify import persistence_summary
     from .readers import follow_csv
     from .report import manifest
+    from .rundir import remove_stale_partials, signals_deferred
 
     out = Path(args.out)
-    if args.force and out.is_dir():
-        _clear_outputs(out)
-    out.mkdir(parents=True, exist_ok=True)
+    created = not out.exists()
     setup = cfg.setup(absorption, seed=seed)
     fill_prior_points(setup)  # before the first reading, not while the stream waits
     ident = OnlineIdentifier(setup, param_bounds=cfg.param_bounds,
@@ -316,7 +329,27 @@ def _follow(args, cfg, absorption, seed, t_emu) -> int:
         f"sensor{j + 1}_offset_{s}" for j in range(n_off) for s in ("mean", "std")] + [
         f"T{j}_{s}" for j in range(len(setup.tracked_positions)) for s in ("mean", "std")] + (
         ["drift_weight"] if setup.drift is not None else [])
-    fh = open(out / "estimates.csv", "w", encoding="utf-8")
+    skipped = []
+    t0 = time.perf_counter()
+
+    def run_json(readings, **extra):
+        shown = [{"line": n, "reason": r} for n, r in skipped[:_LISTED_SKIPS]]
+        manifest(out / "run.json", command="identify --follow", config=cfg.raw, seed=seed,
+                 timings={"emulator": t_emu, "stream": time.perf_counter() - t0},
+                 extra={"follow": str(args.follow), "readings": readings,
+                        "skipped_lines": len(skipped), "skipped": shown,
+                        **_follow_restarts(ident, setup), **extra})
+
+    out.mkdir(parents=True, exist_ok=True)
+    remove_stale_partials(out)  # what a killed run set aside
+    trash = None
+    with signals_deferred():  # the old run whole, or the new one with its run.json
+        if args.force:
+            trash = _set_aside_outputs(out)
+        run_json(0, running=True)
+        fh = open(out / "estimates.csv", "w", encoding="utf-8")
+    if trash is not None:
+        shutil.rmtree(trash, ignore_errors=True)
     fh.write(",".join(cols) + "\n")
     fh.flush()
     last_fig = [0.0]
@@ -337,26 +370,36 @@ def _follow(args, cfg, absorption, seed, t_emu) -> int:
             _live_figure(out, ident, setup)
             last_fig[0] = time.perf_counter()
 
-    t0 = time.perf_counter()
-
-    def run_json(readings, **extra):
-        manifest(out / "run.json", command="identify --follow", config=cfg.raw, seed=seed,
-                 timings={"emulator": t_emu, "stream": time.perf_counter() - t0},
-                 extra={"follow": str(args.follow), "readings": readings,
-                        **_follow_restarts(ident, setup), **extra})
-
     try:
         n = follow_csv(args.follow, ident, on_update, idle_timeout_s=args.idle_timeout,
-                       columns=None if cfg.data.columns is None else ["time", *cfg.data.columns])
+                       columns=None if cfg.data.columns is None else ["time", *cfg.data.columns],
+                       skipped=skipped)
     except BaseException as exc:
-        if not isinstance(exc, Exception):  # Ctrl-C, SIGTERM: what is written stays
-            fh.close()
-            k = len(ident.history)
-            exc.outcome = f"{k} readings assimilated, estimates kept in {out}"
-            try:
+        fh.close()
+        k = len(ident.history)
+        if isinstance(exc, Exception) and k == 0:  # nothing assimilated: nothing left
+            for name in _OUTPUTS:
+                p = out / name
+                if p.is_dir() and not p.is_symlink():
+                    shutil.rmtree(p, ignore_errors=True)
+                elif p.exists() or p.is_symlink():
+                    p.unlink()
+            if created and not any(out.iterdir()):
+                out.rmdir()
+            raise
+        try:
+            if isinstance(exc, Exception):
+                first = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
+                run_json(k, stopped=first)
+            else:  # Ctrl-C, SIGTERM: what is written stays
                 run_json(k, interrupted=True)
-            except Exception:  # noqa: BLE001 - the estimates matter; run.json is a bonus
-                pass
+        except Exception:  # noqa: BLE001 - the estimates matter; run.json is a bonus
+            pass
+        if not isinstance(exc, Exception):
+            exc.outcome = f"{k} readings assimilated, estimates kept in {out}"
+        elif isinstance(exc, ValueError | OSError):  # bad input: one line that says what stays
+            raise ValueError(f"{exc} ({k} readings assimilated before it: estimates kept in "
+                             f"{out})") from exc
         raise
     finally:
         fh.close()
@@ -370,6 +413,9 @@ def _follow(args, cfg, absorption, seed, t_emu) -> int:
     run_json(n, innovation_persistence=persistence, **drift)
     if persistence["flagged"]:
         warnings.warn(persistence["advice"], RuntimeWarning, stacklevel=2)
+    if skipped:
+        print(f"warning: {len(skipped)} line{'s' * (len(skipped) > 1)} of {args.follow} "
+              f"skipped (listed in {out / 'run.json'})", file=sys.stderr)
     # the result, even with --quiet (it hides the progress bars only)
     print(f"{n} readings assimilated -> {out}")
     return 0

@@ -9,9 +9,16 @@ in deg C, as for ``tissue-enkf identify``); the acquisition program appends one 
 per frame. :func:`follow_csv` reads each complete line as soon as it appears, runs one
 filter step (:class:`enkf.tissue.OnlineIdentifier`) and hands the estimate to a
 callback (which writes it) before it looks for the next line. It stops at a line
-``# end``, or when no line has come for ``idle_timeout_s`` seconds. A file that is
-replaced (deleted and written anew, or rotated) or truncated while it is followed is
-read again from its start, header first, after a warning.
+``# end``, or when no line has come for ``idle_timeout_s`` seconds. A bad line in the
+stream is skipped with a warning naming its number, and the stream goes on. A file that
+is replaced (deleted and written anew, or rotated) or truncated while it is followed is
+read again from its start, header first, after a warning; a clock that restarts then
+stops the stream with an error naming the file and the line.
+
+Every reader opens only regular files (:func:`mcmatlab_py.files.open_regular`): a pipe,
+a FIFO or a device is refused before it is read, and a file is refused before it is
+read when the memory cannot hold it (an NPZ archive: from its headers, before anything
+is unpacked).
 
 Files are UTF-8, with or without a byte-order mark (as spreadsheet programs write them);
 the header and the lines are parsed with the :mod:`csv` module, so quoted names
@@ -33,13 +40,18 @@ from pathlib import Path
 import numpy as np
 
 from fem.checks import shorten
+from mcmatlab_py.budget import MAX_STEPS, check_memory, format_bytes
+from mcmatlab_py.files import npz_headers, open_regular
 
 from ..tissue.image import ThermalImage
 
-__all__ = ["apply_time_offset", "follow_csv", "load_frames", "parse_header", "parse_line",
-           "read_sensor_csv"]
+__all__ = ["CSV_MEMORY_PER_BYTE", "SHOWN_SKIPS", "apply_time_offset", "follow_csv", "load_frames",
+           "parse_header", "parse_line", "read_sensor_csv"]
 
 _BOM = "\ufeff"
+#: bytes of memory per byte of a CSV file while it is read (its text, the lines, the parsed
+#: rows): a file the memory cannot hold is refused before it is read
+CSV_MEMORY_PER_BYTE = 8
 _TIME_NAMES = ("time", "t", "time_s")
 #: a number as a CSV file writes it: ASCII digits, an optional sign, point and exponent, or
 #: inf (refused later, naming it)
@@ -103,11 +115,67 @@ def parse_line(line: str, n_columns: int, where: str) -> tuple[float, np.ndarray
     return float(v[0]), v[1:]
 
 
+#: bad lines of a followed file that are each shown; later ones are counted only
+SHOWN_SKIPS = 20
+
+
+class _Stream:
+    """The lines of a followed file, read as bytes (the offset is then exact, to tell a
+    truncated file from a read one), each at most ``max_line`` bytes: a longer line is
+    passed over without being held in memory and reported as too long."""
+
+    def __init__(self, fh, max_line: int):
+        self.fh, self.max_line = fh, max_line
+        self.buf = b""  #: the start of a line the writer has not finished
+        self.too_long = False  #: passing over the rest of a too long line
+        self.line_no = 0
+        self.grew = False
+
+    def next(self):
+        """``(line number, bytes or None for a too long line)``, or None when no complete
+        line is waiting; ``self.grew`` then says whether part of one came."""
+        self.grew = False
+        while True:
+            chunk = self.fh.readline(self.max_line + 1 - len(self.buf))
+            if not chunk:
+                return None
+            self.grew = True
+            if self.too_long:
+                if chunk.endswith(b"\n"):
+                    self.too_long = False
+                    self.line_no += 1
+                    return self.line_no, None
+                continue
+            self.buf += chunk
+            if self.buf.endswith(b"\n"):
+                raw, self.buf = self.buf, b""
+                self.line_no += 1
+                return self.line_no, raw
+            if len(self.buf) > self.max_line:
+                self.buf, self.too_long = b"", True
+
+    def restart(self, fh) -> None:
+        self.fh, self.buf, self.too_long, self.line_no = fh, b"", False, 0
+
+
 def follow_csv(path: str | Path, identifier, on_update: Callable, *, poll_s: float = 0.02,
                idle_timeout_s: float = 10.0, wait_for_file_s: float = 10.0,
                columns: list[str] | None = None,
-               warn: Callable[[str], None] | None = None) -> int:
+               warn: Callable[[str], None] | None = None,
+               skipped: list | None = None) -> int:
     """Feed the lines of a growing CSV to ``identifier`` as they arrive.
+
+    A data line that cannot be used (not a number, a wrong field count, an infinite or
+    missing time, an infinite temperature, a time not after the last reading's, not
+    UTF-8, longer than a line of this many columns can be) is skipped with a warning
+    that names the file and the line, and the stream goes on. A file that is replaced
+    (deleted and written anew, or rotated) or truncated is read again from its start,
+    header first, after a warning; its readings up to the last one assimilated are
+    passed over when they repeat it exactly (a writer that rewrites the whole file), and
+    one that is new but not later than it (a clock that restarted: another acquisition)
+    stops the stream with a ValueError naming the file and the line. A last line that
+    never got its end of line (the writer stopped in the middle of it) is reported when
+    the stream ends, not assimilated.
 
     Parameters
     ----------
@@ -117,19 +185,28 @@ def follow_csv(path: str | Path, identifier, on_update: Callable, *, poll_s: flo
     poll_s : float
         s between looks at the file when no complete line is waiting.
     idle_timeout_s : float
-        s, > 0 and finite: stop after this long without a new line (a ``# end`` line
-        stops at once).
+        s, > 0 and finite: stop after this long without a new line or part of one (a
+        ``# end`` line stops at once).
     columns : list of str, optional
         The expected header (``time`` first); default: ``time`` and one column per
         observation of the identifier.
     warn : callable, optional
-        ``warn(message)`` when the file is replaced (a new file at ``path``: deleted and
-        written anew, or rotated) or truncated; it is then read from its start, header
-        first. Default: a ``warning: ...`` line on stderr.
+        ``warn(message)`` for a skipped line (the first :data:`SHOWN_SKIPS`), a file
+        replaced or truncated, and an unfinished last line. Default: a ``warning: ...``
+        line on stderr.
+    skipped : list, optional
+        Receives ``(line_number, reason)`` for every line skipped (``line_number`` counts
+        the lines of the file read last).
 
     Returns
     -------
     int, the number of readings assimilated.
+
+    Raises
+    ------
+    ValueError
+        The file is missing, not a regular file (a pipe: the replacement checks need a
+        file), has a header that does not fit, or its clock restarted.
     """
     if not (math.isfinite(idle_timeout_s) and idle_timeout_s > 0):
         raise ValueError(f"idle_timeout_s must be a finite number of seconds > 0, got "
@@ -137,79 +214,127 @@ def follow_csv(path: str | Path, identifier, on_update: Callable, *, poll_s: flo
     if warn is None:
         def warn(message):
             print(f"warning: {message}", file=sys.stderr)
+    skipped = [] if skipped is None else skipped
     path = Path(path)
     deadline = time.monotonic() + wait_for_file_s
-    while not path.exists():
+    while not (path.exists() or path.is_symlink()):
         if time.monotonic() > deadline:
             raise ValueError(f"--follow: {path} did not appear within {wait_for_file_s:g} s")
         time.sleep(poll_s)
     n_expected = identifier.n_obs + 1
+    max_dt = getattr(identifier.setup, "max_dt", None)
+    assimilated = {}  # time -> reading: to pass over a rewritten file's repeated lines
     count = 0
-    # bytes, not text: the offset is then exact, to tell a truncated file from a read one
-    fh = open(path, "rb")
+    # a field as a program writes it is at most ~25 characters ("-1.2345678901234567e+308")
+    stream = _Stream(open_regular(path, "--follow file"), 64 * n_expected + 4096)
+    header = None
+    changed = None  # how the file changed, until its first new reading
+    last = time.monotonic()
+
+    def skip(line_no, reason):
+        skipped.append((line_no, reason))
+        if len(skipped) <= SHOWN_SKIPS:
+            more = (" (further skipped lines are counted, not shown)"
+                    if len(skipped) == SHOWN_SKIPS else "")
+            warn(f"--follow: {path}:{line_no}: {reason}: line skipped{more}")
+
     try:
-        buf = b""
-        header = None
-        line_no = 0
-        last = time.monotonic()
         while True:
-            chunk = fh.readline()
-            if chunk:
-                buf += chunk
-                if not buf.endswith(b"\n"):
-                    continue  # the writer has not finished this line yet
-                raw, buf = buf, b""
-                line_no += 1
-                last = time.monotonic()
-                where = f"{path}:{line_no}"
-                try:
-                    line = raw.decode("utf-8")
-                except UnicodeDecodeError:
-                    raise ValueError(f"{where}: not UTF-8 text") from None
-                if line_no == 1:
-                    line = line.removeprefix(_BOM)
-                text = line.strip()
-                if not text:
+            got = stream.next()
+            if got is None:
+                if stream.grew:
+                    last = time.monotonic()  # part of a line: the writer is at work
+                change = _replaced_or_truncated(path, stream.fh)
+                after = stream.line_no
+                if change == "truncated":
+                    stream.fh.seek(0)
+                    stream.restart(stream.fh)
+                elif change == "replaced":
+                    try:
+                        new = open_regular(path, "--follow file")
+                    except ValueError:  # gone again between two looks: at the next poll
+                        if path.exists() and not path.is_file():
+                            raise
+                        change = None
+                    else:
+                        stream.fh.close()
+                        stream.restart(new)
+                if change is not None:
+                    warn(f"--follow: {path} was {change} after line {after}; reading it from "
+                         "its start (header first)")
+                    header, changed, last = None, change, time.monotonic()
                     continue
-                if text.startswith("#"):
-                    if text.lower().startswith("# end"):
-                        break
-                    continue
+                if time.monotonic() - last > idle_timeout_s:
+                    break
+                time.sleep(poll_s)
+                continue
+            line_no, raw = got
+            last = time.monotonic()
+            where = f"{path}:{line_no}"
+            if raw is None:
                 if header is None:
-                    header = parse_header(text, where)
-                    if columns is not None and header != list(columns):
-                        raise ValueError(f"{where}: columns {shorten(header)} differ from the "
-                                         f"expected {list(columns)}")
-                    if len(header) != n_expected:
-                        raise ValueError(f"{where}: {len(header) - 1} data columns, the setup "
-                                         f"observes {identifier.n_obs}")
-                    continue
+                    raise ValueError(f"{where}: the header is longer than "
+                                     f"{stream.max_line} bytes")
+                skip(line_no, f"longer than {stream.max_line} bytes")
+                continue
+            try:
+                line = raw.decode("utf-8")
+            except UnicodeDecodeError:
+                if header is None:
+                    raise ValueError(f"{where}: not UTF-8 text") from None
+                skip(line_no, "not UTF-8 text")
+                continue
+            if line_no == 1:
+                line = line.removeprefix(_BOM)
+            text = line.strip()
+            if not text:
+                continue
+            if text.startswith("#"):
+                if text.lower().startswith("# end"):
+                    break
+                continue
+            if header is None:
+                header = parse_header(text, where)
+                if columns is not None and header != list(columns):
+                    raise ValueError(f"{where}: columns {shorten(header)} differ from the "
+                                     f"expected {list(columns)}")
+                if len(header) != n_expected:
+                    raise ValueError(f"{where}: {len(header) - 1} data columns, the setup "
+                                     f"observes {identifier.n_obs}")
+                continue
+            try:
                 t, y = parse_line(line, n_expected, where)
-                est = identifier.update(t, y)
-                count += 1
-                on_update(est, line_no)
+            except ValueError as err:
+                skip(line_no, str(err).removeprefix(f"{where}: "))
                 continue
-            change = _replaced_or_truncated(path, fh)
-            if change == "truncated":
-                fh.seek(0)
-            elif change == "replaced":
-                try:
-                    new = open(path, "rb")
-                except FileNotFoundError:  # gone again between two looks: at the next poll
-                    change = None
-                else:
-                    fh.close()
-                    fh = new
-            if change is not None:
-                warn(f"--follow: {path} was {change} after line {line_no}; reading it from "
-                     "its start (header first)")
-                buf, header, line_no, last = b"", None, 0, time.monotonic()
+            if t <= identifier.time:
+                seen = assimilated.get(t)
+                if seen is not None and np.array_equal(seen, y, equal_nan=True):
+                    continue  # a rewritten file repeats what was assimilated
+                if changed is not None:
+                    raise ValueError(
+                        f"{where}: the clock restarted: time {t!r} s is not after the last "
+                        f"reading's {identifier.time!r} s in a file {changed} while followed "
+                        "(another acquisition? follow it in a new run)")
+                skip(line_no, f"time {t!r} s is not after the last reading's "
+                              f"{identifier.time!r} s")
                 continue
-            if time.monotonic() - last > idle_timeout_s:
-                break
-            time.sleep(poll_s)
+            if max_dt is not None and (t - identifier.time) / max_dt > MAX_STEPS:
+                skip(line_no, f"time {t!r} s is more than {MAX_STEPS} heat steps of "
+                              f"HS.dt = {max_dt:g} s after the last reading")
+                continue
+            est = identifier.update(t, y)
+            assimilated[t] = y
+            changed = None
+            count += 1
+            on_update(est, line_no)
+        if stream.buf:  # the writer stopped in the middle of a line
+            reason = (f"the last line has no end of line ({len(stream.buf)} bytes; did the "
+                      "writer stop in the middle of it?): not assimilated")
+            skipped.append((stream.line_no + 1, reason))
+            warn(f"--follow: {path}:{stream.line_no + 1}: {reason}")
     finally:
-        fh.close()
+        stream.fh.close()
     return count
 
 
@@ -266,11 +391,15 @@ def read_sensor_csv(path: str | Path, n_columns: int | None = None, *,
         and every time must be > 0.
     """
     path = Path(path)
+    with open_regular(path, "data file") as fh:  # not a pipe, FIFO or device
+        size = os.fstat(fh.fileno()).st_size
+        check_memory(CSV_MEMORY_PER_BYTE * size, f"data file {str(path)!r} "
+                     f"({format_bytes(size)})", "the number of readings (split the file, or "
+                     "save camera frames as an NPZ series)")
+        data = fh.read()
     try:
-        text = path.read_text(encoding="utf-8-sig")  # a byte-order mark is dropped
-    except FileNotFoundError:
-        raise ValueError(f"data file {str(path)!r} does not exist") from None
-    except (OSError, UnicodeDecodeError) as err:
+        text = data.decode("utf-8-sig")  # a byte-order mark is dropped
+    except UnicodeDecodeError as err:
         raise ValueError(f"data file {str(path)!r} cannot be read as text: {err}") from None
     lines = [(i + 1, ln) for i, ln in enumerate(text.splitlines())
              if ln.strip() and not ln.lstrip().startswith("#")]
@@ -316,16 +445,11 @@ def load_frames(path: str | Path, image: ThermalImage | None = None
     or non-numeric array, wrong shape, Inf, unsorted or duplicate times, no frames).
     """
     path = Path(path)
-    try:
-        with open(path, "rb") as fh:
-            is_zip = zipfile.is_zipfile(fh)
-    except FileNotFoundError:
-        raise ValueError(f"data file {str(path)!r} does not exist") from None
-    except OSError as err:
-        raise ValueError(f"data file {str(path)!r} cannot be read: {err.strerror}") from None
-    if not is_zip:  # np.load would call it pickled data: e.g. a CSV renamed .npz
-        raise ValueError(f"{path}: not a readable NPZ file: it is not a zip archive (numpy.savez "
-                         "writes NPZ files as zip archives of arrays; is it a CSV or .npy?)")
+    headers = npz_headers(path, "data file")  # before anything is unpacked
+    unpacked = sum(headers[k][2] for k in ("times", "frames") if k in headers)
+    # the arrays, their float64 copies and the reshaped frames
+    check_memory(3 * unpacked, f"data file {str(path)!r} ({format_bytes(unpacked)} of "
+                 "arrays once unpacked)", "the number of frames or pixels (split the file)")
     try:
         with np.load(path, allow_pickle=False) as f:
             arrays = {k: f[k] for k in ("times", "frames") if k in f.files}

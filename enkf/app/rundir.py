@@ -37,7 +37,7 @@ from pathlib import Path
 
 from ..tissue.outputs import write_json
 
-__all__ = ["atomic_dir", "check_out_dir", "remove_stale_partials", "write_json"]
+__all__ = ["atomic_dir", "check_out_dir", "remove_stale_partials", "signals_deferred", "write_json"]
 
 _HIDDEN = re.compile(r"^\.(?P<name>.+)\.(?P<pid>\d+)\.(?:(?P<ino>\d+)\.done|partial|old)$")
 #: the signals that would end a run; they wait while a finished run is put in place
@@ -140,7 +140,7 @@ def _exchange(a: Path, b: Path) -> bool:
 
 
 @contextlib.contextmanager
-def _signals_deferred():
+def signals_deferred():
     """Hold back Ctrl-C and the terminating signals inside the block; one that came is
     delivered on leaving it (its handler then raises there)."""
     if threading.current_thread() is not threading.main_thread():
@@ -198,7 +198,7 @@ def atomic_dir(out: str | Path, force: bool = False):
         raise
     old, placed = None, False
     try:
-        with _signals_deferred():
+        with signals_deferred():
             old = _put_in_place(tmp, out)
             placed = True
         _remove(old)
