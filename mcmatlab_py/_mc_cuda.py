@@ -118,6 +118,9 @@ def transport_streams(
         s3 = st[3]
         w = np.int64(W_ONE)
         tl[T_LAUNCHED] += w
+        # the part of a fixed-point unit not yet deposited: carried on, so that rounding
+        # down at each interaction does not bias NA where mua / (mua + mus) is tiny
+        due = 0.0
         if boundary_type == 3:
             px = px - Lx * math.floor(px / Lx)
             py = py - Ly * math.floor(py / Ly)
@@ -327,7 +330,9 @@ def transport_streams(
             j = (_clamp(ix, nx) * ny + _clamp(iy, ny)) * nz + _clamp(iz, nz)
             m = M[j]
             mut = mua[m] + mus[m]
-            dep = np.int64(w * (mua[m] / mut))
+            wd = w * (mua[m] / mut) + due
+            dep = np.int64(wd)
+            due = wd - dep
             w -= dep
             if inside:
                 cuda.atomic.add(acc, j, dep)

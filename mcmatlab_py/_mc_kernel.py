@@ -155,6 +155,9 @@ def transport_batch(
             tally[T_MISSED] += w
             continue
         t_opl = 0.0  # optical path (cm): time of flight times c
+        # the part of a fixed-point unit not yet deposited: carried on, so that rounding
+        # down at each interaction does not bias NA where mua / (mua + mus) is tiny
+        due = 0.0
         wrap_x = 0  # cyclic wraps, to unfold the exit point for the radial tallies
         wrap_y = 0
         n_rec = 0
@@ -425,7 +428,9 @@ def transport_batch(
             j = (ixc * ny + iyc) * nz + izc
             m = M[j]
             mut = mua[m] + mus[m]
-            dep = np.int64(w * (mua[m] / mut))
+            wd = w * (mua[m] / mut) + due
+            dep = np.int64(wd)
+            due = wd - dep
             w -= dep
             if inside:
                 if oi is None:

@@ -79,6 +79,9 @@ def transport_uniform_batch(
             si, sf, stab, svox, nx, ny, nz, dx, dy, dz, st, s0, s1, s2, s3)
         w = np.int64(W_ONE)
         tally[T_LAUNCHED] += w
+        # the part of a fixed-point unit not yet deposited: carried on, so that rounding
+        # down at each interaction does not bias NA where mua / (mua + mus) is tiny
+        due = 0.0
         if not (ok and 0.0 <= px <= Lx and 0.0 <= py <= Ly and 0.0 <= pz <= Lz):
             tally[T_MISSED] += w
             continue
@@ -124,7 +127,9 @@ def transport_uniform_batch(
             iy = min(int(py * inv_dy), ny - 1)
             iz = min(int(pz * inv_dz), nz - 1)
             j = (ix * ny + iy) * nz + iz
-            dep = np.int64(w * frac)
+            wd = w * frac + due
+            dep = np.int64(wd)
+            due = wd - dep
             w -= dep
             acc[j] += dep
             s0, s1, s2, s3, r1 = next_double(s0, s1, s2, s3)
