@@ -56,6 +56,7 @@ from ._atomic import fetch_add
 from ._mc_steps import (
     _clamp,
     _cross_interface,
+    _cut_at_face,
     _enter_top,
     _fresnel,
     _hg_cos,
@@ -81,6 +82,7 @@ from ._mc_tally import (  # noqa: F401 (re-exported: the Python layer reads them
     W_ONE,
     fluence_scale,
 )
+from ._mc_track import track_walk
 from ._mc_uniform import transport_uniform_batch, uniform_path_applies
 from ._rng import next_double, seed_stream
 from ._sources import SI_SURFACE, launch_from, sample_pwl
@@ -93,7 +95,7 @@ _FASTMATH = {"nsz", "arcp", "contract", "afn", "reassoc"}
 
 @numba.njit(cache=True, fastmath=_FASTMATH)
 def transport_batch(
-    b, M, mua, mus, g, nref, uniform_medium, nx, ny, nz, dx, dy, dz,
+    b, M, safe, mua, mus, g, nref, nx, ny, nz, dx, dy, dz,
     boundary_type, n_out, matched, roulette, weight_threshold, chance,
     si, sf, stab, svox, phase_idx, phase_tab, normals, use_normals,
     seed, batch_size, n_total, acc, tally, oi, of, consider, ext, paths, path_n,
@@ -104,8 +106,9 @@ def transport_batch(
     Parameters
     ----------
     M : (nx*ny*nz,) int32, medium index per voxel, C order of (nx, ny, nz).
+    safe : (nx*ny*nz,) float32 cm, how far a packet in each voxel may move without meeting
+        a voxel of another kind of medium (:func:`mcmatlab_py.safety.safety_distances`).
     mua, mus, g, nref : (n_media,) float64 optical properties (cm^-1, -, -).
-    uniform_medium : int, the single medium filling the grid, or -1.
     boundary_type : 0 none escape, 1 all escape, 2 top escapes, 3 top and bottom
         escape with cyclic sides (MCmatlab).
     si, sf, stab, svox : the source (:mod:`mcmatlab_py._sources`).
@@ -117,7 +120,8 @@ def transport_batch(
     oi, of, consider, ext, paths, path_n : the optional outputs (:mod:`mcmatlab_py._mc_outputs`);
         ``oi = None`` compiles them out.
     track : (n_media,) bool, media whose fluence is tallied along the path (track length),
-        or None (compiled out). Needs ``uniform_medium = -1``: a path is cut at every voxel face.
+        or None (compiled out); a move through several voxels is split among them
+        (:func:`mcmatlab_py._mc_track.track_walk`).
     flu : (nx*ny*nz,) int64, the track-length tally: weight times length, ``FLU_ONE`` per
         launched packet crossing a voxel's diagonal (:func:`fluence_scale`).
     """
@@ -132,6 +136,13 @@ def transport_batch(
     first = b * batch_size
     last = min(first + batch_size, n_total)
     fscale = fluence_scale(dx, dy, dz)
+    inv_dx = 1.0 / dx
+    inv_dy = 1.0 / dy
+    inv_dz = 1.0 / dz
+    absorb = np.zeros(mua.size)  # the fraction of the weight absorbed at an interaction
+    for k in range(mua.size):
+        if mua[k] + mus[k] > 0.0:
+            absorb[k] = mua[k] / (mua[k] + mus[k])
     # per-packet state of the optional outputs (unused, and optimised away, when oi is None)
     cnt = np.zeros(4, dtype=np.int64)  # scatterings, reflections, refractions, transitions
     rec = np.empty((1, 2), dtype=np.int64)  # deposits awaiting the end-of-life criteria
@@ -187,6 +198,9 @@ def transport_batch(
         npk = nref[m]
         inside = True
         alive = True
+        rs = 0.0  # the packet's safety: how far it may move freely, 0 if unknown
+        mut = 0.0
+        j = 0
         if oi is not None:
             if record_path:
                 O.path_point(paths, path_n, ip, px, py, pz, w / W_ONE)
@@ -195,161 +209,180 @@ def transport_batch(
             s0, s1, s2, s3, r1 = next_double(s0, s1, s2, s3)
             tau = -math.log(1.0 - r1)  # optical depth to the next interaction
             while True:  # move until tau is used up or the photon dies
-                ixc = _clamp(ix, nx)
-                iyc = _clamp(iy, ny)
-                izc = _clamp(iz, nz)
-                m = M[(ixc * ny + iyc) * nz + izc]
-                mut = mua[m] + mus[m]
-                if inside and uniform_medium >= 0:
-                    # one medium everywhere: only the cuboid faces stop the path
-                    d0 = (Lx - px) / ux if ux > 0.0 else (-px / ux if ux < 0.0 else _INF)
-                    d1 = (Ly - py) / uy if uy > 0.0 else (-py / uy if uy < 0.0 else _INF)
-                    d2 = (Lz - pz) / uz if uz > 0.0 else (-pz / uz if uz < 0.0 else _INF)
-                    d0 = max(d0, 0.0)
-                    d1 = max(d1, 0.0)
-                    d2 = max(d2, 0.0)
+                if not (rs > 0.0 and tau < mut * rs):
+                    # the voxel's medium, and how far the packet may move in it freely
+                    ixc = _clamp(ix, nx)
+                    iyc = _clamp(iy, ny)
+                    izc = _clamp(iz, nz)
+                    j = (ixc * ny + iyc) * nz + izc
+                    m = M[j]
+                    mut = mua[m] + mus[m]
+                    if inside and (matched or npk == nref[m]):
+                        rs = max(rs, np.float64(safe[j]))
+                    else:
+                        rs = 0.0
+                if rs > 0.0:
+                    # a free move: no voxel of another kind of medium lies within rs of the
+                    # packet (mcmatlab_py.safety); only the cuboid's faces can stop it. An
+                    # interaction within rs leaves the rest of that ball to the next move, and
+                    # the medium of a kind as the packet's: no look-up
+                    hit = tau < mut * rs
+                    s = tau / mut if hit else rs
+                    qx = px + s * ux
+                    qy = py + s * uy
+                    qz = pz + s * uz
+                    cut = not (0.0 <= qx <= Lx and 0.0 <= qy <= Ly and 0.0 <= qz <= Lz)
+                    if cut:  # it leaves the cuboid: cut at the face, which is met below
+                        axis, s, ua, qx, qy, qz = _cut_at_face(px, py, pz, ux, uy, uz, Lx, Ly,
+                                                               Lz)
+                        hit = False
+                    if track is not None:
+                        if track[m]:
+                            track_walk(flu, w, fscale, px, py, pz, ux, uy, uz, s, ix, iy, iz,
+                                       nx, ny, nz, dx, dy, dz)
+                    if oi is not None:
+                        t_opl += s * (1.0 if matched else npk)
+                    px = qx
+                    py = qy
+                    pz = qz
+                    ix = min(int(px * inv_dx), nx - 1)
+                    iy = min(int(py * inv_dy), ny - 1)
+                    iz = min(int(pz * inv_dz), nz - 1)
+                    if hit:
+                        rs -= s
+                        j = (ix * ny + iy) * nz + iz
+                        break
+                    rs = 0.0
+                    tau = max(tau - mut * s, 0.0)
+                    if not cut:
+                        continue
+                    sgn = 1 if ua > 0.0 else -1
+                    if axis == 0:
+                        inew = ix + sgn
+                    elif axis == 1:
+                        inew = iy + sgn
+                    else:
+                        inew = iz + sgn
                 else:
+                    # ------------------------------------ one voxel face at a time
                     d0 = _plane_distance(px, ux, ix, nx, dx)
                     d1 = _plane_distance(py, uy, iy, ny, dy)
                     d2 = _plane_distance(pz, uz, iz, nz, dz)
-                if d0 <= d1 and d0 <= d2:
-                    axis = 0
-                    dmin = d0
-                elif d1 <= d2:
-                    axis = 1
-                    dmin = d1
-                else:
-                    axis = 2
-                    dmin = d2
-                if tau < mut * dmin:  # interaction before the plane
-                    s = tau / mut
+                    if d0 <= d1 and d0 <= d2:
+                        axis = 0
+                        dmin = d0
+                    elif d1 <= d2:
+                        axis = 1
+                        dmin = d1
+                    else:
+                        axis = 2
+                        dmin = d2
+                    if tau < mut * dmin:  # interaction before the plane
+                        s = tau / mut
+                        if track is not None:
+                            if inside and track[m]:
+                                flu[j] += np.int64(w * (s * fscale) + 0.5)
+                        if oi is not None:
+                            t_opl += s * (1.0 if matched else npk)
+                        px += s * ux
+                        py += s * uy
+                        pz += s * uz
+                        break
+                    if dmin == _INF:  # outside, moving away in vacuum: lost
+                        tally[T_KILLED] += w
+                        alive = False
+                        break
+                    tau -= mut * dmin
                     if track is not None:
                         if inside and track[m]:
-                            flu[(ixc * ny + iyc) * nz + izc] += np.int64(w * (s * fscale) + 0.5)
+                            flu[j] += np.int64(w * (dmin * fscale) + 0.5)
                     if oi is not None:
-                        t_opl += s * (1.0 if matched else npk)
-                    px += s * ux
-                    py += s * uy
-                    pz += s * uz
-                    if inside and uniform_medium >= 0:
-                        ix = _clamp(int(math.floor(px / dx)), nx)
-                        iy = _clamp(int(math.floor(py / dy)), ny)
-                        iz = _clamp(int(math.floor(pz / dz)), nz)
-                    break
-                if dmin == _INF:  # outside, moving away in vacuum: lost
-                    tally[T_KILLED] += w
-                    alive = False
-                    break
-                tau -= mut * dmin
-                if track is not None:
-                    if inside and track[m]:
-                        flu[(ixc * ny + iyc) * nz + izc] += np.int64(w * (dmin * fscale) + 0.5)
-                if oi is not None:
-                    t_opl += dmin * (1.0 if matched else npk)
-                px += dmin * ux
-                py += dmin * uy
-                pz += dmin * uz
-                # land exactly on the plane crossed and find the neighbour voxel.
-                # The per-axis branches are written out: a tuple-returning helper was tried
-                # and measured no faster (benchmarks/bench_mc.py; timings here vary by
-                # about 15% from run to run), so the tested form stays.
-                if axis == 0:
-                    sgn = 1 if ux > 0.0 else -1
-                    if inside and uniform_medium >= 0:
-                        ix = 0 if sgn < 0 else nx - 1
-                    px = (ix + 1) * dx if sgn > 0 else ix * dx
-                    inew = ix + sgn
-                    nax = nx
-                elif axis == 1:
-                    sgn = 1 if uy > 0.0 else -1
-                    if inside and uniform_medium >= 0:
-                        iy = 0 if sgn < 0 else ny - 1
-                    py = (iy + 1) * dy if sgn > 0 else iy * dy
-                    inew = iy + sgn
-                    nax = ny
-                else:
-                    sgn = 1 if uz > 0.0 else -1
-                    if inside and uniform_medium >= 0:
-                        iz = 0 if sgn < 0 else nz - 1
-                    pz = (iz + 1) * dz if sgn > 0 else iz * dz
-                    inew = iz + sgn
-                    nax = nz
-                if inside and uniform_medium >= 0:
-                    # the fast path does not track indices while moving: fix the others
-                    if axis != 0:
-                        ix = _clamp(int(math.floor(px / dx)), nx)
-                    if axis != 1:
-                        iy = _clamp(int(math.floor(py / dy)), ny)
-                    if axis != 2:
-                        iz = _clamp(int(math.floor(pz / dz)), nz)
-                if not inside:
-                    # outside the cuboid on this axis: re-entry or move along outside
+                        t_opl += dmin * (1.0 if matched else npk)
+                    px += dmin * ux
+                    py += dmin * uy
+                    pz += dmin * uz
+                    # land exactly on the plane crossed and find the neighbour voxel
                     if axis == 0:
-                        ix = inew
+                        sgn = 1 if ux > 0.0 else -1
+                        px = (ix + 1) * dx if sgn > 0 else ix * dx
+                        inew = ix + sgn
                     elif axis == 1:
-                        iy = inew
+                        sgn = 1 if uy > 0.0 else -1
+                        py = (iy + 1) * dy if sgn > 0 else iy * dy
+                        inew = iy + sgn
                     else:
-                        iz = inew
-                    inside = 0 <= ix < nx and 0 <= iy < ny and 0 <= iz < nz
-                    continue
-                if 0 <= inew < nax:
-                    # internal voxel face
-                    if axis == 0:
-                        mnew = M[(inew * ny + iy) * nz + iz]
-                    elif axis == 1:
-                        mnew = M[(ix * ny + inew) * nz + iz]
-                    else:
-                        mnew = M[(ix * ny + iy) * nz + inew]
-                    refracting = not matched and nref[mnew] != npk
-                    if oi is not None:
-                        if mnew != m and not refracting and consider[mnew]:
-                            cnt[3] += 1
-                    if refracting:
-                        ua = ux if axis == 0 else (uy if axis == 1 else uz)
-                        cin = abs(ua)
-                        smooth = False
-                        gx = 0.0
-                        gy = 0.0
-                        gz = 0.0
-                        if use_normals:
-                            gx, gy, gz = _interface_normal(normals, M, nref, nref[mnew], px, py,
-                                                           pz, nx, ny, nz, dx, dy, dz)
-                            gn = math.sqrt(gx * gx + gy * gy + gz * gz)
-                            ga = gx if axis == 0 else (gy if axis == 1 else gz)
-                            if gn > 0.0 and ga * sgn > 0.0:
-                                gx /= gn
-                                gy /= gn
-                                gz /= gn
-                                c = gx * ux + gy * uy + gz * uz
-                                if c > 0.0:  # else the smoothed surface faces away: use the face
-                                    smooth = True
-                                    cin = min(1.0, c)
-                        if smooth or npk == nref[m]:
-                            # (a packet passing through the other medium's voxels meets no
-                            # face of its own where no smoothed interface is: MCmatlab)
-                            rf, cat = _fresnel(npk, nref[mnew], cin)
-                            s0, s1, s2, s3, r1 = next_double(s0, s1, s2, s3)
-                            if oi is not None:
-                                if consider[mnew]:
-                                    if r1 < rf:
-                                        cnt[1] += 1
-                                    else:
-                                        cnt[2] += 1
-                                        cnt[3] += 1
-                                if record_path:
-                                    O.path_point(paths, path_n, ip, px, py, pz, w / W_ONE)
-                            ux, uy, uz, npk, stays = _cross_interface(
-                                ux, uy, uz, smooth, gx, gy, gz, cin, cat, npk, nref[mnew],
-                                r1 < rf, axis, sgn)
-                            if stays:  # reflected back into its voxel
-                                continue
-                    if axis == 0:
-                        ix = inew
-                    elif axis == 1:
-                        iy = inew
-                    else:
-                        iz = inew
-                    continue
+                        sgn = 1 if uz > 0.0 else -1
+                        pz = (iz + 1) * dz if sgn > 0 else iz * dz
+                        inew = iz + sgn
+                    if not inside:
+                        # outside the cuboid on this axis: re-entry or move along outside
+                        if axis == 0:
+                            ix = inew
+                        elif axis == 1:
+                            iy = inew
+                        else:
+                            iz = inew
+                        inside = 0 <= ix < nx and 0 <= iy < ny and 0 <= iz < nz
+                        continue
+                    nax = nx if axis == 0 else (ny if axis == 1 else nz)
+                    if 0 <= inew < nax:
+                        # internal voxel face
+                        if axis == 0:
+                            mnew = M[(inew * ny + iy) * nz + iz]
+                        elif axis == 1:
+                            mnew = M[(ix * ny + inew) * nz + iz]
+                        else:
+                            mnew = M[(ix * ny + iy) * nz + inew]
+                        refracting = not matched and nref[mnew] != npk
+                        if oi is not None:
+                            if mnew != m and not refracting and consider[mnew]:
+                                cnt[3] += 1
+                        if refracting:
+                            ua = ux if axis == 0 else (uy if axis == 1 else uz)
+                            cin = abs(ua)
+                            smooth = False
+                            gx = 0.0
+                            gy = 0.0
+                            gz = 0.0
+                            if use_normals:
+                                gx, gy, gz = _interface_normal(normals, M, nref, nref[mnew], px,
+                                                               py, pz, nx, ny, nz, dx, dy, dz)
+                                gn = math.sqrt(gx * gx + gy * gy + gz * gz)
+                                ga = gx if axis == 0 else (gy if axis == 1 else gz)
+                                if gn > 0.0 and ga * sgn > 0.0:
+                                    gx /= gn
+                                    gy /= gn
+                                    gz /= gn
+                                    c = gx * ux + gy * uy + gz * uz
+                                    if c > 0.0:  # else the smoothed surface faces away: the face
+                                        smooth = True
+                                        cin = min(1.0, c)
+                            if smooth or npk == nref[m]:
+                                # (a packet passing through the other medium's voxels meets no
+                                # face of its own where no smoothed interface is: MCmatlab)
+                                rf, cat = _fresnel(npk, nref[mnew], cin)
+                                s0, s1, s2, s3, r1 = next_double(s0, s1, s2, s3)
+                                if oi is not None:
+                                    if consider[mnew]:
+                                        if r1 < rf:
+                                            cnt[1] += 1
+                                        else:
+                                            cnt[2] += 1
+                                            cnt[3] += 1
+                                    if record_path:
+                                        O.path_point(paths, path_n, ip, px, py, pz, w / W_ONE)
+                                ux, uy, uz, npk, stays = _cross_interface(
+                                    ux, uy, uz, smooth, gx, gy, gz, cin, cat, npk, nref[mnew],
+                                    r1 < rf, axis, sgn)
+                                if stays:  # reflected back into its voxel
+                                    continue
+                        if axis == 0:
+                            ix = inew
+                        elif axis == 1:
+                            iy = inew
+                        else:
+                            iz = inew
+                        continue
                 # ------------------------------------------- a face of the cuboid
                 top = axis == 2 and sgn < 0
                 bottom = axis == 2 and sgn > 0
@@ -422,13 +455,8 @@ def transport_batch(
             if not alive:
                 break
             # ------------------------------------------------ interaction
-            ixc = _clamp(ix, nx)
-            iyc = _clamp(iy, ny)
-            izc = _clamp(iz, nz)
-            j = (ixc * ny + iyc) * nz + izc
-            m = M[j]
-            mut = mua[m] + mus[m]
-            wd = w * (mua[m] / mut) + due
+            # (in voxel j, of medium m or of one of its kind)
+            wd = w * absorb[m] + due
             dep = np.int64(wd)
             due = wd - dep
             w -= dep
@@ -504,12 +532,14 @@ def run_batches(
     boundary_type, n_out, matched, roulette, weight_threshold, chance,
     si, sf, stab, svox, phase_idx, phase_tab, normals, use_normals,
     seed, batch_size, n_total, batch_start, batch_stop, acc, tally,
-    oi, of, consider, ext, paths, path_n, track, flu,
+    oi, of, consider, ext, paths, path_n, track, flu, safe,
 ):  # fmt: skip
     """Run batches ``[batch_start, batch_stop)`` on ``acc.shape[0]`` workers in parallel.
 
     ``track`` (n_media,) bool or None and ``flu`` (n_workers, nvox or 1): the track-length
     tally (:func:`transport_batch`; the Python layer sets ``uniform_medium = -1`` with it).
+    ``safe`` (nvox,) float32: the safety distances of the general kernel
+    (:func:`mcmatlab_py.safety.safety_distances`).
 
     ``acc`` is (n_workers, nvox), ``tally`` (n_workers, N_TALLY or more) and ``ext``
     (n_workers, n_ext), one row per worker; the workers (one per thread) claim batches one at a time from a
@@ -536,7 +566,7 @@ def run_batches(
                 )  # fmt: skip
                 continue
             transport_batch(
-                b, M, mua, mus, g, nref, uniform_medium, nx, ny, nz, dx, dy, dz,
+                b, M, safe, mua, mus, g, nref, nx, ny, nz, dx, dy, dz,
                 boundary_type, n_out, matched, roulette, weight_threshold, chance,
                 si, sf, stab, svox, phase_idx, phase_tab, normals, use_normals,
                 seed, batch_size, n_total, acc[k], tally[k],

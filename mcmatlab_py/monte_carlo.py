@@ -18,6 +18,7 @@ from .mc_outputs import OutputSpec, output_spec, store_outputs
 from .media_bins import optical_media_properties
 from .model import MAX_PHOTONS
 from .progress import Progress
+from .safety import medium_kinds, safety_distances
 
 __all__ = [
     "FLUSH_PHOTONS",
@@ -27,6 +28,7 @@ __all__ = [
     "WideSums",
     "batch_range",
     "gpu_available",
+    "kernel_safety",
     "optical_arrays",
     "run_monte_carlo",
     "run_simulation",
@@ -128,6 +130,18 @@ def track_length(sums: WideSums, track, d: tuple, shape: tuple) -> np.ndarray | 
     return sums.value("flu").reshape(shape) / (fluence_scale(*d) * K.W_ONE)
 
 
+def kernel_safety(args: tuple, spec: OutputSpec | None = None) -> np.ndarray:
+    """(nvox,) float32 cm: the safety distances (:mod:`mcmatlab_py.safety`) of the grid of
+    the kernel arguments ``args``; where deposition criteria count the transitions between
+    media, each medium is its own kind. A grid of one medium needs none: ``inf``."""
+    M = args[0]
+    if args[5] >= 0:
+        return np.full(M.size, np.inf, dtype=np.float32)
+    by_medium = spec is not None and spec.active and spec.oi[KO.OI_DC] == 1
+    kinds = medium_kinds(*args[1:5], args[22], by_medium=by_medium)
+    return safety_distances(M.reshape(args[6:9]), kinds, args[9:12])
+
+
 class HostRun:
     """The per-worker int64 accumulators of a run on this machine's threads, moved into
     :class:`WideSums` every :data:`FLUSH_PHOTONS` packets. ``args``: the kernel's
@@ -145,12 +159,14 @@ class HostRun:
             self.args = args = (*args[:5], -1, *args[6:])
         self.flu = np.zeros((n_slots, args[0].size if self.track is not None else 1),
                             dtype=np.int64)
+        self.safe = kernel_safety(args, spec)
         self.sums = WideSums()
         self.pending = 0  #: packets in the int64 accumulators since they were last moved
         self._run(0, 0)  # compile or load first
 
     def _run(self, a: int, b: int) -> None:
-        K.run_batches(*self.args, a, b, self.acc, self.tally, *self.out, self.track, self.flu)
+        K.run_batches(*self.args, a, b, self.acc, self.tally, *self.out, self.track, self.flu,
+                      self.safe)
 
     def run(self, start: int, stop: int) -> None:
         """Batches ``[start, stop)``, in chunks of at most FLUSH_PHOTONS packets."""
