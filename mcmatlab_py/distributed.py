@@ -10,10 +10,11 @@ task carries its own seed; Monte Carlo sums are integers).
 
 Dask is optional (``pip install "tissue-enkf[dist]"``)::
 
-    from mcmatlab_py.distributed import connect
+    from mcmatlab_py.distributed import close, connect
     client = connect()                        # a local cluster: one worker process per core
     client = connect("tcp://10.0.0.5:8786")   # an existing scheduler
     emulator = AbsorptionEmulator.build(spec, client=client)
+    close(client)                             # its local cluster's processes end here
 
 Workers run their numba kernels on one thread each (``threads_per_worker=1`` and
 :func:`numba_threads`), so that a cluster of n single-threaded workers uses n cores
@@ -27,9 +28,11 @@ import os
 from collections.abc import Callable, Iterable, Sequence
 from typing import Any
 
+from fem.checks import shorten
+
 from .progress import Progress
 
-__all__ = ["TaskError", "connect", "numba_threads", "run_tasks"]
+__all__ = ["TaskError", "close", "connect", "numba_threads", "run_tasks"]
 
 
 class TaskError(RuntimeError):
@@ -52,7 +55,7 @@ def _dask():
 
 
 def connect(scheduler: str | Any | None = None, *, n_workers: int | None = None,
-            threads_per_worker: int = 1, **cluster_kw):
+            threads_per_worker: int = 1, timeout: float = 30.0, **cluster_kw):
     """A ``dask.distributed.Client``.
 
     Parameters
@@ -65,6 +68,11 @@ def connect(scheduler: str | Any | None = None, *, n_workers: int | None = None,
     threads_per_worker : int
         Threads of each local worker (default 1: the numba kernels then run on one
         thread each and n workers use n cores).
+    timeout : float
+        s to wait for the scheduler at an address; an address where none answers (nothing
+        listening, or another service) raises ValueError naming it.
+
+    Close the client with :func:`close`: it waits until a local cluster's processes end.
     """
     distributed = _dask()
     if scheduler is not None and not isinstance(scheduler, str):
@@ -72,13 +80,67 @@ def connect(scheduler: str | Any | None = None, *, n_workers: int | None = None,
     if isinstance(scheduler, str):
         if not scheduler.strip():
             raise ValueError("scheduler must be an address like 'tcp://host:8786', got ''")
-        return distributed.Client(scheduler)
+        try:
+            return distributed.Client(scheduler, timeout=timeout)
+        except (OSError, TimeoutError, MemoryError, ValueError, TypeError) as err:
+            # nothing listening (a time-out), or another service, whose first bytes Dask
+            # reads as a frame length (3 EiB asked for an HTTP server's reply)
+            why = str(err).splitlines()[0] if str(err) else ""
+            raise ValueError(f"no Dask scheduler answered at {shorten(scheduler)} within "
+                             f"{timeout:g} s ({type(err).__name__}: {shorten(why)})") from None
     n = int(n_workers) if n_workers is not None else (os.cpu_count() or 1)
     if n < 1:
         raise ValueError(f"n_workers must be >= 1, got {n_workers!r}")
     cluster = distributed.LocalCluster(n_workers=n, threads_per_worker=threads_per_worker,
                                        processes=True, dashboard_address=None, **cluster_kw)
     return distributed.Client(cluster)
+
+
+def close(client, timeout: float = 10.0) -> None:
+    """Close ``client`` and the local cluster it runs on (one of :func:`connect`), and wait
+    until the cluster's worker processes have ended, killing those still running after
+    ``timeout`` s: no process the cluster started outlives the caller. A remote
+    cluster (a scheduler at an address) is left running."""
+    if client is None:
+        return
+    cluster = getattr(client, "cluster", None)
+    pids = [w.pid for w in getattr(cluster, "workers", {}).values()
+            if isinstance(getattr(w, "pid", None), int)]
+    try:
+        client.close()
+    finally:
+        if cluster is not None:
+            cluster.close()
+        _wait_for_end(pids, timeout)
+
+
+def _wait_for_end(pids: list[int], timeout: float) -> None:
+    import time
+
+    import psutil  # a dependency of distributed
+
+    procs = []
+    for pid in pids:
+        with contextlib.suppress(psutil.Error):
+            procs.append(psutil.Process(pid))
+
+    def running(p) -> bool:
+        try:
+            return p.is_running() and p.status() != psutil.STATUS_ZOMBIE
+        except psutil.Error:
+            return False
+
+    def wait(seconds: float) -> None:
+        deadline = time.monotonic() + seconds
+        while any(running(p) for p in procs) and time.monotonic() < deadline:
+            time.sleep(0.05)
+
+    wait(timeout)
+    for p in procs:
+        if running(p):
+            with contextlib.suppress(psutil.Error):
+                p.kill()
+    wait(5.0)  # SIGKILL is delivered asynchronously
 
 
 @contextlib.contextmanager
@@ -102,7 +164,8 @@ def _in_worker(fn, item, threads):
 
 def run_tasks(fn: Callable[[Any], Any], items: Iterable[Any], *, client=None, retries: int = 2,
               errors: str = "raise", progress: bool = False, label: str = "tasks",
-              worker_threads: int = 1) -> list:
+              worker_threads: int = 1,
+              on_result: Callable[[int, Any], None] | None = None) -> list:
     """``[fn(item) for item in items]``, on ``client`` when given, in order.
 
     Parameters
@@ -121,6 +184,10 @@ def run_tasks(fn: Callable[[Any], Any], items: Iterable[Any], *, client=None, re
         the other tasks go on (a batch of datasets where one file is bad).
     worker_threads : int
         numba threads inside each task on a worker.
+    on_result : callable, optional
+        ``on_result(index, result)`` as soon as a task succeeds (in the order they end on
+        a cluster), before the others end: a caller keeps what is done when the rest is
+        interrupted.
     """
     if errors not in ("raise", "return"):
         raise ValueError(f"errors must be 'raise' or 'return', got {errors!r}")
@@ -141,6 +208,8 @@ def run_tasks(fn: Callable[[Any], Any], items: Iterable[Any], *, client=None, re
                             bar.close()
                             raise TaskError(i, exc) from exc
                         out[i] = TaskError(i, exc)
+            if on_result is not None and not isinstance(out[i], TaskError):
+                on_result(i, out[i])
             bar.update(i + 1)
         bar.close()
         return out
@@ -160,6 +229,8 @@ def run_tasks(fn: Callable[[Any], Any], items: Iterable[Any], *, client=None, re
                 out[i] = TaskError(i, exc)
             else:
                 out[i] = fut.result()
+                if on_result is not None:
+                    on_result(i, out[i])
             done += 1
             bar.update(done)
     finally:

@@ -44,12 +44,15 @@ __all__ = [
     "default_cache_dir",
     "cache_key",
     "check_emulated",
+    "entry_problem",
     "interpolate_log_na",
+    "load_cached",
     "resolve_method",
     "symmetrize",
     "table_point",
     "table_row",
     "table_rows",
+    "store_atomically",
     "usable_cache_dir",
     "white_supported",
 ]
@@ -63,6 +66,9 @@ WHITE_VERSION = 5  #: bumped when the white kernel's numbers change
 #: The table holds log(NA + NA_OFFSET): smooth where NA is zero or noisy in voxels
 #: that (almost) no photon reaches, and exactly inverted on evaluation.
 NA_OFFSET = 1e-3  # W/cm^3/W, far below the NA of the voxels that matter
+#: s between two stores of a table being built (each writes the whole table): a run
+#: interrupted or killed loses at most this much of its Monte Carlo
+STORE_EVERY_S = 30.0
 
 
 def default_cache_dir() -> Path:
@@ -441,6 +447,8 @@ class AbsorptionEmulator:
         key = cache_key(spec, method)
         cache = Path(cache_dir) if cache_dir is not None else default_cache_dir()
         path = cache / f"emulator-{key}.npz"
+        if entry_problem(path) is not None:  # a directory or FIFO in its place: not read
+            path = usable_cache_dir(cache, path.name) / path.name
         loaded = _load(path, spec, key)
         if loaded is None:
             shape = (spec.n_mua, spec.n_mus)
@@ -490,28 +498,49 @@ class AbsorptionEmulator:
         spec = self.spec
         path, client, progress = self._fill_with
         if path is not None:  # before minutes of Monte Carlo, not after
-            path = usable_cache_dir(path.parent) / path.name
+            path = usable_cache_dir(path.parent, path.name) / path.name
             self._fill_with = (path, client, progress)
         t0 = time.perf_counter()
+        saved = [time.monotonic()]
+
+        def keep(filled: bool = False) -> None:
+            """Store the points built so far: every STORE_EVERY_S seconds, at the end, and
+            when the fill is interrupted (a rerun then builds only the rest)."""
+            path = self._fill_with[0]
+            if path is None or not (filled or time.monotonic() - saved[0] > STORE_EVERY_S):
+                return
+            if not _store(path, cache_key(spec, self.method), self):
+                self._fill_with = (None, client, progress)  # one warning, then no cache
+            saved[0] = time.monotonic()
+
         # cost grows with mus: the expensive columns first, so the ETA is honest
         columns = [b for b in range(spec.n_mus)[::-1] if missing[:, b].any()]
         if self.method == "white":
             todo = [(b, np.flatnonzero(missing[:, b])) for b in columns]
-            results = run_tasks(functools.partial(_white_rows, spec), todo, client=client,
-                                progress=progress, label="emulator table (white)")
-            for (b, rows), (values, fracs) in zip(todo, results, strict=True):
+
+            def put(i, result):
+                (b, rows), (values, fracs) = todo[i], result
                 self.log_na[rows, b], self.absorbed[rows, b] = values, fracs
-                self.have[rows, b] = True
+                self.have[rows, b] = True  # last: a point is had once its numbers are in
+                keep()
+            task, label = functools.partial(_white_rows, spec), "emulator table (white)"
         else:
             todo = [(a, b) for b in columns for a in range(spec.n_mua) if missing[a, b]]
-            results = run_tasks(functools.partial(table_point, spec), todo, client=client,
-                                progress=progress, label="emulator table")
-            for (a, b), (row, frac) in zip(todo, results, strict=True):
+
+            def put(i, result):
+                (a, b), (row, frac) = todo[i], result
                 self.log_na[a, b], self.absorbed[a, b] = row, frac
                 self.have[a, b] = True
+                keep()
+            task, label = functools.partial(table_point, spec), "emulator table"
+        try:
+            run_tasks(task, todo, client=client, progress=progress, label=label, on_result=put)
+        except BaseException:
+            self.build_seconds += time.perf_counter() - t0
+            keep(filled=True)  # the points finished before Ctrl-C, SIGTERM or a failure
+            raise
         self.build_seconds += time.perf_counter() - t0
-        if path is not None:
-            _store(path, cache_key(spec, self.method), self)
+        keep(filled=True)
         from fem.threads import release_free_memory
 
         release_free_memory()  # the load operator's and the runs' temporaries
@@ -666,50 +695,123 @@ def _checksum(*arrays) -> str:
     return h.hexdigest()
 
 
-def usable_cache_dir(cache: Path) -> Path:
-    """``cache`` if a table can be written there; else a temporary folder, with a warning
-    that says why (the table is then rebuilt by the next run)."""
-    import tempfile
+def entry_problem(path: Path) -> str | None:
+    """Why the cache entry ``path`` cannot be used (``"it is a directory"``), or None when
+    it is a regular file or absent (it is then written)."""
+    import stat
+
+    from .files import file_kind
 
     try:
-        cache.mkdir(parents=True, exist_ok=True)
-        with tempfile.NamedTemporaryFile(dir=cache, prefix=".probe-"):
-            pass
-        return cache
+        mode = os.stat(path).st_mode  # a FIFO is not opened: that could wait forever
+    except FileNotFoundError:
+        return None
     except OSError as err:
-        why = err.strerror or type(err).__name__
-        tmp = Path(tempfile.mkdtemp(prefix="tissue-enkf-cache-"))
-        warnings.warn(f"the cache folder {str(cache)!r} cannot be written ({why}); the "
-                      f"emulator table goes to {tmp} and is lost after this run (set "
-                      "TISSUE_ENKF_CACHE or --cache-dir to a writable folder)",
+        return err.strerror or type(err).__name__
+    return None if stat.S_ISREG(mode) else f"it is {file_kind(mode)}, not a regular file"
+
+
+def usable_cache_dir(cache: Path, entry: str | None = None) -> Path:
+    """``cache`` if a table can be written there (and its file ``entry``, when given, is a
+    regular file or absent); else a temporary folder, removed when this process exits,
+    with a warning that says why (the table is then rebuilt by the next run)."""
+    import atexit
+    import shutil
+    import tempfile
+
+    why = None if entry is None else entry_problem(cache / entry)
+    if why is not None:
+        why = f"the cache entry {str(cache / entry)!r} cannot be used ({why})"
+    else:
+        try:
+            cache.mkdir(parents=True, exist_ok=True)
+            with tempfile.NamedTemporaryFile(dir=cache, prefix=".probe-"):
+                pass
+            return cache
+        except OSError as err:
+            why = (f"the cache folder {str(cache)!r} cannot be written "
+                   f"({err.strerror or type(err).__name__})")
+    tmp = Path(tempfile.mkdtemp(prefix="tissue-enkf-cache-"))
+    atexit.register(shutil.rmtree, tmp, True)
+    warnings.warn(f"{why}; what would be cached goes to {tmp}, removed when this run ends "
+                  "(set TISSUE_ENKF_CACHE or --cache-dir to a writable folder)",
+                  RuntimeWarning, stacklevel=3)
+    return tmp
+
+
+def store_atomically(path: Path, what: str = "emulator cache", **arrays) -> bool:
+    """Write ``arrays`` to the NPZ file ``path`` atomically (a temporary file beside it,
+    renamed over it: a reader never sees half a file, and an interrupted or failed write
+    leaves nothing). A write that fails (a full disk, no permission, a directory in its
+    place) gives one warning naming the path and returns False: a cache that cannot be
+    written never stops a valid run."""
+    tmp = path.with_name(f".{path.stem}.tmp{os.getpid()}.npz")
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        np.savez(tmp, **arrays)
+        os.replace(tmp, path)
+        return True
+    except OSError as err:
+        warnings.warn(f"the {what} {str(path)!r} cannot be written "
+                      f"({err.strerror or type(err).__name__}): the run goes on without it",
                       RuntimeWarning, stacklevel=3)
-        return tmp
+        return False
+    finally:  # interrupted (Ctrl-C, SIGTERM) or failed: no half-written file stays
+        try:
+            tmp.unlink(missing_ok=True)
+        except OSError:
+            pass
 
 
-def _store(path: Path, key: str, emu: AbsorptionEmulator) -> None:
+def load_cached(path: Path, what: str = "cache") -> dict | None:
+    """The arrays of the cached NPZ file ``path``, or None when there is none to use: absent,
+    not a regular file (left alone, never opened: a FIFO would wait), or unreadable
+    (removed: it is computed again). A forged header is refused before anything is
+    allocated."""
+    if not path.exists() or entry_problem(path) is not None:
+        return None
+    from .files import npz_headers
+
+    try:
+        npz_headers(path, what)
+        with np.load(path, allow_pickle=False) as f:
+            return {k: f[k] for k in f.files}
+    except Exception:  # noqa: BLE001 - any unreadable file is treated as corrupted
+        try:
+            path.unlink(missing_ok=True)
+        except OSError:
+            pass
+        return None
+
+
+def _store(path: Path, key: str, emu: AbsorptionEmulator) -> bool:
     """Write the table (and which points it holds) atomically; points another process
-    added to the file meanwhile are kept."""
+    added to the file meanwhile are kept. False (after a warning) when it cannot be
+    written."""
     on_disk = _load(path, emu.spec, key, quiet=True)
     if on_disk is not None:
         extra = on_disk["have"] & ~emu.have
         emu.log_na[extra] = on_disk["log_na"][extra]
         emu.absorbed[extra] = on_disk["absorbed"][extra]
         emu.have |= extra
-    path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_suffix(f".tmp{os.getpid()}.npz")
-    try:
-        np.savez(tmp, log_na=emu.log_na, absorbed=emu.absorbed, have=emu.have,
-                 build_seconds=emu.build_seconds, key=key,
-                 checksum=_checksum(emu.log_na, emu.absorbed, emu.have))
-        os.replace(tmp, path)  # atomic: a reader never sees half a table
-    finally:  # interrupted (Ctrl-C, SIGTERM, a full disk): no half-written file stays
-        tmp.unlink(missing_ok=True)
+    return store_atomically(path, log_na=emu.log_na, absorbed=emu.absorbed, have=emu.have,
+                            build_seconds=emu.build_seconds, key=key,
+                            checksum=_checksum(emu.log_na, emu.absorbed, emu.have))
 
 
 def _load(path: Path, spec: EmulatorSpec, key: str, quiet: bool = False):
-    if not path.exists():
+    if not path.exists() or entry_problem(path) is not None:
         return None
+    from .files import npz_headers
+
+    orbits = spec.orbits()[0].size
     try:
+        # from the headers: a forged one that declares a huge shape is not allocated
+        heads = npz_headers(path, "emulator cache")
+        expect = {"log_na": (spec.n_mua, spec.n_mus, orbits), "absorbed": (spec.n_mua, spec.n_mus),
+                  "have": (spec.n_mua, spec.n_mus)}
+        if any(k in heads and heads[k][0] != shape for k, shape in expect.items()):
+            raise ValueError("a table of another shape")
         with np.load(path, allow_pickle=False) as f:
             data = {k: f[k] for k in ("log_na", "absorbed", "build_seconds", "key", "checksum")}
             if "have" in f:
@@ -729,7 +831,10 @@ def _load(path: Path, spec: EmulatorSpec, key: str, quiet: bool = False):
             return None
         warnings.warn(f"emulator cache {path} is corrupted or stale: rebuilding", RuntimeWarning,
                       stacklevel=3)
-        path.unlink(missing_ok=True)
+        try:
+            path.unlink(missing_ok=True)
+        except OSError:  # no permission: the rebuilt table replaces it, or is not stored
+            pass
         return None
     return data
 

@@ -32,11 +32,11 @@ def dask_client(args, config: dict | None = None):
 
 
 def close_client(client) -> None:
+    """Close the client; a local cluster's worker processes end before this returns."""
     if client is not None:
-        cluster = getattr(client, "cluster", None)
-        client.close()
-        if cluster is not None:
-            cluster.close()
+        from mcmatlab_py.distributed import close
+
+        close(client)
 
 
 def apply_threads(threads):

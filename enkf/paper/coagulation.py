@@ -47,7 +47,7 @@ from pathlib import Path
 import numpy as np
 
 import fem
-from mcmatlab_py.emulator import default_cache_dir
+from mcmatlab_py.emulator import default_cache_dir, load_cached, store_atomically, usable_cache_dir
 from mcmatlab_py.heat import HeatSimulation
 
 from ..tissue.coagulation import Coagulation, coagulated_fraction
@@ -139,14 +139,11 @@ def damage_truth(cfg: CoagulationTruthConfig, emulator, *, cache_dir=None,
     """
     cache = Path(cache_dir) if cache_dir is not None else default_cache_dir()
     path = cache / f"coag-truth-{cfg.key()}.npz"
-    if path.exists():
-        try:
-            with np.load(path) as f:
-                times, temps, nodes = f["times"], f["temps"], f["nodes"]
-                wall, runs = float(f["wall_seconds"]), int(f["mc_runs"])
-            return effective_truth(cfg.scenario, times, temps, nodes, emulator, wall, runs)
-        except Exception:  # noqa: BLE001 - unreadable cache: recompute
-            path.unlink(missing_ok=True)
+    f = load_cached(path, "truth cache")
+    if f is not None and {"times", "temps", "nodes", "wall_seconds", "mc_runs"} <= set(f):
+        return effective_truth(cfg.scenario, f["times"], f["temps"], f["nodes"], emulator,
+                               float(f["wall_seconds"]), int(f["mc_runs"]))
+    path = usable_cache_dir(cache, path.name) / path.name  # checked before hours of work
     tic = time.perf_counter()
     P, on, off, n = COAG_PULSES[cfg.scenario]
     model = paper_model(cfg.grid, cfg.n_photons, cfg.mc_seed, progress, scenario="constant")
@@ -169,11 +166,8 @@ def damage_truth(cfg: CoagulationTruthConfig, emulator, *, cache_dir=None,
     temps = HS.sensor_temps[:, :len(tracked)]
     nodes = HS.sensor_temps[:, len(tracked):]
     runs = int(HS.mc_runs) + 1
-    cache.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_suffix(".tmp.npz")
-    np.savez(tmp, times=times, temps=temps, nodes=nodes.astype(np.float32),
-             wall_seconds=wall, mc_runs=runs)
-    tmp.replace(path)
+    store_atomically(path, "truth cache", times=times, temps=temps,
+                     nodes=nodes.astype(np.float32), wall_seconds=wall, mc_runs=runs)
     return effective_truth(cfg.scenario, times, temps, nodes, emulator, wall, runs)
 
 

@@ -12,7 +12,7 @@ from pathlib import Path
 import numpy as np
 
 import fem
-from mcmatlab_py.emulator import default_cache_dir
+from mcmatlab_py.emulator import default_cache_dir, load_cached, store_atomically, usable_cache_dir
 
 from ..tissue.forward import TissueForwardModel
 from ..tissue.parameters import PARAMETER_NAMES
@@ -71,14 +71,11 @@ def generate_truth(cfg: TruthConfig, *, cache_dir: str | Path | None = None,
     """
     cache = Path(cache_dir) if cache_dir is not None else default_cache_dir()
     path = cache / f"truth-{cfg.key()}.npz"
-    if path.exists():
-        try:
-            with np.load(path) as f:
-                times, temps, wall = f["times"], f["temps"], float(f["wall_seconds"])
-                images = f["images"] if "images" in f.files else None
-            return Truth(times, temps, true_parameters(cfg.scenario, times), wall, images)
-        except Exception:  # noqa: BLE001 - unreadable cache: recompute
-            path.unlink(missing_ok=True)
+    f = load_cached(path, "truth cache")
+    if f is not None and {"times", "temps", "wall_seconds"} <= set(f):
+        times, temps, wall = f["times"], f["temps"], float(f["wall_seconds"])
+        return Truth(times, temps, true_parameters(cfg.scenario, times), wall, f.get("images"))
+    path = usable_cache_dir(cache, path.name) / path.name  # checked before hours of work
     t0 = time.perf_counter()
     varying = cfg.scenario != "constant"
     model = paper_model(cfg.grid, cfg.n_photons_per_step if varying else cfg.n_photons_constant,
@@ -106,10 +103,7 @@ def generate_truth(cfg: TruthConfig, *, cache_dir: str | Path | None = None,
     if cfg.camera is not None:
         images = camera_image(cfg.camera).average(model.HS.sensor_temps[:, n_tracked:])
         extra["images"] = images
-    cache.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_suffix(".tmp.npz")
-    np.savez(tmp, times=times, temps=temps, wall_seconds=wall, **extra)
-    tmp.replace(path)
+    store_atomically(path, "truth cache", times=times, temps=temps, wall_seconds=wall, **extra)
     return Truth(times, temps, true_parameters(cfg.scenario, times), wall, images)
 
 
