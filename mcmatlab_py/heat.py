@@ -140,8 +140,15 @@ class HeatSimulation(StrictAttributes):
     duration_off: float = 0.0  #: s, then off
     duration_end: float = 0.0  #: s, cooling after the last pulse (MCmatlab's durationEnd)
     n_pulses: int = 1
-    dt: float | None = None  #: s, time step; None: :func:`auto_dt` from mesh and media
-    large_time_steps: bool = False  #: with ``dt = None``: ten times longer automatic steps
+    dt: float | None = None  #: s, time step; None: chosen automatically (``step_control``)
+    #: with ``dt = None``: "accuracy" (steps from a local error estimate against ``rtol``,
+    #: :mod:`mcmatlab_py.heat_steps`) or "stability" (MCmatlab's rule, :func:`auto_dt`)
+    step_control: str = "accuracy"
+    rtol: float = 1e-3  #: "accuracy": local error per step, of the run's temperature rise
+    #: s, "accuracy": sensor readings at the multiples of this (the steps land on them);
+    #: None: at the end of every step, as MCmatlab's
+    sensor_interval: float | None = None
+    large_time_steps: bool = False  #: with ``step_control = "stability"``: ten times longer steps
     #: deg C: a number, or an (nx, ny, nz) array on the voxels (MCmatlab's 3-D ``HS.T``)
     T_initial: float | np.ndarray = 37.0
     heat_boundary_type: int = 0  #: 0 insulating, 1 constant temperature, 2 convective
@@ -191,6 +198,8 @@ class HeatSimulation(StrictAttributes):
     movie_frames: np.ndarray | None = None
     mc_runs: int = 0
     dt_used: np.ndarray | None = None  #: s, the distinct step lengths of the last run (sub-steps too)
+    #: (accepted, rejected) steps of the last run (rejected: retaken shorter, "accuracy")
+    steps_taken: tuple | None = None
 
     _owner_label = "HS"
     _renamed = {"Tinitial": "T_initial", "sensorsTimeVector": "sensor_times",
@@ -211,6 +220,12 @@ class HeatSimulation(StrictAttributes):
         self.media_prop_recalc_period = check_number(
             "HS.media_prop_recalc_period", self.media_prop_recalc_period, integer=True, lo=0,
             hi=10**7)
+        if self.step_control not in ("accuracy", "stability"):
+            raise ValueError(f"HS.step_control must be 'accuracy' or 'stability', got "
+                             f"{self.step_control!r}")
+        self.rtol = check_number("HS.rtol", self.rtol, lo=1e-9, hi=0.5)
+        if self.sensor_interval is not None:
+            self.sensor_interval = check_positive("HS", "sensor_interval", self.sensor_interval)
         if self.dt is not None:
             self.dt = check_positive("HS", "dt", self.dt)
             if self.dt > self.total_duration:

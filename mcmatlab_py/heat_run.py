@@ -144,9 +144,15 @@ def run_heat(model) -> None:  # noqa: C901  (one loop with its callbacks)
 
     vhc0, tc0 = element_props(0.0)
     dt_max = None
+    # steps chosen by accuracy (mcmatlab_py.heat_steps); the *_t functions of time keep
+    # the schedule's steps, so that their Monte Carlo re-runs stay at its times
+    adaptive = (HS.dt is None and HS.step_control == "accuracy" and not varying_optics
+                and HS.VHC_t is None and HS.TC_t is None)
     if HS.dt is None:
         dt_max = auto_dt(S.mesh_grid.spacing, vhc0, tc0, HS.theta, HS.large_time_steps)
-    sched = HS.schedule(dt_max)
+    sched = HS.schedule(math.inf if adaptive else dt_max)
+    if adaptive:
+        dt_max = None  # no sub-steps from the stability bound
     # the bound of the automatic step for the current thermal sub-media: a step of the
     # schedule longer than it (the media became more diffusive) is taken in sub-steps
     bound = {"dt": dt_max}
@@ -159,15 +165,15 @@ def run_heat(model) -> None:  # noqa: C901  (one loop with its callbacks)
     single_thermal = len(media) == 1 and not coupling.thermal_dependent
     steppers: dict = {}
 
-    def stepper_for(dt, vhc, tc):
-        key = (round(dt, 15), coupling.version)
+    def stepper_for(dt, vhc, tc, theta=HS.theta):
+        key = (round(dt, 15), coupling.version, theta)
         if key not in steppers or not single_thermal and (HS.VHC_t or HS.TC_t):
             # a stepper of an older coupling version is never used again: keep only the
             # current version's (one per step length), or media re-binned at every update
             # would hold one factorization each (24 GB at 100^3 voxels)
             for old in [k for k in steppers if k[1] != coupling.version]:
                 del steppers[old]
-            steppers[key] = fem.HeatStepper(mesh, vhc, tc, dt, theta=HS.theta,
+            steppers[key] = fem.HeatStepper(mesh, vhc, tc, dt, theta=theta,
                                             boundary=boundary)
         return steppers[key]
 
@@ -230,7 +236,58 @@ def run_heat(model) -> None:  # noqa: C901  (one loop with its callbacks)
     updates = set(int(k) for k in sched.updates)
     n_update = 0
 
+    def be_solve(T, dt, load):
+        # a backward Euler solve of any length on the stepper of the base step: the
+        # solvers take the length as a scale on the mass (VHC / dt), no new factorization
+        st = stepper_for(dt_base, coupling.vhc_e, coupling.tc_e, theta=1.0)
+        return st.step(T[None, :], None if load is None else load[None, :],
+                       vhc_scale=np.array([dt_base / dt]))[0]
+
+    def laser_load(t0, t1):
+        power = HS.mean_laser_power(t0, t1)
+        return power * absorption_load(0.5 * (t0 + t1)) if power != 0 else None
+
+    readings = []  # (t, sensors) after every accepted step of the error-controlled run
+    n_substeps = [0]
+
+    def on_substep(t0, t1, T_old, T_new):
+        advance_state(t1 - t0, T_old, T_new)
+        readings.append((t1, probes @ T_new if probes is not None else None))
+
+    if adaptive:
+        from .heat_steps import ErrorControlledSteps
+
+        # the first step is MCmatlab's (the stability bound); none shorter than 1/64 of it
+        dt_base = auto_dt(S.mesh_grid.spacing, vhc0, tc0, 1.0, False) / 64
+
+        def current():
+            return stepper_for(dt_base, coupling.vhc_e, coupling.tc_e, theta=1.0)
+
+        def apply_a(T):
+            st = current()
+            return st.K @ T + st.R @ T
+
+        def operator():
+            st = current()
+            if getattr(st, "_mass_rows", None) is None:  # the lumped capacity, once
+                st._mass_rows = (st._m_lumped if st._m_lumped is not None
+                                 else np.asarray(st.M.sum(axis=1)).ravel())
+            return st.g, st._mass_rows, st.fixed
+
+        controller = ErrorControlledSteps(
+            be_solve, apply_a, operator, laser_load, HS.rtol, dt_base, start_level=6,
+            spread=float(T0.max() - T0.min()), on_step=on_substep)
+
     def step(T, t0, t1):
+        if adaptive:  # the steps land on the sensor times within [t0, t1]
+            marks = [t0]
+            if HS.sensor_interval is not None:
+                k = np.arange(math.floor(t0 / HS.sensor_interval + 1e-9) + 1,
+                              math.ceil(t1 / HS.sensor_interval - 1e-9))
+                marks.extend(k * HS.sensor_interval)
+            for a, b in zip(marks, [*marks[1:], t1], strict=True):
+                T = controller.advance(T, a, b)
+            return T
         n_sub = 1 if bound["dt"] is None else max(1, math.ceil((t1 - t0) / bound["dt"] - 1e-9))
         for i in range(n_sub):
             T = substep(T, t0 + (t1 - t0) * i / n_sub, t0 + (t1 - t0) * (i + 1) / n_sub)
@@ -239,6 +296,7 @@ def run_heat(model) -> None:  # noqa: C901  (one loop with its callbacks)
     def substep(T, t0, t1):
         dt = t1 - t0
         dt_taken.add(round(dt, 15))
+        n_substeps[0] += 1
         t_mid = t0 + 0.5 * dt  # sources and properties at mid-step
         if HS.VHC_t is not None or HS.TC_t is not None:
             vhc, tc = element_props(t_mid)
@@ -256,16 +314,21 @@ def run_heat(model) -> None:  # noqa: C901  (one loop with its callbacks)
             return st.step(T[None, :], None if load is None else load[None, :], **scales)[0]
         return st.step(T, load)
 
-    def on_step(k, t1, T_old, T_new):
-        nonlocal n_update, T_vox_old
+    def advance_state(dt, T_old, T_new):
+        nonlocal T_vox_old
         if E_node is not None:
-            fem.advance_damage(Omega, T_old, T_new, t1 - times[k - 1], E_node, A_node)
+            fem.advance_damage(Omega, T_old, T_new, dt, E_node, A_node)
             T_vox_new = S.to_voxels(T_new).ravel()
-            fem.advance_damage(Omega_vox, T_vox_old, T_vox_new, t1 - times[k - 1], E_vox, A_vox)
+            fem.advance_damage(Omega_vox, T_vox_old, T_vox_new, dt, E_vox, A_vox)
             T_vox_old = T_vox_new
         for i, nodes in enumerate(S.medium_nodes):
             if nodes.size:
                 HS.max_media_temps[i] = max(HS.max_media_temps[i], float(T_new[nodes].max()))
+
+    def on_step(k, t1, T_old, T_new):
+        nonlocal n_update
+        if not adaptive:  # the error-controlled steps did it step by step
+            advance_state(t1 - times[k - 1], T_old, T_new)
         if snap_every and k % snap_every == 0:
             HS.snapshots.append((t_offset + t1, T_new.copy()))
         if k in updates:
@@ -293,6 +356,12 @@ def run_heat(model) -> None:  # noqa: C901  (one loop with its callbacks)
 
     T, sensor = fem.march(step, T0, times, probes, on_step)
     bar.close()
+    if adaptive:
+        times, sensor = _sensor_series(times[0], T0, readings, probes, HS.sensor_interval)
+        HS.steps_taken = (controller.n_accepted, controller.n_rejected)
+        dt_taken.update(controller.lengths)
+    else:
+        HS.steps_taken = (n_substeps[0], 0)
     _store(HS, S, T, Omega, times + t_offset, sensor, chained, coupling)
     HS.Omega_voxels = Omega_vox.reshape(M.shape)
     HS.dt_used = np.unique(np.fromiter(dt_taken, float))
@@ -303,6 +372,27 @@ def run_heat(model) -> None:  # noqa: C901  (one loop with its callbacks)
             warnings.warn(f"medium {m.name!r} gets hotter than {BOILING_WARNING_C:g} deg C "
                           f"({HS.max_media_temps[i]:.4g} deg C): water in it would boil, "
                           "which this heat model does not include", stacklevel=4)
+
+
+def _sensor_series(t_start, T0, readings, probes, interval):
+    """The sensor times (s) and readings (n, n_sensors) of an error-controlled run.
+
+    Every accepted step's end; with ``interval``, only the steps that end on its multiples
+    (the steps land on them) and the run's end.
+    """
+    t = np.array([t_start] + [r[0] for r in readings])
+    n_sensors = 0 if probes is None else probes.shape[0]
+    v = np.empty((t.size, n_sensors))
+    if n_sensors:
+        v[0] = probes @ T0
+        for i, (_, r) in enumerate(readings):
+            v[i + 1] = r
+    if interval is None:
+        return t, v
+    k = (t - t_start) / interval
+    keep = np.abs(k - np.round(k)) < 1e-6
+    keep[-1] = True
+    return t[keep], v[keep]
 
 
 def _start_from_T(HS, G, S, chained) -> np.ndarray | None:

@@ -181,6 +181,7 @@ def conducting_block(theta, dt=None):
     HS = model.HS
     HS.P, HS.duration_on, HS.n_updates, HS.media_prop_recalc_period = 0.2, 0.2, 20, 1
     HS.theta, HS.dt, HS.progress = theta, dt, False
+    HS.step_control = "stability"  # the bound of the automatic step is what is tested
     return model
 
 

@@ -39,6 +39,7 @@ def test_auto_dt_follows_the_theta_scheme_and_mcmatlab_phases():
     model = block()
     HS = model.HS
     HS.duration_on, HS.duration_off, HS.duration_end, HS.n_pulses = 0.2, 0.8, 0.5, 2
+    HS.step_control = "stability"
     model.simulate_heat_distribution()
     G = model.G
     lam = 4 * TC / VHC * (1 / G.dx**2 + 1 / G.dy**2 + 1 / G.dz**2)
