@@ -523,7 +523,9 @@ def transport_batch(
         if oi is not None:
             if dc_end:  # MCmatlab's evaluateOnlyAtEndOfLife: the whole path, or nothing
                 met = O.criteria_met(oi, cnt, fate, True)
-                tally[T_ABSORBED_EXCLUDED] += O.flush_record(rec, n_rec, acc, met)
+                # as MCmatlab's, the deposits count times the packet's final weight
+                tally[T_ABSORBED_EXCLUDED] += O.flush_record(rec, n_rec, acc, met,
+                                                             w / W_ONE)
 
 
 @numba.njit(cache=True, parallel=True)

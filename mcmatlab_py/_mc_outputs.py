@@ -112,12 +112,21 @@ def push_record(rec, n, j, dep):
 
 
 @numba.njit(cache=True)
-def flush_record(rec, n, acc, met):
-    """Add the recorded deposits into ``acc`` if ``met``; return the weight left out."""
+def flush_record(rec, n, acc, met, scale=1.0):
+    """Add the recorded deposits times ``scale`` into ``acc`` if ``met``; return the weight
+    left out (all of it if not ``met``, else the rest, ``1 - scale`` of each deposit).
+
+    MCmatlab (MCmatlab.c, ``evaluateCriteriaAtEndOfLife``) adds a packet's recorded
+    deposits times its final weight: ``scale`` is that weight, a fraction of the launched
+    one. Its "collected fluence rate" (Example 8) thus weights where light was absorbed by
+    how much of the packet reached the collector.
+    """
     left_out = np.int64(0)
     for i in range(n):
         if met:
-            acc[rec[i, 0]] += rec[i, 1]
+            part = np.int64(rec[i, 1] * scale)
+            acc[rec[i, 0]] += part
+            left_out += rec[i, 1] - part
         else:
             left_out += rec[i, 1]
     return left_out

@@ -115,7 +115,10 @@ class DepositionCriteria(StrictAttributes):
     criteria hold when it dies, escapes or is collected; else each deposit is judged on
     the counts so far. ``only_collected`` needs the end-of-life evaluation and a light
     collector. As in MCmatlab, a packet that dies inside (roulette, killed) meets a
-    maximum only if that maximum is unlimited.
+    maximum only if that maximum is unlimited, and the deposits of a packet judged at the
+    end of its life count times its final weight (a fraction of the launched weight: what
+    escaped or reached the collector, or what was left when roulette ended it); the rest
+    counts as absorbed by excluded packets in the energy balance.
     """
 
     min_scatterings: int = 0
