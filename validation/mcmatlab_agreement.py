@@ -73,7 +73,8 @@ class Case:
     grid: tuple[int, int, int]  #: the reduced nx, ny, nz
     photons: int  #: photons per Monte Carlo call and batch
     fmc_photons: int = 0  #: photons per fluorescence call and batch
-    batches: int = 10
+    batches: int = 20  #: MCmatlab's batches, kept in validation/data/mcmatlab
+    ours_batches: int = 10  #: ours, in the study
     #: the CI test runs one batch of ours with photons / ci_divisor
     ci_divisor: int = 4
     #: which of our recorded stages are MCmatlab's, in MCmatlab's order (None: all)
@@ -82,8 +83,9 @@ class Case:
     mcmatlab_stages: tuple[int, ...] | None = None
     #: extra (regex, replacement) edits of MCmatlab's script, applied before the generic ones
     edits: tuple[tuple[str, str], ...] = ()
-    #: extra (attribute path, value) set on our models before each call (e.g. to mirror a
-    #: MCmatlab default our script leaves out); documented in ``note``
+    #: (attribute path below MC, value) set on our model before each Monte Carlo call, where
+    #: the gallery script departs from MCmatlab's on purpose (said in ``note``)
+    ours_set: tuple[tuple[str, object], ...] = ()
     note: str = ""
     #: quantities whose name matches this regex are left out of the comparison (reason in note)
     skip: str = ""
@@ -107,8 +109,10 @@ CASES: dict[str, Case] = {c.name: c for c in [
     Case("ex04", "ex04_blood_vessel", "Example4_BloodVessel", (20, 20, 20), 100_000),
     Case("ex05", "ex05_fluorescence_and_imaging", "Example5_FluorescenceAndImaging",
          (20, 20, 20), 100_000, fmc_photons=100_000),
-    Case("ex06", "ex06_time_tagging", "Example6_TimeTagging", (20, 20, 20), 20_000,
-         ours_stages=(0,)),
+    Case("ex06", "ex06_time_tagging", "Example6_TimeTagging", (20, 20, 20), 200_000,
+         ours_stages=(0,), ours_set=(("request_collected_photons", False),),
+         note="The gallery counts collected packets (`request_collected_photons`); here both "
+              "count launched ones, as MCmatlab's script does."),
     Case("ex07", "ex07_far_field", "Example7_FarField", (21, 21, 21), 100_000,
          fmc_photons=100_000),
     Case("ex08", "ex08_collected_fluence_rate", "Example8_CollectedFluenceRate", (20, 20, 20),
@@ -193,6 +197,11 @@ def summarize(rec: dict) -> dict[str, float]:
     if rec["kind"] == "FMC":
         q["fluorescence emitted"] = float(np.sum(rec["emitted"]))
     scale = rec.get("source_scale")
+    missed = np.atleast_1d(np.nan_to_num(np.asarray(rec.get("missed", 0.0), dtype=float)))
+    if np.any(missed > 0):
+        # MCmatlab draws a launch that misses the cuboid again: its maps are per W that
+        # enters, ours per W launched (the miss counts in MC.missed_fraction)
+        scale = 1.0 / (1.0 - missed)
     if scale is not None:  # MCmatlab's maps carry the emitted power twice (see report)
         rec = {**rec, **_rescaled(rec, np.atleast_1d(scale), waves)}
         NA = np.asarray(rec["NA"], dtype=np.float64)
@@ -258,7 +267,7 @@ def _summarize_outputs(q: dict, rec: dict, waves: int) -> None:
         if img.ndim == 0 or img.size == 1:
             q["light collector power"] = float(img)
         elif img.ndim == 1:  # a fiber, time-resolved: the time bins in up to 12 groups
-            for k, s in enumerate(_blocks(img.size, 12)):
+            for s in _blocks(img.size, 12):
                 q[f"light collector, time bins {s.start}-{s.stop - 1}"] = float(img[s].sum())
         else:
             sp = img if img.ndim == 2 else img.sum(axis=2)
@@ -268,7 +277,8 @@ def _summarize_outputs(q: dict, rec: dict, waves: int) -> None:
                     q[f"image block {i + 1},{j + 1}"] = float(sp[sx, sy].mean())
             if img.ndim == 3:
                 for s in _blocks(img.shape[2], 12):
-                    q[f"image, time bins {s.start}-{s.stop - 1}"] = float(img[:, :, s].mean(axis=(0, 1)).sum())
+                    q[f"image, time bins {s.start}-{s.stop - 1}"] = float(
+                        img[:, :, s].mean(axis=(0, 1)).sum())
 
 
 def _summarize_heat(rec: dict) -> dict[str, float]:
@@ -295,18 +305,18 @@ def _summarize_heat(rec: dict) -> dict[str, float]:
     return q
 
 
-def batch_statistics(summaries: list[list[dict]]) -> list[dict]:
-    """Per stage, per number: mean and standard error over the batches
-    (``summaries[batch][stage]``)."""
+def batch_statistics(records: list[list[dict]]) -> list[dict]:
+    """Per stage ``{"kind", "numbers": {name: {"mean", "se"}}}``: the mean and standard
+    error over the batches of the numbers of :func:`summarize` (``records[batch][stage]``)."""
+    summaries = [[summarize(r) for r in batch] for batch in records]
     out = []
     for stage in range(len(summaries[0])):
-        names = summaries[0][stage].keys()
         st = {}
-        for name in names:
+        for name in summaries[0][stage]:
             v = np.array([s[stage][name] for s in summaries if name in s[stage]])
             se = float(v.std(ddof=1) / math.sqrt(v.size)) if v.size > 1 else float("nan")
             st[name] = {"mean": float(v.mean()), "se": se}
-        out.append(st)
+        out.append({"kind": records[0][stage]["kind"], "numbers": st})
     return out
 
 
@@ -528,10 +538,10 @@ def run_mcmatlab(case: Case, mcm_root: Path, batch: int, log) -> list[dict]:
 def mcmatlab_reference(case: Case, mcm_root: Path) -> dict:
     """MCmatlab's batches of one example, summarised: what ``validation/data/mcmatlab`` keeps."""
     t0 = time.perf_counter()
-    summaries = []
+    records = []
     with open(Path(tempfile.gettempdir()) / f"mcmatlab_{case.name}.log", "w") as log:
         for b in range(case.batches):
-            summaries.append([summarize(r) for r in run_mcmatlab(case, mcm_root, b, log)])
+            records.append(run_mcmatlab(case, mcm_root, b, log))
     return {
         "example": case.name, "mcmatlab_script": f"{case.mcmatlab}.m",
         "mcmatlab_commit": mcmatlab_commit(mcm_root),
@@ -541,7 +551,7 @@ def mcmatlab_reference(case: Case, mcm_root: Path) -> dict:
                      "fmc_photons_per_call": case.fmc_photons, "batches": case.batches,
                      "seeds": "MCMATLAB_SEED = batch + 1"},
         "wall_s": round(time.perf_counter() - t0, 1),
-        "stages": batch_statistics(summaries),
+        "stages": batch_statistics(records),
     }
 
 
@@ -568,7 +578,7 @@ def _record(model, kind: str, T0: float | None = None) -> dict:
                    Omega=np.asarray(HS.Omega_voxels if HS.Omega_voxels is not None else 0.0))
         return rec
     S = model.MC if kind == "MC" else model.FMC
-    rec.update(NFR=S.NFR, NA=S.NA, farField=S.far_field)
+    rec.update(NFR=S.NFR, NA=S.NA, farField=S.far_field, missed=S.missed_fraction)
     if kind == "FMC":
         rec["emitted"] = S.emitted_power
     for f in FACES:
@@ -579,7 +589,7 @@ def _record(model, kind: str, T0: float | None = None) -> dict:
 
 @contextlib.contextmanager
 def reduced_and_recorded(case: Case, photons: int, fmc_photons: int, seed: int,
-                         records: list):
+                         records: list, heat: bool = True):
     """While active: grids take ``case.grid`` whenever a script sets ``nx``/``ny``/``nz``,
     and each top-level Monte Carlo, fluorescence and heat call gets the photon count and a
     seed (``seed + call number``), and appends its record to ``records``."""
@@ -599,6 +609,12 @@ def reduced_and_recorded(case: Case, photons: int, fmc_photons: int, seed: int,
         saved[Geometry, "__setattr__"](self, name, grid.get(name, value))
 
     def prepare(S, n):
+        for path, value in case.ours_set:
+            *parents, attr = path.split(".")
+            obj = S
+            for a in parents:
+                obj = getattr(obj, a)
+            setattr(obj, attr, value)
         S.n_photons_requested, S.simulation_time_requested = n, None
         S.seed = seed + calls[0]
         S.progress = False
@@ -612,6 +628,8 @@ def reduced_and_recorded(case: Case, photons: int, fmc_photons: int, seed: int,
         def call(self, *args, **kw):
             if depth[0] or (kind == "MC" and args and args[0] == "fluorescence"):
                 return orig(self, *args, **kw)
+            if kind == "HS" and not heat:
+                return self
             if kind == "MC":
                 prepare(self.MC, photons)
             elif kind == "FMC":
@@ -622,10 +640,17 @@ def reduced_and_recorded(case: Case, photons: int, fmc_photons: int, seed: int,
                     T0.append(float(np.ravel(self.HS.T if self.HS.T is not None
                                              else self.HS.T_initial)[0]))
             depth[0] += 1
+            P = self.HS.P
+            missed = float(np.nan_to_num(np.max(self.MC.missed_fraction or 0.0)))
+            if kind == "HS" and missed > 0 and not callable(P):
+                # MCmatlab's NA is per W entering the cuboid (a launch that misses is drawn
+                # again): its heat source is P / (1 - missed) of ours; heat as MCmatlab does
+                self.HS.P = P / (1.0 - missed)
             try:
                 out = orig(self, *args, **kw)
             finally:
                 depth[0] -= 1
+                self.HS.P = P
             records.append(_record(self, kind, T0[0] if T0 else None))
             return out
         return call
@@ -642,21 +667,21 @@ def reduced_and_recorded(case: Case, photons: int, fmc_photons: int, seed: int,
 
 
 def run_ours(case: Case, batch: int, photons: int | None = None,
-             fmc_photons: int | None = None) -> list[dict]:
-    """One batch of our gallery script on the reduced model: the stage records."""
+             fmc_photons: int | None = None, heat: bool = True) -> list[dict]:
+    """One batch of our gallery script on the reduced model: the stage records (without
+    ``heat``, the heat runs are skipped and not recorded)."""
     module = load_gallery(case.script)
     records: list = []
     with reduced_and_recorded(case, photons or case.photons, fmc_photons or case.fmc_photons,
-                              10_007 * (batch + 1), records):
+                              10_007 * (batch + 1), records, heat):
         getattr(module, case.ours_run)(quick=False, **case.kw)
     if case.ours_stages is not None:
-        records = [records[i] for i in case.ours_stages]
+        records = [records[i] for i in case.ours_stages if i < len(records)]
     return records
 
 
-def ours_statistics(case: Case) -> list[dict]:
-    summaries = [[summarize(r) for r in run_ours(case, b)] for b in range(case.batches)]
-    return batch_statistics(summaries)
+def ours_statistics(case: Case, batches: int) -> list[dict]:
+    return batch_statistics([run_ours(case, b) for b in range(batches)])
 
 
 # ----------------------------------------------------------------------------- comparison
@@ -668,6 +693,7 @@ def compare(ref_stages: list[dict], our_stages: list[dict], case: Case) -> list[
                          f"{len(our_stages)}")
     rows = []
     for k, (ref, ours) in enumerate(zip(ref_stages, our_stages, strict=True)):
+        ref, ours = ref["numbers"], ours["numbers"]
         for name, r in ref.items():
             if case.skip and re.search(case.skip, name):
                 continue
@@ -694,22 +720,30 @@ def compare(ref_stages: list[dict], our_stages: list[dict], case: Case) -> list[
     return rows
 
 
-def ci_check(case: Case) -> list[tuple[str, float, float, float]]:
-    """One batch of ours with ``photons / ci_divisor`` against the stored reference:
-    ``(name, ours, MCmatlab's, tolerance)`` per number. The tolerance is 4 combined standard
-    errors, ours scaled from MCmatlab's by the photon count (the per-photon variance is
-    the same when the two agree)."""
-    ref = json.loads((DATA / f"{case.name}.json").read_text())
+def ci_check(case: Case, z: float = 5.0, heat: bool = False, ref: dict | None = None
+             ) -> list[tuple[str, float, float, float]]:
+    """One batch of ours with ``photons / ci_divisor`` against the stored reference (or
+    ``ref``): ``(name, ours, MCmatlab's, tolerance)`` per number. The tolerance is ``z``
+    combined standard errors, ours scaled from MCmatlab's by the photon count (the
+    per-packet variance is the same where the two agree). Without ``heat`` the heat runs
+    are skipped. Numbers the case explains are left out."""
+    ref = ref or json.loads((DATA / f"{case.name}.json").read_text())
+    stages = [st for st in ref["stages"] if heat or st["kind"] != "HS"]
     n_ref = ref["settings"]["photons_per_call"] * ref["settings"]["batches"]
     n_ci = case.photons // case.ci_divisor
-    ours = [summarize(r) for r in run_ours(case, 0, n_ci, case.fmc_photons // case.ci_divisor)]
+    records = run_ours(case, 0, n_ci, max(1, case.fmc_photons // case.ci_divisor), heat)
+    if len(records) != len(stages):
+        raise ValueError(f"{case.name}: {len(records)} stages of ours, {len(stages)} stored")
     out = []
-    for k, (st, o) in enumerate(zip(ref["stages"], ours, strict=True)):
-        for name, r in st.items():
+    for k, (st, rec) in enumerate(zip(stages, records, strict=True)):
+        o = summarize(rec)
+        for name, r in st["numbers"].items():
             if case.skip and re.search(case.skip, name):
                 continue
+            if any(re.search(pat, name) for pat, _ in case.explained):
+                continue
             se_ours = r["se"] * math.sqrt(n_ref / n_ci)
-            tol = max(4.0 * math.hypot(r["se"], se_ours), 1e-5 * abs(r["mean"]), 1e-12)
+            tol = max(z * math.hypot(r["se"], se_ours), 1e-5 * abs(r["mean"]), 1e-12)
             if "rise" in name:
                 tol = max(tol, HEAT_REL * abs(r["mean"]))
             out.append((f"stage {k + 1}: {name}", o.get(name, math.nan), r["mean"], tol))
@@ -763,18 +797,22 @@ def main(argv=None) -> None:
     ap.add_argument("side", choices=("mcmatlab", "compare"))
     ap.add_argument("examples", nargs="*", help=f"default: all ({', '.join(CASES)})")
     ap.add_argument("--batches", type=int, help="fewer batches, for a trial (not stored)")
+    ap.add_argument("--ours-batches", type=int, help="batches of ours (default: the case's)")
     args = ap.parse_args(argv)
     names = args.examples or list(CASES)
     if args.batches:
         for name in names:
-            CASES[name] = dataclasses.replace(CASES[name], batches=args.batches)
+            CASES[name] = dataclasses.replace(CASES[name], batches=args.batches,
+                                              ours_batches=args.batches)
     if args.side == "mcmatlab":
         mcm_root = Path(os.environ["MCM_ROOT"])
         adapt_build(mcm_root)
         DATA.mkdir(parents=True, exist_ok=True)
         for name in names:
             ref = mcmatlab_reference(CASES[name], mcm_root)
-            out = DATA / f"{name}.json" if not args.batches else Path(tempfile.gettempdir()) / f"mcmatlab_{name}.json"
+            out = DATA / f"{name}.json"
+            if args.batches:  # a trial: not stored
+                out = Path(tempfile.gettempdir()) / f"mcmatlab_{name}.json"
             out.write_text(json.dumps(ref, indent=1) + "\n")
             print(f"{name}: {len(ref['stages'])} stages in {ref['wall_s']} s", flush=True)
         return
@@ -785,7 +823,8 @@ def main(argv=None) -> None:
         if args.batches:
             ref_path = Path(tempfile.gettempdir()) / f"mcmatlab_{name}.json"
         ref = json.loads(ref_path.read_text())
-        rows = compare(ref["stages"], ours_statistics(case), case)
+        rows = compare(ref["stages"], ours_statistics(case, args.ours_batches or case.ours_batches),
+                       case)
         results[name] = (case, ref, rows)
         n_bad = sum(r["verdict"] != "agree" for r in rows)
         print(f"{name}: {len(rows) - n_bad}/{len(rows)} agree", flush=True)
