@@ -71,7 +71,14 @@ def check_number(name: str, value, *, integer: bool = False, lo: float | None = 
     if isinstance(value, bool) or not isinstance(value, numbers.Real):
         kind = "an integer" if integer else "a number"
         raise error(f"{name} must be {kind}, got {shorten(repr(value))}")
-    v = float(value)
+    try:
+        v = float(value)
+    except OverflowError:  # an integer beyond the floats (10**400): out of any range
+        if hi is not None and value > 0:
+            raise error(f"{name} must be <= {hi:g}, got {shorten(repr(value))}") from None
+        if lo is not None and value < 0:
+            raise error(f"{name} must be >= {lo:g}, got {shorten(repr(value))}") from None
+        raise error(f"{name} must be finite, got {shorten(repr(value))}") from None
     if math.isnan(v) or (math.isinf(v) and not allow_inf):
         raise error(f"{name} must be finite, got {shorten(repr(value))}")
     if integer and not (math.isfinite(v) and v.is_integer()):

@@ -9,8 +9,11 @@ from __future__ import annotations
 
 import os
 
+from fem.checks import shorten
+
 __all__ = [
     "HEAT_BYTES_PER_NODE",
+    "LONG_RUN_S",
     "MAX_STEPS",
     "available_memory",
     "check_filter",
@@ -18,10 +21,14 @@ __all__ = [
     "check_memory",
     "check_steps",
     "format_bytes",
+    "format_seconds",
+    "warn_long_run",
 ]
 
 #: time steps beyond which a run is refused (10^6 heat steps of even a tiny mesh take hours)
 MAX_STEPS = 1_000_000
+#: s: a run expected to take longer than this says so, with its estimate, before it goes on
+LONG_RUN_S = 600.0
 
 
 def available_memory() -> int:
@@ -29,7 +36,8 @@ def available_memory() -> int:
     total = os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES")
     for path in ("/sys/fs/cgroup/memory.max", "/sys/fs/cgroup/memory/memory.limit_in_bytes"):
         try:
-            text = open(path).read().strip()
+            with open(path) as fh:
+                text = fh.read().strip()
         except OSError:
             continue
         if text.isdigit():
@@ -44,6 +52,25 @@ def format_bytes(n: float) -> str:
             return f"{n:.3g} {unit}"
         n /= 1000
     return f"{n:.3g} PB"  # pragma: no cover
+
+
+def format_seconds(s: float) -> str:
+    """``s`` seconds in a readable unit (``"3.2 days"``)."""
+    for unit, length in (("years", 365.25 * 86400), ("days", 86400), ("h", 3600), ("min", 60)):
+        if s >= 2 * length or unit == "min" and s >= 60:
+            return f"{s / length:.3g} {unit}"
+    return f"{s:.3g} s"
+
+
+def warn_long_run(seconds: float, what: str, measured: str, instead: str) -> None:
+    """Warn (once, before a long run goes on) when it is expected to take more than
+    :data:`LONG_RUN_S`: ``"{what} will take about 3.2 days more ({measured}): Ctrl-C stops
+    it; {instead}"``."""
+    if seconds > LONG_RUN_S:
+        import warnings
+
+        warnings.warn(f"{what} will take about {format_seconds(seconds)} more ({measured}): "
+                      f"Ctrl-C stops it; {instead}", RuntimeWarning, stacklevel=3)
 
 
 def check_memory(need_bytes: float, what: str, keys: str, fraction: float = 0.8) -> None:
@@ -84,14 +111,15 @@ def check_heat(G, HS) -> None:
                      [m.VHC for m in const], [m.TC for m in const], HS.theta,
                      HS.large_time_steps)
     duration = HS.total_duration + HS.duration_end
+    step = f"HS.dt = {dt:g} s" if HS.dt is not None else f"the automatic step {dt:g} s"
     check_steps(duration / dt, f"HS (n_pulses * (duration_on + duration_off) + duration_end = "
-                               f"{duration:g} s in steps of {dt:g} s)",
+                               f"{duration:g} s in steps of {step})",
                 "HS.dt, HS.duration_on, HS.duration_off, HS.duration_end or HS.n_pulses")
     n_nodes = 1.0
     for d in div:
         n_nodes *= float(d) + 1
-    keys = "HS.mesh_divisions" if HS.mesh_divisions is not None else "G.nx, G.ny, G.nz (or " \
-        "set a coarser HS.mesh_divisions)"
+    keys = (f"HS.mesh_divisions = {shorten(list(div))}" if HS.mesh_divisions is not None else
+            f"G.nx, G.ny, G.nz = {shorten(list(div))} (or set a coarser HS.mesh_divisions)")
     check_memory(n_nodes * HEAT_BYTES_PER_NODE, f"the heat mesh of {n_nodes:.3g} nodes", keys)
 
 

@@ -64,7 +64,7 @@ class Geometry(StrictAttributes):
             setattr(self, name, check_int("G", name, getattr(self, name)))
         n = self.nx * self.ny * self.nz
         if n > self.MAX_VOXELS:
-            raise ValueError(f"G.nx * G.ny * G.nz = {n} voxels is more than this machine can "
+            raise ValueError(f"G.nx * G.ny * G.nz = {n:.3g} voxels is more than this machine can "
                              f"hold (limit {self.MAX_VOXELS}: medium map and tallies)")
         for name in ("Lx", "Ly", "Lz"):
             setattr(self, name, check_positive("G", name, getattr(self, name)))

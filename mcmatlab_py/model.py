@@ -447,9 +447,16 @@ class Model(StrictAttributes):
         return self
 
     def simulate_heat_distribution(self) -> Model:
-        """Run the heat simulation driven by ``MC.NA``; fills ``self.HS`` and returns ``self``."""
+        """Run the heat simulation driven by ``MC.NA``; fills ``self.HS`` and returns ``self``.
+
+        A run that cannot fit or finish is refused first, naming the field and its value
+        (:func:`mcmatlab_py.budget.check_heat`: more than 10^6 time steps from ``HS.dt``
+        and the durations, a mesh of ``HS.mesh_divisions`` larger than the memory)."""
+        from .budget import check_heat
         from .heat import simulate_heat_distribution
 
+        self.HS.validate(self.G)
+        check_heat(self.G, self.HS)
         simulate_heat_distribution(self)
         return self
 

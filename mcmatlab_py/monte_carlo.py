@@ -14,6 +14,7 @@ from . import _mc_outputs as KO
 from ._mc_tally import fluence_scale
 from ._strict import NotBuiltError
 from .broadband import is_broadband, run_broadband
+from .budget import warn_long_run
 from .mc_outputs import OutputSpec, output_spec, store_outputs
 from .media_bins import optical_media_properties
 from .model import MAX_PHOTONS
@@ -280,6 +281,11 @@ def simulate(G, MC, M: np.ndarray, mua, mus, g, nref, *, seed: int, n_photons: i
                 break
             # aim at rounds of about half a second, to keep the bar and the clock responsive
             rate = n_round / max(dt, 1e-6)  # batches per second
+            if n_batches is not None and done == n_round:  # the estimate, once, up front
+                warn_long_run((n_batches - done) / rate,
+                              f"MC.n_photons_requested = {n_total:.3g}",
+                              f"{rate * bs:.3g} photons/s on the first {done * bs:.3g}",
+                              "request fewer photons, or set MC.simulation_time_requested")
             per_round = int(min(max(n_slots, 0.5 * rate), 50 * per_round))
             per_round = max(n_slots, per_round - per_round % n_slots)
             if n_batches is None:

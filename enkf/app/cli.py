@@ -25,6 +25,16 @@ from .common import EXIT_BAD_INPUT, EXIT_UNEXPECTED, MAX_SEED, shorten
 __all__ = ["build_parser", "main"]
 
 
+class _Parser(argparse.ArgumentParser):
+    """argparse's parser, whose option errors are one line that names the command, the
+    option and the value, not the usage of every option (exit status 2). The
+    subcommands' parsers are of this class too (argparse makes them of the parent's)."""
+
+    def error(self, message: str):
+        self.exit(EXIT_BAD_INPUT, f"error: {self.prog}: {shorten(' '.join(message.split()), 240)}"
+                                  f" (see {self.prog} --help)\n")
+
+
 def _common(p: argparse.ArgumentParser) -> None:
     p.add_argument("--out", required=True, help="output directory (created; must be new or empty)")
     p.add_argument("--force", action="store_true", help="replace a non-empty --out")
@@ -56,7 +66,7 @@ def _model_command(p: argparse.ArgumentParser, config_help: str, func) -> None:
 
 
 def build_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(
+    parser = _Parser(
         prog="tissue-enkf",
         description="Monte Carlo light transport, FEM heat and ensemble Kalman filtering "
                     "for laser-irradiated tissue.")

@@ -43,6 +43,7 @@ def apply_threads(threads):
     if threads is not None:
         import numba
 
-        if threads < 1:
-            raise ValueError(f"--threads must be >= 1, got {shorten(threads)}")
+        from fem.checks import check_number
+
+        threads = check_number("--threads", threads, integer=True, lo=1, hi=1_000_000)
         numba.set_num_threads(min(threads, numba.config.NUMBA_NUM_THREADS))
