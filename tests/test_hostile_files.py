@@ -359,3 +359,18 @@ def test_a_stream_stopped_by_a_restarted_clock_keeps_a_whole_run(tmp_path, capsy
     man = json.loads((out / "run.json").read_text())
     assert man["readings"] == 3 and "the clock restarted" in man["stopped"]
     assert len((out / "estimates.csv").read_text().splitlines()) == 4
+
+
+def test_a_stream_the_health_check_stops_ends_as_a_file_does(tmp_path, capsys, cache):
+    """A reading the filter cannot follow: the estimates up to it, status 0, run.json says
+    why (identify on a file does the same)."""
+    live = tmp_path / "live.csv"
+    live.write_text("\n".join(DATA[:4]) + "\n0.5,5000\n0.6,1e5\n# end\n")
+    out = tmp_path / "out"
+    assert run("identify", EX / "tiny.toml", "--follow", live, "--out", out, "--quiet",
+               "--cache-dir", cache, "--idle-timeout", "5") == 0
+    captured = capsys.readouterr()
+    assert "3 readings assimilated" in captured.out
+    assert f"warning: {live}: the filter stopped early: filter diverged at step 1" in captured.err
+    man = json.loads((out / "run.json").read_text())
+    assert man["readings"] == 3 and man["stopped"].startswith("filter diverged")

@@ -301,7 +301,8 @@ def _follow(args, cfg, absorption, seed, t_emu) -> int:
 
     It holds a run.json from the start (``"running": true``), rewritten when the stream
     ends, whatever ends it: the readings assimilated, the lines skipped, and why it
-    stopped (``"interrupted"``, ``"stopped"``). A stream that ends in an error before
+    stopped (``"interrupted"``, ``"stopped"``: an error, or the filter's health check,
+    which ends the run with status 0 as it does on a file). A stream that ends in an error before
     its first reading leaves nothing. With --force the outputs of an earlier run in
     --out are set aside first and removed once the new run.json is written (no old
     summary.json or fields/final.vtu beside the new estimates). Interrupted (Ctrl-C,
@@ -310,9 +311,11 @@ def _follow(args, cfg, absorption, seed, t_emu) -> int:
     """
     import shutil
 
+    from ..problem import FilterDivergence
     from ..tissue import OnlineIdentifier
     from ..tissue.absorption import fill_prior_points
     from ..tissue.identify import persistence_summary
+    from ..tissue.outputs import readable_stop
     from .readers import follow_csv
     from .report import manifest
     from .rundir import remove_stale_partials, signals_deferred
@@ -370,10 +373,13 @@ def _follow(args, cfg, absorption, seed, t_emu) -> int:
             _live_figure(out, ident, setup)
             last_fig[0] = time.perf_counter()
 
+    stopped = None
     try:
         n = follow_csv(args.follow, ident, on_update, idle_timeout_s=args.idle_timeout,
                        columns=None if cfg.data.columns is None else ["time", *cfg.data.columns],
                        skipped=skipped)
+    except FilterDivergence as err:  # as for a file: the estimates up to then, exit 0
+        n, stopped = len(ident.history), readable_stop(str(err), names)
     except BaseException as exc:
         fh.close()
         k = len(ident.history)
@@ -410,7 +416,11 @@ def _follow(args, cfg, absorption, seed, t_emu) -> int:
         w = ident.history[-1].drift_weight
         drift = {"drift": {"behaviour": "drifting" if w >= 0.5 else "still", "weight_final": w}}
         print(f"optics {drift['drift']['behaviour']} while heated (P(drift) = {w:.2g})")
-    run_json(n, innovation_persistence=persistence, **drift)
+    run_json(n, innovation_persistence=persistence, **drift,
+             **({"stopped": stopped} if stopped else {}))
+    if stopped:
+        print(f"warning: {args.follow}: the filter stopped early: {stopped} (estimates up to "
+              "then are written)", file=sys.stderr)
     if persistence["flagged"]:
         warnings.warn(persistence["advice"], RuntimeWarning, stacklevel=2)
     if skipped:
