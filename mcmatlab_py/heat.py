@@ -37,7 +37,7 @@ import numpy as np
 from fem.checks import check_number
 
 from ._strict import StrictAttributes
-from .media import check_positive
+from .media import LIMITS, check_positive
 
 __all__ = ["HeatSimulation", "Schedule", "auto_dt", "simulate_heat_distribution"]
 
@@ -371,7 +371,7 @@ class HeatSimulation(StrictAttributes):
         period = self.duration_on + self.duration_off
         if t < 0 or t >= self.n_pulses * period or (t % period) >= self.duration_on:
             return 0.0
-        return float(self.P(t)) if callable(self.P) else float(self.P)
+        return self.peak_power(t)
 
     def mean_laser_power(self, t0: float, t1: float) -> float:
         """W averaged over ``[t0, t1)`` (s): :meth:`laser_power` integrated over the pulses'
@@ -397,8 +397,20 @@ class HeatSimulation(StrictAttributes):
         return energy / (t1 - t0)
 
     def peak_power(self, t: float) -> float:
-        """W of the laser when on at ``t`` (s): what FR-dependent media see (MCmatlab's MC.P)."""
-        return float(self.P(t)) if callable(self.P) else float(self.P)
+        """W of the laser when on at ``t`` (s): what FR-dependent media see (MCmatlab's MC.P).
+
+        A callable ``P`` is checked at every call (a NaN would turn every temperature to
+        NaN without a word): a value that is not a finite number in [0, 1e6] W raises
+        ValueError naming ``HS.P``, the time and the value."""
+        if not callable(self.P):
+            return float(self.P)
+        value = self.P(t)
+        if isinstance(value, np.ndarray) and value.shape == ():  # np.interp of a scalar
+            value = value.item()
+        try:
+            return check_number(f"HS.P(t) at t = {t:g} s", value, lo=0.0, hi=LIMITS["P"])
+        except ValueError as err:
+            raise ValueError(f"{err} (HS.P is a function of time: it must return W)") from None
 
 
 def simulate_heat_distribution(model) -> None:

@@ -109,3 +109,16 @@ def test_a_short_monte_carlo_says_nothing(monkeypatch):
                                      (3 * 86400.0, "3 days"), (1e9, "31.7 years")])
 def test_durations_read_well(s, text):
     assert format_seconds(s) == text
+
+
+@pytest.mark.parametrize("value, needle", [(float("nan"), "must be finite, got nan"),
+                                           (-1.0, "must be >= 0"), ("2", "must be a number")])
+def test_a_power_function_returning_nonsense_is_named(value, needle):
+    """HS.P(t) returning NaN gave NaN temperatures and no error."""
+    model = _tiny()
+    model.MC.n_photons_requested = 1000
+    model.run_monte_carlo()
+    model.HS.P = lambda t: value
+    with pytest.raises(ValueError, match=rf"HS\.P\(t\) at t = .* s {needle}.*HS\.P is a "
+                                         r"function of time"):
+        model.simulate_heat_distribution()
