@@ -14,10 +14,22 @@ Two details make the tallies exact and reproducible:
 * The photon's voxel is tracked as integer indices that change by +-1 when it
   crosses a voxel face (a 3-D DDA), never recomputed by truncating a possibly
   negative coordinate; this is the bug of the public mcxyz code that piles
-  energy into the first voxel layer of the -x and -y faces.
+  energy into the first voxel layer of the -x and -y faces. (A free move, below,
+  ends inside the cuboid, where truncation is the floor.)
 
 Coordinates inside the kernel are local: ``0 <= px <= Lx`` etc. (the Python
 layer shifts x and y by ``L/2``).
+
+Heterogeneous tissue costs little more than one medium: ``safe`` gives for each voxel
+how far a packet in it may go, in any direction, without meeting a voxel of another
+kind of medium (other optics; :mod:`mcmatlab_py.safety`). Within that distance the
+packet moves a whole free path at once, cut only at the cuboid's faces, and keeps what
+is left of the ball after an interaction inside it, so that in the bulk of a medium it
+looks nothing up. Within one voxel of a change of medium, outside the cuboid, and where
+its own refractive index is not its voxel's, it walks face by face. The moves cross the
+same media either way; only the rounding of the positions differs. The free path's
+optical depth comes from an exponential ziggurat and the azimuth from a point in the
+unit disc (:mod:`mcmatlab_py._rng`).
 
 Sources are launched by :func:`mcmatlab_py._sources.launch`. With mismatched
 interfaces, a packet meeting a change of refractive index inside the grid is
@@ -64,7 +76,7 @@ from ._mc_steps import (
     _mirror,
     _plane_distance,
     _refract_face,
-    _spin,
+    _spin_cs,
 )
 from ._mc_tally import (  # noqa: F401 (re-exported: the Python layer reads them here)
     FLU_ONE,
@@ -84,7 +96,7 @@ from ._mc_tally import (  # noqa: F401 (re-exported: the Python layer reads them
 )
 from ._mc_track import track_walk
 from ._mc_uniform import transport_uniform_batch, uniform_path_applies
-from ._rng import next_double, seed_stream
+from ._rng import next_azimuth, next_double, next_exponential, seed_stream
 from ._sources import SI_SURFACE, launch_from, sample_pwl
 
 KILLRANGE = 5.0  # as MCmatlab: photons farther than 2.5 cuboid sizes from the centre die
@@ -206,8 +218,8 @@ def transport_batch(
                 O.path_point(paths, path_n, ip, px, py, pz, w / W_ONE)
         # ------------------------------------------------------------- hop loop
         while alive:
-            s0, s1, s2, s3, r1 = next_double(s0, s1, s2, s3)
-            tau = -math.log(1.0 - r1)  # optical depth to the next interaction
+            # the optical depth to the next interaction, by the ziggurat (no logarithm)
+            s0, s1, s2, s3, tau = next_exponential(s0, s1, s2, s3)
             while True:  # move until tau is used up or the photon dies
                 if not (rs > 0.0 and tau < mut * rs):
                     # the voxel's medium, and how far the packet may move in it freely
@@ -484,8 +496,10 @@ def transport_batch(
                     cnt[0] += 1
                 if record_path:
                     O.path_point(paths, path_n, ip, px, py, pz, w / W_ONE)
+            # the azimuth from a point in the unit disc (no sine or cosine), drawn before the
+            # deflection: the one-medium kernel draws them the other way round
+            s0, s1, s2, s3, cosp, sinp = next_azimuth(s0, s1, s2, s3)
             s0, s1, s2, s3, r1 = next_double(s0, s1, s2, s3)
-            s0, s1, s2, s3, r2 = next_double(s0, s1, s2, s3)
             if phase_idx is None:  # no tabulated phase function: pruned at compile time
                 cost = _hg_cos(g[m], r1)
             else:
@@ -494,7 +508,7 @@ def transport_batch(
                     cost = _hg_cos(g[m], r1)
                 else:
                     cost = math.cos(math.pi * sample_pwl(phase_tab[row], 0, n_table, r1))
-            ux, uy, uz = _spin(ux, uy, uz, cost, 2.0 * math.pi * r2)
+            ux, uy, uz = _spin_cs(ux, uy, uz, cost, cosp, sinp)
             if w < w_thr:
                 if roulette:
                     s0, s1, s2, s3, r1 = next_double(s0, s1, s2, s3)
