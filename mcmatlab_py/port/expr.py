@@ -368,7 +368,8 @@ class ExprTranslator:
             e = self.ex(node, scope)
         finally:
             self._end = saved
-        return E(e.code, e.prec, "int")
+        # a mask such as X < Z(end) stays a mask: its 'end' belongs to the inner index
+        return E(e.code, e.prec, "bool" if e.kind == "bool" else "int")
 
 
 _END = E("end", ATOM, "end")  # a subscript that is MATLAB's bare 'end'

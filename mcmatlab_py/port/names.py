@@ -56,6 +56,8 @@ SPECIAL = {
     ("FMC", "useAllCPUs"): "all_cpus",
     ("HS", "useAllCPUs"): "all_cpus",
     ("HS", "useGPU"): "hs_gpu",
+    ("MC", "matchedInterfaces"): "matched",
+    ("FMC", "matchedInterfaces"): "matched",
     ("HS", "T"): "hs_T",
     ("HS", "Omega"): "hs_Omega",
     ("MC", "P"): "mc_P",

@@ -208,6 +208,12 @@ class Translator(CallTranslator, MediaTranslator):
             # MCmatlab's HS.T is the start temperature, also what the Monte Carlo's T-dependent
             # media see before a heat run
             return [f"{indent}{target} = {m}.MC.T = {e.code}"]
+        if special == "matched":
+            # MCmatlab's cuboid faces neither reflect nor refract (a packet outside sees the
+            # nearest voxel's medium); this port's default is Fresnel against air (n_outside 1)
+            owner = target.rsplit(".", 1)[0]
+            return [f"{indent}{owner}.n_outside = None  # MCmatlab's faces: no Fresnel at the cuboid",
+                    f"{indent}{target} = {e.code}"]
         if special == "medium_index":
             e = _minus_one(e)  # MCmatlab's media are numbered from 1
             return [f"{indent}{target} = {e.code}  # (0-based: MCmatlab's index minus 1)"]
