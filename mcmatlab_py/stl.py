@@ -18,6 +18,8 @@ from pathlib import Path
 
 import numpy as np
 
+from .files import open_regular
+
 __all__ = ["find_inside_voxels"]
 
 
@@ -79,8 +81,8 @@ def find_inside_voxels(X: np.ndarray, Y: np.ndarray, Z: np.ndarray, mesh,
 
     if isinstance(mesh, (str, Path)):
         path = Path(mesh)
-        if not path.is_file():
-            raise ValueError(f"mesh file {str(path)!r} does not exist")
+        with open_regular(path, "mesh file"):  # a pipe, FIFO or device: refused, not read
+            pass
         surface = pv.read(path)
     elif isinstance(mesh, pv.DataSet):
         surface = mesh

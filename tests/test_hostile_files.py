@@ -374,3 +374,12 @@ def test_a_stream_the_health_check_stops_ends_as_a_file_does(tmp_path, capsys, c
     assert f"warning: {live}: the filter stopped early: filter diverged at step 1" in captured.err
     man = json.loads((out / "run.json").read_text())
     assert man["readings"] == 3 and man["stopped"].startswith("filter diverged")
+
+
+def test_a_mesh_file_that_is_a_fifo_is_refused(fifo):
+    pytest.importorskip("pyvista")
+    from mcmatlab_py.stl import find_inside_voxels
+
+    X, Y, Z = np.meshgrid(*[np.array([0.25, 0.75])] * 3, indexing="ij")
+    with pytest.raises(ValueError, match="mesh file .* is a pipe or FIFO, not a regular file"):
+        find_inside_voxels(X, Y, Z, str(fifo))
