@@ -83,3 +83,18 @@ def test_assert_entry_can_fail(entry, ok):
     else:
         with pytest.raises(AssertionError):
             assert_entry("x", entry)
+
+
+def test_ex23_reads_mcmatlabs_tables(tmp_path):
+    # Lucifer Yellow from tables in MCmatlab's layout ('#' lines, then nm and a value),
+    # interpolated as MCmatlab's interp1 calls: mua = eps / 100 (10 mM), 1e-8 outside and at
+    # least 1e-8; ES 0 outside
+    module = load(GALLERY / "ex23_broadband_monte_carlo.py")
+    (tmp_path / module.ABSORPTION_TABLE).write_text(
+        "# absorption\n##Wavelength (nm)\tMolar Extinction (cm-1/M)\n400\t1000\n500\t3000\n")
+    (tmp_path / module.EMISSION_TABLE).write_text("# emission\n500\t2\n600\t4\n")
+    mua, ES = module.lucifer_yellow(tmp_path)
+    assert mua(450.0) == pytest.approx(20.0) and mua(300.0) == 1e-8 and mua(501.0) == 1e-8
+    assert ES(550.0) == pytest.approx(3.0) and ES(499.0) == 0.0 and ES(650.0) == 0.0
+    medium = module.media(tmp_path)[5]
+    assert medium.value("mua", 450.0) == pytest.approx(20.0)

@@ -240,6 +240,58 @@ def test_unmatched_interfaces_keep_mcmatlabs_faces():
     assert ns["model"].MC.n_outside is None and ns["model"].MC.matched_interfaces is False
 
 
+#: MCmatlab 3's style (Test1's): properties as text of FR and T, a power yield, Tinitial
+OLD_STYLE = """model = MCmatlab.model;
+model.G.nx = 9; model.G.ny = 9; model.G.nz = 8;
+model.G.Lx = .1; model.G.Ly = .1; model.G.Lz = .1;
+model.G.mediaPropertiesFunc = @mediaPropertiesFunc;
+model.G.geomFunc = @geometryDefinition;
+model = reset(model,'MC'); % a fresh MC
+model.MC.nPhotonsRequested = 500;
+model.MC.wavelength = 532;
+model.MC.P = 2;
+model.HS.Tinitial = 3;
+model = runMonteCarlo(model);
+model.FMC.nPhotonsRequested = 500;
+model.FMC.wavelength = 600;
+model = runMonteCarlo(model,'fluorescence');
+
+function M = geometryDefinition(X,Y,Z,parameters)
+M = ones(size(X));
+end
+
+function mediaProperties = mediaPropertiesFunc(wavelength,parameters)
+j=1;
+mediaProperties(j).name = 'material 1';
+mediaProperties(j).mua  = '1 + (T+FR)/100';
+mediaProperties(j).mus  = 10;
+mediaProperties(j).g    = 0.9;
+mediaProperties(j).PY   = '0.5/(1+T/10)';
+end
+"""
+
+
+def test_mcmatlab3_model(quick):
+    result = port_model(OLD_STYLE, "old.m")
+    assert result.unconverted == []
+    script = result.script
+    # the start temperature is what the Monte Carlo sees; FR in the text: 20 iterations
+    # (MCmatlab 3's FRdepIterations), set again after reset; PY as photons
+    assert "model.HS.T_initial = model.MC.T = 3" in script
+    assert script.count("model.MC.fr_dep_iterations = 20") == 2
+    assert 'model = model.reset("MC")  # a fresh MC\nquick(model)\n' in script
+    ns = {}
+    exec(compile(script, "old.py", "exec"), ns)  # noqa: S102
+    model = ns["model"]
+    assert model.MC.fr_dep_iterations == 20 and model.MC.n_photons <= 500
+    QY = model.G.media[0].QY
+    assert QY(532.0, 0.0, 3.0, 0.0) == pytest.approx(0.5 / 1.3 * 600 / 532, rel=1e-12)
+    # the fluorescence emitted is PY times the absorbed power
+    dV = model.G.dx * model.G.dy * model.G.dz
+    assert model.FMC.emitted_power == pytest.approx(
+        0.5 / 1.3 * model.MC.NA.sum() * dV, rel=1e-9)
+
+
 def test_unknown_function_is_kept_and_listed():
     result = port_model("a = 1;\nb = myHelper(a);\nc = a + 1;\n")
     assert result.unconverted[0][0] == 2 and "myHelper" in result.unconverted[0][2]

@@ -65,7 +65,9 @@ HAND = {
     "Test1_AllFRTDependences": "test1_all_frt_dependences",
 }
 #: keyword arguments of build() for the converted script's first model, where not the default
-BUILD_ARGS = {"ex10_media_property_parametric_sweep": {"g": -1.0}}
+BUILD_ARGS = {"ex10_media_property_parametric_sweep": {"g": -1.0},
+              # MCmatlab's tables of Lucifer Yellow, in the folder the scripts run in
+              "ex23_broadband_monte_carlo": {"tables": "helperfuncs"}}
 
 
 # ---------------------------------------------------------------------- the parent process

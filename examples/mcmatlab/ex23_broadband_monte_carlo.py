@@ -12,13 +12,19 @@ Each wavelength's maps are a slice of ``NA`` and ``NFR`` (nx, ny, nz, n_waveleng
 ``model.plot`` draws their sums over the wavelengths and the power per wavelength.
 
     python examples/mcmatlab/ex23_broadband_monte_carlo.py [--quick] [--out DIR]
+        [--tables MCMATLAB_DIR/helperfuncs]
+
+Lucifer Yellow's absorption and emission are MCmatlab's omlc.org tables (PhotochemCAD
+data, ``LuciferYellowCHinWater-abs.txt`` and ``-ems.txt`` in MCmatlab's ``helperfuncs``
+folder, which ``tables`` names; they are not copied here), interpolated as MCmatlab's
+script does. Without them, Gaussian fits stand in (absorption peak 428 nm, 1/e half-width
+48 nm, 110 cm^-1 at 10 mM; emission peak 536 nm, half-width 54 nm): the excitation then
+differs from MCmatlab's where Lucifer Yellow absorbs.
 
 Differences from MCmatlab: fixed photon counts (3.06 x 10^6 excitation and 2.44 x 10^6
 fluorescence packets, split over the wavelengths as MCmatlab splits them) instead of one
 minute each; no lambda slider on the figures (sums over wavelengths, and a spectrum
-figure). Lucifer Yellow's absorption and emission, which MCmatlab reads from omlc.org
-tables, are Gaussians here (absorption peak 428 nm, 1/e half-width 48 nm, 110 cm^-1 at
-10 mM; emission peak 536 nm, half-width 54 nm).
+figure).
 """
 
 from __future__ import annotations
@@ -57,8 +63,37 @@ def _gauss(centre: float, width: float, height: float = 1.0):
     return lambda wavelength: height * math.exp(-(((wavelength - centre) / width) ** 2))
 
 
-def media() -> list[Medium]:
-    """MCmatlab's six media; blood content B, saturation S, water W, fat F, melanin M."""
+#: MCmatlab's tables of Lucifer Yellow CH in water (in its helperfuncs folder)
+ABSORPTION_TABLE = "LuciferYellowCHinWater-abs.txt"  #: nm, molar extinction cm^-1 M^-1
+EMISSION_TABLE = "LuciferYellowCHinWater-ems.txt"  #: nm, emission (arbitrary units)
+
+
+def lucifer_yellow(tables: str | Path | None = None):
+    """(mua, ES) of Lucifer Yellow CH, functions of the wavelength (nm).
+
+    ``tables``: the folder of MCmatlab's omlc.org tables; mua (cm^-1) is the molar
+    extinction at 10 mM (divided by 100) interpolated linearly, 1e-8 outside the table and
+    at least 1e-8, ES the emission interpolated, 0 outside (MCmatlab's ``interp1`` calls).
+    Without ``tables``: Gaussian fits of the two.
+    """
+    if tables is None:
+        ly_abs = _gauss(428.0, 48.0, 110.0)
+        return (lambda wl: max(1e-8, ly_abs(wl))), _gauss(536.0, 54.0)
+    wl_a, eps = np.loadtxt(Path(tables) / ABSORPTION_TABLE, comments="#", unpack=True)
+    wl_e, em = np.loadtxt(Path(tables) / EMISSION_TABLE, comments="#", unpack=True)
+
+    def mua(wl):
+        return np.maximum(1e-8, np.interp(wl, wl_a, eps, left=1e-8, right=1e-8) / 100)
+
+    def ES(wl):
+        return np.interp(wl, wl_e, em, left=0.0, right=0.0)
+
+    return mua, ES
+
+
+def media(tables: str | Path | None = None) -> list[Medium]:
+    """MCmatlab's six media; blood content B, saturation S, water W, fat F, melanin M.
+    ``tables``: see :func:`lucifer_yellow`."""
     def tissue(B, S, W, M, a_prime, f_ray, extra=None):
         def mua(wl):
             base = calc_mua(wl, S, B, W, 0.0, M)
@@ -70,7 +105,7 @@ def media() -> list[Medium]:
     derm = tissue(0.002, 0.67, 0.65, 0.0, 42.4, 0.62)
     blood = tissue(1.0, 0.75, 0.95, 0.0, 10.0, 0.0)
     stained = tissue(0.002, 0.67, 0.65, 0.0, 42.4, 0.62, extra=_gauss(450.0, 50.0, 100.0))
-    ly_abs = _gauss(428.0, 48.0, 110.0)
+    ly_mua, ly_es = lucifer_yellow(tables)
     return [
         Medium("air", mua=1e-8, mus=1e-8, g=1.0),
         Medium("epidermis", mua=epi[0], mus=epi[1], g=0.9),
@@ -78,8 +113,7 @@ def media() -> list[Medium]:
         Medium("blood", mua=blood[0], mus=blood[1], g=0.9),
         Medium("stained cancerous tissue", mua=stained[0], mus=stained[1], g=0.9,
                QY=_gauss(450.0, 50.0, 0.1), ES=_gauss(650.0, 50.0)),
-        Medium("Lucifer Yellow CH in water", mua=lambda wl: max(1e-8, ly_abs(wl)), mus=10.0,
-               g=0.9, QY=0.21, ES=_gauss(536.0, 54.0)),
+        Medium("Lucifer Yellow CH in water", mua=ly_mua, mus=10.0, g=0.9, QY=0.21, ES=ly_es),
     ]
 
 
@@ -90,13 +124,14 @@ def wavelengths(quick: bool) -> tuple[np.ndarray, np.ndarray]:
     return np.linspace(300.0, 550.0, 51), np.linspace(450.0, 750.0, 61)
 
 
-def build(quick: bool = False) -> Model:
-    """The model of Example 23; ``quick``: 24^3 voxels, 3 and 4 wavelengths, few photons."""
+def build(quick: bool = False, tables: str | Path | None = None) -> Model:
+    """The model of Example 23; ``quick``: 24^3 voxels, 3 and 4 wavelengths, few photons.
+    ``tables``: MCmatlab's helperfuncs folder (:func:`lucifer_yellow`)."""
     model = Model()
     G = model.G
     G.nx = G.ny = G.nz = 24 if quick else 100
     G.Lx = G.Ly = G.Lz = 0.1  # cm
-    G.media = media()
+    G.media = media(tables)
     G.geom_func = geometry
     wl_x, wl_f = wavelengths(quick)
     MC, FMC = model.MC, model.FMC
@@ -121,9 +156,9 @@ def build(quick: bool = False) -> Model:
     return model
 
 
-def run(quick: bool = False) -> Model:
+def run(quick: bool = False, tables: str | Path | None = None) -> Model:
     """The broadband excitation, then the broadband fluorescence (MCmatlab's two calls)."""
-    model = build(quick).run_monte_carlo()
+    model = build(quick, tables).run_monte_carlo()
     return model.run_monte_carlo("fluorescence")
 
 
@@ -176,8 +211,11 @@ if __name__ == "__main__":
     ap.add_argument("--quick", action="store_true", help="small grid, few photons (seconds)")
     ap.add_argument("--out", type=Path, default=Path(__file__).parent / "out",
                     help="folder for the figures (default: examples/mcmatlab/out)")
+    ap.add_argument("--tables", type=Path, default=None,
+                    help="MCmatlab's helperfuncs folder, for Lucifer Yellow's omlc.org tables "
+                         "(default: Gaussian fits)")
     args = ap.parse_args()
-    model = run(args.quick)
+    model = run(args.quick, args.tables)
     G, MC, FMC = model.G, model.MC, model.FMC
     dV = G.dx * G.dy * G.dz
     absorbed = MC.NA.sum() * dV  # W per W incident, all wavelengths

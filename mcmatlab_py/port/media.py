@@ -36,6 +36,7 @@ class MediaTranslator:
     """Media and geometry functions (mixed into :class:`~mcmatlab_py.port.translate.Translator`)."""
 
     _shift_media: str | None = None
+    _media_name: str | None = None  #: the media function being translated
 
     # -- geometry: media numbered from 0 -------------------------------------------------
     def literal_media(self, body, out: str) -> bool:
@@ -87,6 +88,24 @@ class MediaTranslator:
         return bool(outs) and any(_medium_target(s, outs) is not None
                                   for s in fn.n_body.l_statements)
 
+    def fr_in_text(self, fn) -> bool:
+        """Whether MCmatlab 3 iterated ``fn``'s media on the fluence rate: an optical property
+        (mua, mus, g) given as text that holds ``FR`` (MCmatlab 3's test, by substring)."""
+        from miss_hit_core import m_ast
+
+        outs = [o.t_ident.value for o in fn.n_sig.l_outputs]
+        found = []
+
+        class V(m_ast.AST_Visitor):
+            def visit(self, n, parent, relation):
+                target = _medium_target(n, outs)
+                if target is not None and target[1] in ("mua", "mus", "g") and isinstance(
+                        n.n_rhs, m_ast.Char_Array_Literal) and "FR" in n.n_rhs.t_string.value:
+                    found.append(n)
+
+        fn.n_body.visit(None, V(), "root")
+        return bool(found)
+
     def media_call(self, fname: str, params: str, model: str) -> str:
         n = len(self.functions[fname].n_sig.l_inputs)
         if n == 0:
@@ -102,6 +121,7 @@ class MediaTranslator:
 
         self.imports.add("Medium")
         name = fn.n_sig.n_name.t_ident.value
+        self._media_name = name
         params = [p.t_ident.value for p in fn.n_sig.l_inputs]
         outs = [o.t_ident.value for o in fn.n_sig.l_outputs]
         scope = Scope(role="media")
@@ -195,8 +215,9 @@ class MediaTranslator:
         rhs = node.n_rhs
         try:
             if field == "PY":
-                raise Unconvertible("MCmatlab 3's power yield PY: give QY = PY * FMC.wavelength "
-                                    "/ MC.wavelength (photons instead of power)")
+                e = self.power_yield(rhs, scope)
+                return [f"QY={e.code},{self.trailing(first, last)}  # (MCmatlab 3's power yield "
+                        "PY as photons: QY = PY * FMC.wavelength / MC.wavelength)"]
             kw = medium_field(field)
             if isinstance(rhs, m_ast.Char_Array_Literal) and kw != "name":
                 e = self.text_property(rhs.t_string.value, kw, scope)
@@ -209,11 +230,37 @@ class MediaTranslator:
         text = f"{kw}={e.code}," if kw != "name" else f"name={e.code}"
         return [text + self.trailing(first, last)]
 
+    def power_yield(self, rhs, scope) -> E:
+        """MCmatlab 3's power yield PY (W emitted per W absorbed) as the quantum yield QY of
+        the excitation wavelength, read from the one model that uses this media function."""
+        from miss_hit_core import m_ast
+
+        why = "MCmatlab 3's power yield PY: give QY = PY * FMC.wavelength / MC.wavelength " \
+              "(photons instead of power)"
+        models = sorted(m for m, f in self.media_funcs.items() if f == self._media_name)
+        if len(models) != 1:
+            raise Unconvertible(why)
+        if isinstance(rhs, m_ast.Char_Array_Literal):
+            body = f"({self.text_expression(rhs.t_string.value, OPTICAL_ARGS, scope).code})"
+        else:
+            e = self.ex(rhs, scope)
+            if e.kind not in ("int", "scalar"):
+                raise Unconvertible(why)
+            body = e.code
+        args = ", ".join(OPTICAL_ARGS)
+        return E(f"lambda {args}: {body} * {models[0]}.FMC.wavelength / wavelength", LAMBDA,
+                 "function")
+
     def text_property(self, text: str, kw: str, scope) -> E:
         """MCmatlab 3's ``'10 + FR/1000'``: a lambda of the state variables."""
+        args = THERMAL_ARGS if kw in ("VHC", "TC") else OPTICAL_ARGS
+        body = self.text_expression(text, args, scope)
+        return E(f"lambda {', '.join(args)}: {body.code}", LAMBDA, "function")
+
+    def text_expression(self, text: str, args, scope) -> E:
+        """The MATLAB expression ``text`` of the variables ``args``, in Python."""
         from .parse import MatlabSyntaxError, parse_expression
 
-        args = THERMAL_ARGS if kw in ("VHC", "TC") else OPTICAL_ARGS
         try:
             node = parse_expression(text)
         except MatlabSyntaxError as err:
@@ -221,8 +268,7 @@ class MediaTranslator:
         inner = Scope(parent=scope, role="function")
         for a in args:
             inner.kinds[a] = None
-        body = self.ex(node, inner)
-        return E(f"lambda {', '.join(args)}: {body.code}", LAMBDA, "function")
+        return self.ex(node, inner)
 
 
 def _shifted_medium(rhs, whole: bool):

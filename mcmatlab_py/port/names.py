@@ -59,6 +59,7 @@ SPECIAL = {
     ("MC", "matchedInterfaces"): "matched",
     ("FMC", "matchedInterfaces"): "matched",
     ("HS", "T"): "hs_T",
+    ("HS", "Tinitial"): "hs_T",  # MCmatlab 3's start temperature (MCmatlab 4: HS.T)
     ("HS", "Omega"): "hs_Omega",
     ("MC", "P"): "mc_P",
     ("MC", "FRinitial"): "FR",

@@ -33,6 +33,9 @@ class Translator(CallTranslator, MediaTranslator):
         self.events: list[tuple[int, str, str]] = []  # (line, "mc" | "hs", model variable)
         self.param_lines: list[tuple[int, str]] = []  # where G.mediaPropParams is set
         self.preamble: list[str] = []
+        #: media functions with MCmatlab 3's text properties of FR (mua, mus or g)
+        self.fr_text_media: set[str] = set()
+        self.sets_fr_iterations: set[str] = set()  #: model variables that set FRdepIterations
 
     # -- comments ------------------------------------------------------------------------
     def comments_before(self, lo: int, hi: int, indent: str, lead: bool = True) -> list[str]:
@@ -97,7 +100,11 @@ class Translator(CallTranslator, MediaTranslator):
         if body:
             head_last = first if _compound(node) else last
             tail = self.trailing(first, head_last)
-            k = 0 if _compound(node) else -1
+            # a simple statement's comment goes on its own line, not on the quick(...) and
+            # settings lines that follow Model() and reset
+            k = 0 if _compound(node) else max(
+                (i for i, ln in enumerate(body) if not ln.lstrip().startswith(("#@", "quick("))),
+                default=len(body) - 1)
             if tail and "  # (" in body[k]:  # the converter's note joins the line's comment
                 code, note = body[k].split("  # ", 1)
                 body[k] = f"{code}{tail} {note}"
@@ -152,6 +159,13 @@ class Translator(CallTranslator, MediaTranslator):
         if name in scope.kinds and old != e.kind and old is not None and e.kind is not None:
             scope.kinds[name] = None
         lines = [f"{indent}{target} = {e.code}"]
+        if e.kind == "model" and e.code.startswith(f"{target}.reset("):
+            # a fresh part: small again under MCMATLAB_PY_QUICK; a fresh MC needs the settings
+            # made after Model() again
+            self.imports.add("quick")
+            lines.append(f"{indent}quick({target})")
+            if e.code in (f"{target}.reset()", f'{target}.reset("MC")'):
+                lines.append(f"{indent}#@settings {target}")
         if e.code == "Model()":
             self.imports.add("quick")
             lines.append(f"{indent}quick({target})  # MCMATLAB_PY_QUICK=1: a small grid and few "
@@ -395,6 +409,8 @@ class Translator(CallTranslator, MediaTranslator):
                         return
                     if chain[-1] == "mediaPropParams":
                         translator.param_lines.append((n.loc().line, py_name(chain[0])))
+                    if chain[-1] == "FRdepIterations":
+                        translator.sets_fr_iterations.add(py_name(chain[0]))
                 if isinstance(n, m_ast.Reference) and isinstance(n.n_ident, m_ast.Identifier):
                     name = n.n_ident.t_ident.value
                     kind = {"runMonteCarlo": "mc", "simulateHeatDistribution": "hs"}.get(name)
@@ -406,6 +422,8 @@ class Translator(CallTranslator, MediaTranslator):
         for name, fn in self.functions.items():
             if name not in self.roles and self.is_media_function(fn):
                 self.roles[name] = "media"
+            if self.roles.get(name) == "media" and self.fr_in_text(fn):
+                self.fr_text_media.add(name)
 
     def translate(self, tree) -> tuple[list[str], list[str]]:
         """(function definitions, script body) as lines of Python."""
@@ -447,6 +465,10 @@ class Translator(CallTranslator, MediaTranslator):
                 if m in self.needs_ni:
                     out.append(f"{indent}{m}.MC.calc_normalized_irradiance = True  # the script "
                                "reads NI_* (MCmatlab computes them always)")
+                if self.media_funcs.get(m) in self.fr_text_media and \
+                        m not in self.sets_fr_iterations:
+                    out.append(f"{indent}{m}.MC.fr_dep_iterations = 20  # MCmatlab 3 iterated "
+                               "media whose text holds FR 20 times (its FRdepIterations)")
                 continue
             out.append(line)
         return out
