@@ -95,14 +95,16 @@ class Case:
     kw: dict = field(default_factory=dict)  #: keyword arguments of ``ours_run`` besides quick
 
 
-AIR_NA = ("absorbed in medium 1$|depth slab 1/6",
-          "the air's absorption (mua = 1e-8 cm^-1): MCmatlab's NA is mua x NFR from the track "
-          "length, ours scores absorption where packets interact, and in this air none do "
-          "(the same expectation, 3e-10 of the power; ours is 0 at any feasible count)")
+#: absorbed power below this (W per W incident) in both engines: a nearly transparent medium
+AIR_ABSORBED = 1e-6
+AIR_NA = ("the absorption of air (mua = 1e-8 cm^-1, below 1e-6 of the power in both): MCmatlab's "
+          "NA is mua x NFR, the fluence rate from the track length; ours scores absorption where "
+          "packets interact, and in air (mus = 1e-8 cm^-1) none do: ours is 0, the same "
+          "expectation (MCmatlab's is 3e-10 of the power in Example 1), unbiased but at any "
+          "feasible photon count 0. The air's fluence rate NFR (track length) agrees.")
 
 CASES: dict[str, Case] = {c.name: c for c in [
-    Case("ex01", "ex01_standard_tissue", "Example1_StandardTissue", (21, 21, 30), 100_000,
-         explained=(AIR_NA,)),
+    Case("ex01", "ex01_standard_tissue", "Example1_StandardTissue", (21, 21, 30), 100_000),
     Case("ex02", "ex02_beam_definitions", "Example2_BeamDefinitions", (41, 41, 20), 100_000),
     Case("ex03", "ex03_refraction_reflection", "Example3_RefractionReflection", (20, 20, 20),
          20_000),
@@ -713,6 +715,9 @@ def compare(ref_stages: list[dict], our_stages: list[dict], case: Case) -> list[
                        None)
             if not ok and why is not None:
                 verdict = f"explained ({why + 1})"
+            elif (not ok and name.startswith("absorbed")
+                  and max(abs(o["mean"]), abs(r["mean"])) < AIR_ABSORBED):
+                verdict = "explained (air)"
             rows.append({"stage": k + 1, "name": name, "mcmatlab": r["mean"],
                          "se_mcmatlab": r["se"], "ours": o["mean"], "se_ours": o["se"],
                          "z": d / se if se > 0 else (0.0 if d == 0 else math.inf),
@@ -742,11 +747,160 @@ def ci_check(case: Case, z: float = 5.0, heat: bool = False, ref: dict | None = 
                 continue
             if any(re.search(pat, name) for pat, _ in case.explained):
                 continue
+            if name.startswith("absorbed") and abs(r["mean"]) < AIR_ABSORBED:
+                continue  # air: ours is 0 (AIR_NA)
             se_ours = r["se"] * math.sqrt(n_ref / n_ci)
             tol = max(z * math.hypot(r["se"], se_ours), 1e-5 * abs(r["mean"]), 1e-12)
             if "rise" in name:
                 tol = max(tol, HEAT_REL * abs(r["mean"]))
             out.append((f"stage {k + 1}: {name}", o.get(name, math.nan), r["mean"], tol))
+    return out
+
+
+# ----------------------------------------------------------------------------- pencil-beam heat
+
+#: The heat case of the issue (../shared/tools/mcmatlab-octave/scripts/run_heat.m): Example 1's
+#: cuboid (0.1 x 0.1 x 0.15 cm, 0.03 cm of water on standard tissue), a pencil beam of 0.1 W
+#: along the axis for 1 s, then 0.5 s without light, insulating faces, from 37 deg C.
+PENCIL = {"L": (0.1, 0.1, 0.15), "z_surface": 0.03, "P": 0.1, "on": 1.0, "off": 0.5,
+          "media": ((1e-8, 1e-8, 1.0, 4.19, 5.8e-3), (1.0, 100.0, 0.9, 3391 * 1.109e-3, 0.37e-2))}
+#: cm: the issue's four sensors (two on the axis just under the surface), and points at 0.005
+#: and 0.01 cm from the axis at the first one's depth
+PENCIL_SENSORS = ((0, 0, 0.035), (0, 0, 0.05), (0, 0, 0.08), (0.02, 0, 0.05),
+                  (0.005, 0, 0.035), (0.01, 0, 0.035))
+
+OCTAVE_PENCIL_HEAT = r"""1;
+function M = geom(X, Y, Z, p)
+  M = ones(size(X)); M(Z > %(zs)r) = 2;
+end
+function mp = media(p)
+  mp = MCmatlab.mediumProperties;
+  mp(1).name = 'water'; mp(1).mua = %(mua1)r; mp(1).mus = %(mus1)r; mp(1).g = %(g1)r;
+  mp(1).VHC = %(vhc1)r; mp(1).TC = %(tc1)r;
+  mp(2).name = 'tissue'; mp(2).mua = %(mua2)r; mp(2).mus = %(mus2)r; mp(2).g = %(g2)r;
+  mp(2).VHC = %(vhc2)r; mp(2).TC = %(tc2)r;
+end
+mcmRoot = getenv('MCM_ROOT'); cd(mcmRoot); addpath(fullfile(mcmRoot, 'octave_compat'));
+mcmatlab_octave_setup(mcmRoot);
+src = load('%(src)s');
+model = MCmatlab.model;
+model.G.nx = %(nx)d; model.G.ny = %(ny)d; model.G.nz = %(nz)d;
+model.G.Lx = %(Lx)r; model.G.Ly = %(Ly)r; model.G.Lz = %(Lz)r;
+model.G.mediaPropertiesFunc = @media; model.G.geomFunc = @geom;
+model.MC.nPhotonsRequested = 1; model.MC.silentMode = true; model.MC.useAllCPUs = false;
+model.MC.matchedInterfaces = true; model.MC.boundaryType = 1; model.MC.wavelength = 532;
+model.MC.lightSource.sourceType = 0;
+model = runMonteCarlo(model);  %% sets up M and the media; its one photon is replaced below
+mua = model.MC.mediaProperties.mua;
+model.MC.NFR = single(src.NA ./ reshape(mua(model.MC.M), size(src.NA)));  %% NA = mua(M) .* NFR
+model.MC.P = %(P)r;
+model.HS.silentMode = true; model.HS.useAllCPUs = false; model.HS.makeMovie = false;
+model.HS.largeTimeSteps = false; model.HS.heatBoundaryType = 0; model.HS.T = 37;
+model.HS.durationOn = %(on)r; model.HS.durationOff = 0; model.HS.durationEnd = 0;
+model.HS.nPulses = 1; model.HS.tempSensorPositions = %(sensors)s;
+model = simulateHeatDistribution(model);
+model.HS.durationOn = 0; model.HS.durationOff = %(off)r;
+model = simulateHeatDistribution(model);
+sensorTemps = model.HS.sensorTemps; sensorsTimeVector = model.HS.sensorsTimeVector;
+save('-v7', '%(out)s', 'sensorTemps', 'sensorsTimeVector');
+"""
+
+
+def pencil_grid(n: int) -> tuple[int, int, int]:
+    """(n, n, nz): odd n puts the beam on the centre of a column of voxels; dz close to dx."""
+    return n, n, round(n * PENCIL["L"][2] / PENCIL["L"][0])
+
+
+def pencil_model(n: int):
+    """Our model of the pencil-beam heat case on the grid ``pencil_grid(n)``."""
+    from mcmatlab_py import Medium, Model
+
+    model = Model()
+    G = model.G
+    G.nx, G.ny, G.nz = pencil_grid(n)
+    G.Lx, G.Ly, G.Lz = PENCIL["L"]
+    G.media = [Medium(name, mua=a, mus=b, g=g, VHC=v, TC=t)
+               for name, (a, b, g, v, t) in zip(("water", "tissue"), PENCIL["media"],
+                                                 strict=True)]
+    zs = PENCIL["z_surface"]
+    G.geom_func = lambda X, Y, Z: np.where(Z > zs, 1, 0)
+    MC = model.MC
+    MC.matched_interfaces, MC.boundary_type, MC.wavelength = True, 1, 532
+    MC.light_source.source_type = 0
+    return model
+
+
+def pencil_source(n: int, photons: int, seed: int = 46) -> np.ndarray:
+    """(nx, ny, nz) W/cm^3/W: our absorption on the grid, the source both solvers heat with."""
+    model = pencil_model(n)
+    model.MC.n_photons_requested, model.MC.seed, model.MC.progress = photons, seed, False
+    return model.run_monte_carlo().MC.NA
+
+
+def pencil_heat_ours(n: int, NA: np.ndarray, dt: float = 5e-3) -> tuple[np.ndarray, np.ndarray]:
+    """Our heat solver on the source ``NA``: (times, (n_times, n_sensors) deg C)."""
+    model = pencil_model(n)
+    model.MC.NA = NA
+    HS = model.HS
+    HS.P, HS.heat_boundary_type, HS.T_initial, HS.progress = PENCIL["P"], 0, 37.0, False
+    # one step length, one factorisation (the default accuracy control refactorises at
+    # every step: ~7x longer here for the same numbers); the step's effect is measured
+    HS.dt = dt
+    HS.temp_sensor_positions = [tuple(map(float, s)) for s in PENCIL_SENSORS]
+    HS.duration_on, HS.duration_off, HS.duration_end = PENCIL["on"], 0.0, 0.0
+    model.simulate_heat_distribution()
+    HS.duration_on, HS.duration_off = 0.0, PENCIL["off"]
+    model.simulate_heat_distribution()
+    return np.asarray(HS.sensor_times), np.asarray(HS.sensor_temps)
+
+
+def pencil_heat_mcmatlab(n: int, NA: np.ndarray, mcm_root: Path) -> tuple[np.ndarray, np.ndarray]:
+    """MCmatlab's heat solver (Octave) on the same source: (times, (n_times, n_sensors))."""
+    from scipy.io import loadmat, savemat
+
+    nx, ny, nz = pencil_grid(n)
+    (a1, b1, g1, v1, t1), (a2, b2, g2, v2, t2) = PENCIL["media"]
+    with tempfile.TemporaryDirectory(prefix="mcm_pencil_") as tmp:
+        tmp = Path(tmp)
+        savemat(tmp / "src.mat", {"NA": np.asarray(NA, dtype=np.float64)})
+        sensors = "[" + "; ".join(" ".join(repr(float(c)) for c in s) for s in PENCIL_SENSORS) + "]"
+        script = OCTAVE_PENCIL_HEAT % dict(
+            zs=PENCIL["z_surface"], mua1=a1, mus1=b1, g1=g1, vhc1=v1, tc1=t1, mua2=a2, mus2=b2,
+            g2=g2, vhc2=v2, tc2=t2, src=tmp / "src.mat", nx=nx, ny=ny, nz=nz,
+            Lx=PENCIL["L"][0], Ly=PENCIL["L"][1], Lz=PENCIL["L"][2], P=PENCIL["P"],
+            on=PENCIL["on"], off=PENCIL["off"], sensors=sensors, out=tmp / "out.mat")
+        (tmp / "run.m").write_text(script)
+        p = subprocess.run(["nice", "-n", "10", "octave-cli", "--norc", str(tmp / "run.m")],
+                           env={**os.environ, "MCM_ROOT": str(mcm_root), "OMP_NUM_THREADS": "1"},
+                           capture_output=True, text=True)
+        if p.returncode != 0 or not (tmp / "out.mat").exists():
+            raise RuntimeError(f"pencil heat, n = {n}: Octave failed:\n{p.stderr[-3000:]}")
+        d = loadmat(tmp / "out.mat", squeeze_me=True)
+    return np.atleast_1d(d["sensorsTimeVector"]), np.atleast_2d(d["sensorTemps"]).T
+
+
+def pencil_convergence(ns: tuple[int, ...], photons: int, mcm_root: Path | None,
+                       dt: float = 5e-3) -> dict:
+    """Both heat solvers on one source per grid (ours, ``photons`` packets): the sensors'
+    rises at the end of the light (t = on) and of the run, per grid; wall times. Ours steps
+    by ``dt`` (backward Euler); on the first grid also by dt / 5, to measure its effect."""
+    out = {"ns": list(ns), "photons": photons, "sensors": [list(s) for s in PENCIL_SENSORS],
+           "dt": dt, "ours": {}, "mcmatlab": {}, "wall_s": {}}
+    for n in ns:
+        NA = pencil_source(n, photons)
+        solvers = [("ours", lambda NA=NA, n=n: pencil_heat_ours(n, NA, dt))]
+        if n == ns[0]:
+            solvers.append(("ours dt/5", lambda NA=NA, n=n: pencil_heat_ours(n, NA, dt / 5)))
+        if mcm_root is not None:
+            solvers.append(("mcmatlab", lambda NA=NA, n=n: pencil_heat_mcmatlab(n, NA, mcm_root)))
+        for side, solve in solvers:
+            t0 = time.perf_counter()
+            t, T = solve()
+            out["wall_s"][f"{side} {n}"] = round(time.perf_counter() - t0, 1)
+            rises = [np.interp(tq, t, T[:, s]) - 37.0 for tq in (PENCIL["on"], t[-1])
+                     for s in range(T.shape[1])]
+            out.setdefault(side, {})[str(n)] = np.reshape(rises, (2, T.shape[1])).tolist()
+            print(f"pencil heat n = {n} {side}: {out['wall_s'][f'{side} {n}']} s", flush=True)
     return out
 
 
@@ -756,88 +910,240 @@ def _fmt(v) -> str:
     return "–" if v is None or (isinstance(v, float) and math.isnan(v)) else f"{v:.5g}"
 
 
-def report(results: dict[str, tuple[Case, dict, list[dict]]], command: str) -> list[str]:
-    lines = ["# MCmatlab's engine against ours, example by example", "",
-             f"Made by `{command}` (MCmatlab's side: `MCM_ROOT=... python "
-             "validation/mcmatlab_agreement.py mcmatlab`, stored in "
-             "`validation/data/mcmatlab/`). Each row: the mean over the batches on each side, "
-             f"the combined standard error (SE) and `z` = (ours - MCmatlab) / SE; agreement: "
-             f"|z| <= {Z_AGREE:g} (heat rises: or within {HEAT_REL:.0%} of the rise).", ""]
-    total = bad = 0
-    summary = ["| example | MCmatlab script | grid | photons/call x batches | numbers | agree |",
-               "|---|---|---|---|---:|---:|"]
+#: what ours had wrong against MCmatlab, found by this study, and how it is mended
+FIXES = [
+    "**Absorption in nearly transparent media** (Example 20's air: mua = 1e-8, mus = 100 "
+    "cm^-1): each interaction deposited `int(w mua / (mua + mus))` fixed-point units of the "
+    "2^36 of a packet, ~6.87 rounded down to 6, so NA there was 13% low (air layer NFR 6.08 vs "
+    "MCmatlab's 6.98 W/cm^2/W, 10^6 photons each). The kernels now carry the fraction not "
+    "deposited on with the packet: 6.95 vs 6.98.",
+    "**Deposition criteria judged at the end of a packet's life** (Example 8's collected "
+    "fluence rate, `only_collected`): MCmatlab.c adds a packet's recorded deposits times its "
+    "final weight (the part that reached the collector); ours added them whole, 40% above "
+    "MCmatlab's absorbed power. Ours now weights them the same way.",
+    "**The cuboid's faces** (Examples 3, 17, 20, mismatched refractive indices): MCmatlab "
+    "applies no Fresnel reflection or refraction where light enters or leaves the cuboid (the "
+    "medium at a face goes on beyond it) and counts in the far field and the light collector "
+    "only light that leaves from a medium of n = 1; ours reflected and refracted against "
+    "`MC.n_outside = 1`. `MC.n_outside = None` now gives MCmatlab's faces, and the gallery's "
+    "Examples 3, 17 and 20 use it (Example 3's top escape: 0.1513 vs MCmatlab's 0.1508; with "
+    "Fresnel at the faces it was 0.214, 2% of the directions trapped by total reflection).",
+]
+
+#: MCmatlab's conventions that the comparison converts, with the measurement
+CONVENTIONS = [
+    "**A source distribution's outputs carry its power twice in MCmatlab.** "
+    "`normalizeDepositionAndResetO` (MCmatlab.c) receives `Pfraction = B->power` and divides "
+    "`normfactor` by `B->power` again: the maps of a fluorescence run, and of "
+    "`MC.sourceDistribution` (Example 26), come out multiplied by the emitted power of their "
+    "wavelength. Measured: Example 5's fluorescence maps were 31.3 times ours, and ours emits "
+    "0.0320 W per W (1/0.0320 = 31.3); Example 7's 6.10 times, emitted 0.164 W per W; Example "
+    "26's absorbed power per wavelength divided by the squared wavelength share is one constant, "
+    "0.0736, ours' absorbed fraction. MCmatlab's energy balance does not close with these "
+    "maps (its fluorescence absorbed and escaped sum to the emitted power squared), so this is "
+    "MCmatlab's error: its maps are divided by its own emitted power per wavelength before "
+    "the comparison.",
+    "**MCmatlab draws a launch that misses the cuboid again** (`launchPhoton` repeats until "
+    "the packet starts inside), so its outputs are per W that enters; ours are per W launched, "
+    "the miss counted in `MC.missed_fraction`. Where a tilted or wide beam misses the top face "
+    "in part (Examples 7, 14, 15), ours are divided by 1 - missed fraction before the "
+    "comparison, and our heat runs heat with P / (1 - missed) as MCmatlab's do. This is a "
+    "convention: MCmatlab's heat then puts the whole power into the cuboid although part of "
+    "the beam misses it.",
+]
+
+
+def report(results: dict, pencil: dict) -> list[str]:
+    """The Markdown report: ``results[name] = (case, reference, rows, ours)``."""
+    commit = next((r[1]["mcmatlab_commit"] for r in results.values()), "?")
+    lines = [
+        "# MCmatlab's engine against ours, example by example", "",
+        "    MCMATLAB_GIT=<bare clone of github.com/ankrh/MCmatlab> W=/tmp/mcm \\",
+        "        bash ../shared/tools/mcmatlab-octave/build.sh",
+        "    MCM_ROOT=/tmp/mcm/mcm python validation/mcmatlab_agreement.py mcmatlab  "
+        "# MCmatlab's numbers",
+        "    python validation/mcmatlab_agreement.py compare  # ours against them, this report",
+        "    MCM_ROOT=/tmp/mcm/mcm python validation/mcmatlab_agreement.py pencil  "
+        "# the heat study below", "",
+        f"MCmatlab commit `{commit}`, its C engines built for GNU Octave 7 and run through its "
+        "own `runMonteCarlo` and `simulateHeatDistribution` on its own example scripts (edited "
+        "on the fly: reduced grid, a fixed photon count per call, one thread, plots removed); "
+        "ours: the gallery script's own `run()` with the same grid and photon count "
+        "(`validation/mcmatlab_agreement.py` says how). Both sides run independent batches; "
+        "each number is the mean over them, SE the combined standard error of the two means, "
+        f"z = (ours - MCmatlab) / SE. A number agrees within {Z_AGREE:g} SE (a heat rise also "
+        f"within {HEAT_REL:.0%} of the rise). MCmatlab's numbers are kept in "
+        "`validation/data/mcmatlab/` (numbers only, with the settings); "
+        "`tests/test_mcmatlab_agreement.py` holds one smaller batch of ours against them in CI.",
+        ""]
+    summary = ["| example | MCmatlab script | grid | photons per call x batches (MCmatlab, ours) "
+               "| numbers | agree | explained | differ |", "|---|---|---|---|---:|---:|---:|---:|"]
     body = []
-    for name, (case, ref, rows) in results.items():
+    total = {"n": 0, "agree": 0, "explained": 0, "differ": 0}
+    clean = 0
+    for name, (case, ref, rows, ours) in results.items():
         n_ok = sum(r["verdict"] == "agree" for r in rows)
-        total += len(rows)
-        bad += len(rows) - n_ok
-        summary.append(f"| {name} | {case.mcmatlab} | {'x'.join(map(str, case.grid))} | "
-                       f"{case.photons:.0e} x {case.batches} | {len(rows)} | {n_ok} |")
-        body += [f"## {name}: {case.mcmatlab}", "",
-                 f"MCmatlab commit `{ref['mcmatlab_commit'][:12]}`, grid "
-                 f"{'x'.join(map(str, case.grid))}, {case.photons:g} photons per call"
-                 + (f" ({case.fmc_photons:g} per fluorescence call)" if case.fmc_photons else "")
-                 + f", {case.batches} batches per side.", ""]
+        n_ex = sum(r["verdict"].startswith("explained") for r in rows)
+        n_bad = len(rows) - n_ok - n_ex
+        clean += n_bad == 0
+        for k, v in (("n", len(rows)), ("agree", n_ok), ("explained", n_ex), ("differ", n_bad)):
+            total[k] += v
+        grid = "x".join(map(str, case.grid))
+        summary.append(f"| {name} | {case.mcmatlab} | {grid} | {case.photons:.0e} x "
+                       f"({ref['settings']['batches']}, {ours['batches']}) | {len(rows)} | "
+                       f"{n_ok} | {n_ex} | {n_bad} |")
+        body += [f"### {name}: {case.mcmatlab}", "",
+                 f"Grid {grid}; {case.photons:g} photons per Monte Carlo call"
+                 + (f", {case.fmc_photons:g} per fluorescence call" if case.fmc_photons else "")
+                 + f"; MCmatlab {ref['settings']['batches']} batches ({ref['wall_s']} s), ours "
+                 f"{ours['batches']} ({ours['wall_s']} s).", ""]
         if case.note:
             body += [case.note, ""]
+        for i, (_, why) in enumerate(case.explained):
+            body += [f"Explained ({i + 1}): {why}", ""]
+        if any(r["verdict"] == "explained (air)" for r in rows):
+            body += [f"Explained (air): {AIR_NA}", ""]
         body += ["| stage | number | ours | MCmatlab | SE | z | verdict |",
                  "|---:|---|---:|---:|---:|---:|---|"]
         for r in rows:
             se = math.hypot(r.get("se_mcmatlab", 0.0), r.get("se_ours", 0.0))
-            body.append(f"| {r['stage']} | {r['name']} | {_fmt(r['ours'])} | "
-                        f"{_fmt(r['mcmatlab'])} | {_fmt(se)} | {_fmt(r.get('z'))} | "
-                        f"{r['verdict']} |")
+            body.append(f"| {r['stage']} ({ref['stages'][r['stage'] - 1]['kind']}) | "
+                        f"{r['name']} | {_fmt(r['ours'])} | {_fmt(r['mcmatlab'])} | {_fmt(se)} | "
+                        f"{_fmt(r.get('z'))} | {r['verdict']} |")
         body.append("")
-    lines += summary + ["", f"{total - bad} of {total} numbers agree.", ""] + body
+    lines += ["## Summary", "", *summary, "",
+              f"{total['agree']} of {total['n']} numbers agree, {total['explained']} differ for a "
+              f"reason measured below, {total['differ']} differ unexplained; {clean} of "
+              f"{len(results)} compared scripts have no unexplained difference. Not compared: "
+              + "; ".join(f"{k} ({v})" for k, v in NOT_COMPARED.items()), "",
+              "## What ours had wrong, now mended", "", *[f"* {f}" for f in FIXES], "",
+              "## MCmatlab's conventions, converted before the comparison", "",
+              *[f"* {c}" for c in CONVENTIONS], ""]
+    lines += pencil_section(pencil)
+    lines += ["## Example by example", "", *body]
     return lines
+
+
+def pencil_section(pencil: dict) -> list[str]:
+    """The pencil-beam heat convergence, from ``PENCIL_JSON``."""
+    if not pencil:
+        return []
+    sensors = pencil["sensors"]
+    out = ["## Pencil-beam heat: which solver converges", "",
+           "The heat case of the issue (Example 1's cuboid, 0.1 W pencil beam for 1 s, then 0.5 s "
+           "dark, insulating faces). On each grid n x n x 1.5n both heat solvers get the same "
+           f"source, our absorption map from {pencil['photons']:g} photons; MCmatlab's is its "
+           "explicit finite-difference solver on the voxel centres, ours the finite-element "
+           f"solver on the voxel corners (backward Euler, dt = {pencil['dt']:g} s; "
+           "dt / 5 on the first grid changes the rises by the amounts shown). Temperature "
+           "rises in deg C:", ""]
+    head = "| t | sensor (x, y, z) cm | " + " | ".join(
+        f"n = {n} ours | n = {n} MCmatlab" for n in pencil["ns"]) + " |"
+    out += [head, "|---|---|" + "---:|---:|" * len(pencil["ns"])]
+    for it, label in enumerate(("1 s (light off)", "1.5 s")):
+        for k, sxyz in enumerate(sensors):
+            cells = []
+            for n in pencil["ns"]:
+                o = pencil["ours"].get(str(n))
+                m = pencil.get("mcmatlab", {}).get(str(n))
+                cells += [_fmt(o[it][k]) if o else "–", _fmt(m[it][k]) if m else "–"]
+            out.append(f"| {label} | ({', '.join(f'{c:g}' for c in sxyz)}) | "
+                       + " | ".join(cells) + " |")
+    fine = pencil.get("ours dt/5", {})
+    if fine:
+        n0 = str(pencil["ns"][0])
+        d = [abs(a - b) for a, b in zip(fine[n0][0], pencil["ours"][n0][0], strict=True)]
+        out += ["", f"dt / 5 at n = {n0} moves our rises at 1 s by at most {max(d):.3g} deg C."]
+    out += ["", *PENCIL_FINDINGS, ""]
+    return out
+
+
+#: what the pencil-beam convergence study shows (written from its table)
+PENCIL_FINDINGS: list[str] = []
+
+
+OURS = ROOT / "validation" / "reports" / "mcmatlab_agreement.json"
+PENCIL_JSON = ROOT / "validation" / "reports" / "mcmatlab_pencil_heat.json"
+
+
+def _load(path: Path) -> dict:
+    return json.loads(path.read_text()) if path.exists() else {}
+
+
+def write_report() -> None:
+    """``REPORT`` from the stored references, our stored statistics and the pencil study."""
+    ours = _load(OURS)
+    results = {}
+    for name, case in CASES.items():
+        ref_path = DATA / f"{name}.json"
+        if name in ours and ref_path.exists():
+            ref = json.loads(ref_path.read_text())
+            results[name] = (case, ref, compare(ref["stages"], ours[name]["stages"], case),
+                             ours[name])
+    REPORT.write_text("\n".join(report(results, _load(PENCIL_JSON))) + "\n")
 
 
 def main(argv=None) -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("side", choices=("mcmatlab", "compare"))
-    ap.add_argument("examples", nargs="*", help=f"default: all ({', '.join(CASES)})")
+    ap.add_argument("step", choices=("mcmatlab", "compare", "pencil", "report"),
+                    help="mcmatlab: MCmatlab's references; compare: ours against them; "
+                         "pencil: the pencil-beam heat convergence; report: the report only")
+    ap.add_argument("examples", nargs="*", help=f"default: all ({', '.join(CASES)}); "
+                    "pencil: the grids n (default 21 31 41 61)")
     ap.add_argument("--batches", type=int, help="fewer batches, for a trial (not stored)")
     ap.add_argument("--ours-batches", type=int, help="batches of ours (default: the case's)")
+    ap.add_argument("--photons", type=int, default=1_000_000, help="pencil: source photons")
     args = ap.parse_args(argv)
+    mcm_root = Path(os.environ["MCM_ROOT"]) if os.environ.get("MCM_ROOT") else None
+    if args.step == "pencil":
+        ns = tuple(int(n) for n in args.examples) or (21, 31, 41, 61)
+        if mcm_root is not None:
+            adapt_build(mcm_root)
+        out = pencil_convergence(ns, args.photons, mcm_root)
+        out["mcmatlab_commit"] = mcmatlab_commit(mcm_root) if mcm_root else None
+        PENCIL_JSON.write_text(json.dumps(out, indent=1) + "\n")
+        write_report()
+        return
+    if args.step == "report":
+        write_report()
+        return
     names = args.examples or list(CASES)
-    if args.batches:
+    trial = args.batches is not None  # a trial: nothing is stored
+    if trial:
         for name in names:
             CASES[name] = dataclasses.replace(CASES[name], batches=args.batches,
                                               ours_batches=args.batches)
-    if args.side == "mcmatlab":
-        mcm_root = Path(os.environ["MCM_ROOT"])
+    where = Path(tempfile.gettempdir()) if trial else DATA
+    if args.step == "mcmatlab":
         adapt_build(mcm_root)
         DATA.mkdir(parents=True, exist_ok=True)
         for name in names:
             ref = mcmatlab_reference(CASES[name], mcm_root)
-            out = DATA / f"{name}.json"
-            if args.batches:  # a trial: not stored
-                out = Path(tempfile.gettempdir()) / f"mcmatlab_{name}.json"
-            out.write_text(json.dumps(ref, indent=1) + "\n")
+            (where / (f"mcmatlab_{name}.json" if trial else f"{name}.json")).write_text(
+                json.dumps(ref, indent=1) + "\n")
             print(f"{name}: {len(ref['stages'])} stages in {ref['wall_s']} s", flush=True)
         return
-    results = {}
     for name in names:
         case = CASES[name]
-        ref_path = DATA / f"{name}.json"
-        if args.batches:
-            ref_path = Path(tempfile.gettempdir()) / f"mcmatlab_{name}.json"
-        ref = json.loads(ref_path.read_text())
-        rows = compare(ref["stages"], ours_statistics(case, args.ours_batches or case.ours_batches),
-                       case)
-        results[name] = (case, ref, rows)
+        ref = json.loads((where / (f"mcmatlab_{name}.json" if trial else f"{name}.json"))
+                         .read_text())
+        t0 = time.perf_counter()
+        n_b = args.ours_batches or case.ours_batches
+        stats = ours_statistics(case, n_b)
+        rows = compare(ref["stages"], stats, case)
         n_bad = sum(r["verdict"] != "agree" for r in rows)
         print(f"{name}: {len(rows) - n_bad}/{len(rows)} agree", flush=True)
         for r in rows:
             if r["verdict"] != "agree":
                 print(f"   stage {r['stage']} {r['name']}: ours {_fmt(r['ours'])} MCmatlab "
-                      f"{_fmt(r['mcmatlab'])} z {_fmt(r.get('z'))}")
-    if not args.examples:
-        command = "python validation/mcmatlab_agreement.py compare"
-        REPORT.write_text("\n".join(report(results, command)) + "\n")
-    else:
-        out = ROOT / "validation" / "reports" / "mcmatlab_agreement_partial.json"
-        out.write_text(json.dumps({n: r for n, (_, _, r) in results.items()}, indent=1))
+                      f"{_fmt(r['mcmatlab'])} z {_fmt(r.get('z'))} {r['verdict']}")
+        if not trial:
+            ours = _load(OURS)
+            ours[name] = {"batches": n_b, "wall_s": round(time.perf_counter() - t0, 1),
+                          "stages": stats}
+            OURS.write_text(json.dumps(ours, indent=1) + "\n")
+    if not trial:
+        write_report()
 
 
 if __name__ == "__main__":
