@@ -6,8 +6,12 @@ For each of MCmatlab's 26 ``Example*.m`` and ``Test1``: convert it
 holding MCmatlab's ``sample.stl`` and ``helperfuncs/`` as its users run from MCmatlab's
 folder), and compare its first model with the hand-written port in
 ``examples/mcmatlab/`` (``build(quick=True)``): the converted model, set to the hand
-port's grid, photon count and seed, must give the same voxel map of media and the same
-absorption ``MC.NA`` to rounding (the same kernel, the same seed: the same numbers).
+port's grid, photon count (launched or collected) and seed, must give the same voxel map
+of media and the same absorption ``MC.NA`` to rounding (the same kernel, the same seed:
+the same numbers). Where the hand port's ``build`` leaves the seed to ``run`` (a sweep's
+runs), both get :data:`SEED_IF_NONE`; Example 21 is compared at the grid its fixed voxel
+``M(51,51,:)`` needs (:data:`COMPARE_GRID`). Nothing else of the converted model is set:
+every other setting is the conversion's.
 
     python validation/port_examples.py PATH [--only Example4_BloodVessel ...]
 
@@ -68,6 +72,12 @@ HAND = {
 BUILD_ARGS = {"ex10_media_property_parametric_sweep": {"g": -1.0},
               # MCmatlab's tables of Lucifer Yellow, in the folder the scripts run in
               "ex23_broadband_monte_carlo": {"tables": "helperfuncs"}}
+#: grids compared at instead of the hand port's quick one: Example 21's scatterer is the
+#: fixed voxel column M(51,51,:), the hand port's centre column only at nx, ny = 101
+COMPARE_GRID = {"ex21_custom_phase_functions": (101, 101, 30)}
+#: the seed of both runs where the hand port's build() leaves it to run() (one per run of a
+#: sweep: Examples 10, 20, 22)
+SEED_IF_NONE = 1
 
 
 # ---------------------------------------------------------------------- the parent process
@@ -210,6 +220,8 @@ def compare(conv, at: str, hand_name: str, np) -> dict:
         hand = mod.build(quick=True, **BUILD_ARGS.get(hand_name, {}))
     for part in ("G", "MC", "FMC", "HS"):
         _plain(getattr(conv, part))
+    if hand_name in COMPARE_GRID:
+        hand.G.nx, hand.G.ny, hand.G.nz = COMPARE_GRID[hand_name]
     for name in ("nx", "ny", "nz"):
         setattr(conv.G, name, getattr(hand.G, name))
     try:
@@ -223,7 +235,11 @@ def compare(conv, at: str, hand_name: str, np) -> dict:
     if at != "run":
         return {"agrees": "identical", "detail": "the voxel map of media (no Monte Carlo run)"}
     MC = conv.MC
-    for name in ("n_photons_requested", "seed", "fr_dep_iterations"):
+    if hand.MC.seed is None:
+        hand.MC.seed = SEED_IF_NONE
+    # how many photons: launched, or collected (Example 6's hand port stops at a count of
+    # collected packets where MCmatlab's script runs for a time)
+    for name in ("n_photons_requested", "request_collected_photons", "seed"):
         setattr(MC, name, getattr(hand.MC, name))
     MC.simulation_time_requested = hand.MC.simulation_time_requested
     if np.ndim(hand.MC.wavelength) and np.ndim(MC.wavelength):
@@ -266,8 +282,12 @@ def report(rows: list[dict], command: str, out: Path) -> None:
              f"**{conv} of {n} convert, {ran} of {n} run unchanged** at reduced size "
              "(`MCMATLAB_PY_QUICK=1`: at most 61 voxels a side, 2000 photons a run, 5 heat "
              f"updates a pulse on a 12^3 mesh); **{same}** give the hand port's numbers "
-             "exactly (the converted model at the hand port's grid, photons and seed: the "
-             "same voxel map of media and the same `MC.NA` to 1e-9).", "",
+             "exactly (the converted model at the hand port's grid, photon count and seed: "
+             "the same voxel map of media and the same `MC.NA` to 1e-9; seed "
+             f"{SEED_IF_NONE} for both where the hand port's build() leaves the seed to its "
+             "run(); Example 21 at "
+             f"{'x'.join(map(str, COMPARE_GRID['ex21_custom_phase_functions']))} voxels, "
+             "where its fixed voxel M(51,51,:) is the hand port's centre column).", "",
              "| example | converted | ran | agrees with the hand port | what needs a hand |",
              "|---|---|---|---|---|"]
     for r in rows:

@@ -56,12 +56,10 @@ def build(quick: bool = False) -> Model:
         Medium("air", mua=1e-8, mus=1e-8, g=1.0),
         Medium("Rayleigh scatterer", mua=1e-8, mus=10.0, custom_phase_func=rayleigh),
     ]
-    centre = (G.nx // 2, G.ny // 2)  # MCmatlab's M(51, 51, :) on 101 x 101
-
     def geometry(X, Y, Z):
-        """0 air, 1 the scattering centre column."""
+        """0 air, 1 the scattering centre column (MCmatlab's M(51, 51, :) on 101 x 101)."""
         M = np.zeros(X.shape, dtype=int)
-        M[centre[0], centre[1], :] = 1
+        M[X.shape[0] // 2, X.shape[1] // 2, :] = 1
         return M
 
     G.geom_func = geometry
