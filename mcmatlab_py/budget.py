@@ -100,21 +100,26 @@ def check_heat(G, HS) -> None:
     than :data:`MAX_STEPS` steps (``HS.dt``, the durations) or more memory than the machine
     has (``HS.mesh_divisions``, the voxel grid)."""
     div = HS.mesh_divisions if HS.mesh_divisions is not None else (G.nx, G.ny, G.nz)
+    # steps chosen by accuracy (mcmatlab_py.heat_run's condition): their number follows the
+    # temperatures, not the stability bound, and is not known ahead
+    adaptive = (HS.dt is None and getattr(HS, "step_control", "stability") == "accuracy"
+                and HS.mua_t is None and HS.mus_t is None and HS.VHC_t is None
+                and HS.TC_t is None)
     dt = HS.dt
-    if dt is None:  # the automatic step, from the media given as numbers
+    if dt is None and not adaptive:  # the stability bound, from the media given as numbers
         from .heat import auto_dt
 
         const = [m for m in G.media if isinstance(m.VHC, float) and isinstance(m.TC, float)]
-        if not const:
-            return
-        dt = auto_dt([L / n for L, n in zip((G.Lx, G.Ly, G.Lz), div, strict=True)],
-                     [m.VHC for m in const], [m.TC for m in const], HS.theta,
-                     HS.large_time_steps)
-    duration = HS.total_duration + HS.duration_end
-    step = f"HS.dt = {dt:g} s" if HS.dt is not None else f"the automatic step {dt:g} s"
-    check_steps(duration / dt, f"HS (n_pulses * (duration_on + duration_off) + duration_end = "
-                               f"{duration:g} s in steps of {step})",
-                "HS.dt, HS.duration_on, HS.duration_off, HS.duration_end or HS.n_pulses")
+        if const:
+            dt = auto_dt([L / n for L, n in zip((G.Lx, G.Ly, G.Lz), div, strict=True)],
+                         [m.VHC for m in const], [m.TC for m in const], HS.theta,
+                         HS.large_time_steps)
+    if dt is not None:
+        duration = HS.total_duration + HS.duration_end
+        step = f"HS.dt = {dt:g} s" if HS.dt is not None else f"the automatic step {dt:g} s"
+        check_steps(duration / dt, f"HS (n_pulses * (duration_on + duration_off) + "
+                                   f"duration_end = {duration:g} s in steps of {step})",
+                    "HS.dt, HS.duration_on, HS.duration_off, HS.duration_end or HS.n_pulses")
     n_nodes = 1.0
     for d in div:
         n_nodes *= float(d) + 1

@@ -122,3 +122,18 @@ def test_a_power_function_returning_nonsense_is_named(value, needle):
     with pytest.raises(ValueError, match=rf"HS\.P\(t\) at t = .* s {needle}.*HS\.P is a "
                                          r"function of time"):
         model.simulate_heat_distribution()
+
+
+def test_steps_chosen_by_accuracy_are_not_counted_from_the_stability_bound():
+    """HS.step_control = "accuracy" takes as many steps as the temperatures need: a long
+    run is not refused from the stability bound's count, which "stability" runs take."""
+    from mcmatlab_py.budget import check_heat
+
+    model = _tiny()
+    model.HS.dt = None
+    model.HS.duration_on = 1e6  # s: about 1e8 steps of the stability bound
+    model.HS.validate(model.G)
+    check_heat(model.G, model.HS)
+    model.HS.step_control = "stability"
+    with pytest.raises(ValueError, match=r"in steps of the automatic step .* would take"):
+        check_heat(model.G, model.HS)
