@@ -64,7 +64,7 @@ from .threads import blas_threads, run_blocks
 __all__ = ["KroneckerSolver", "MASS_KINDS", "NotApplicable", "one_d_mass", "one_d_operators"]
 
 #: 1-D mass matrices of the tensor-product operator (see :func:`one_d_mass`)
-MASS_KINDS = ("lumped", "averaged")
+MASS_KINDS = ("lumped", "averaged", "consistent")
 
 
 class NotApplicable(Exception):
@@ -98,6 +98,8 @@ def one_d_mass(n: int, h: float, kind: str = "lumped") -> np.ndarray:
     if kind == "lumped":
         return np.diag(m)
     consistent = (np.diag(2.0 * m) + (np.eye(n + 1, k=1) + np.eye(n + 1, k=-1)) * h / 2) / 3
+    if kind == "consistent":
+        return consistent
     return 0.5 * (np.diag(m) + consistent)
 
 

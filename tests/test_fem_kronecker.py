@@ -17,7 +17,7 @@ def mesh():
     fem.HeatBoundary({"z-": fem.FaceBC("convective", temperature=5.0, h=2e-3),
                       "z+": fem.FaceBC("fixed", temperature=37.0)}),
 ])
-@pytest.mark.parametrize("mass", ["lumped", "averaged"])
+@pytest.mark.parametrize("mass", ["lumped", "averaged", "consistent"])
 def test_fast_path_equals_sparse_lu_with_member_scales(mesh, boundary, mass):
     rng = np.random.default_rng(0)
     n = mesh.p.shape[1]
@@ -84,3 +84,27 @@ def test_averaged_mass_conserves_energy(mesh):
         fem.HeatStepper(mesh, 3.76, 0.0037, 0.1, mass="averaged")
     with pytest.raises(ValueError, match="mass must be one of"):
         fem.HeatStepper(mesh, 3.76, 0.0037, 0.1, operator="kronecker", mass="spectral")
+
+
+def test_consistent_mass_is_the_trilinear_hexahedron():
+    """mass="consistent": the tensor product of 1-D consistent masses and stiffnesses is the
+    Q1 (trilinear hexahedral) element's, as scikit-fem assembles it on the same box."""
+    import skfem
+    from skfem.models.poisson import laplace, mass
+
+    grid = fem.BoxGrid(4, 3, 2, 0.4, 0.3, 0.2)
+    tet = grid.mesh()
+    st = fem.HeatStepper(tet, 2.0, 0.5, 0.1, operator="kronecker", mass="consistent")
+    x, y, z = (np.linspace(lo, hi, n + 1) for lo, hi, n in
+               zip(tet.p.min(axis=1), tet.p.max(axis=1), grid.shape, strict=True))
+    hexes = skfem.MeshHex.init_tensor(x, y, z)
+    basis = skfem.Basis(hexes, skfem.ElementHex1())
+    M, K = 2.0 * mass.assemble(basis), 0.5 * laplace.assemble(basis)
+    # the same nodes: match each hexahedral mesh node to the tetrahedral mesh's
+    order = np.lexsort(np.round(tet.p, 9)[::-1])
+    perm = np.empty_like(order)
+    perm[np.lexsort(np.round(hexes.p, 9)[::-1])] = order
+    P = np.zeros((tet.p.shape[1], tet.p.shape[1]))
+    P[perm, np.arange(perm.size)] = 1.0
+    np.testing.assert_allclose(P @ M.toarray() @ P.T, st.M.toarray(), atol=1e-14)
+    np.testing.assert_allclose(P @ K.toarray() @ P.T, st.K.toarray(), atol=1e-13)
