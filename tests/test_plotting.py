@@ -208,3 +208,39 @@ def test_far_field_and_boundary_figures_are_drawn_as_mcmatlab():
     orthogonal_slices(f, np.ones((201, 5, 5)), G, (0.5, 0.5, 0.5))
     assert "x = 0 cm" in f.axes[2].get_title()
     plt.close("all")
+
+
+def test_example_paths_in_pyvista_have_the_laser_face_on_top():
+    pv = pytest.importorskip("pyvista")
+    from mcmatlab_py.plotting.outputs import plot_example_paths
+
+    m = Model()
+    G = m.G
+    G.nx = G.ny = G.nz = 5
+    G.Lx = G.Ly = 0.1
+    G.Lz = 0.2
+    G.media = [Medium("tissue", 1.0, 50.0, 0.9, 1.0)]
+    G.geom_func = lambda X, Y, Z: np.zeros(X.shape, dtype=int)
+    MC = m.MC
+    MC.n_photons_requested, MC.seed, MC.progress = 100, 1, False
+    MC.n_example_paths = 4
+    MC.light_source.source_type = "pencil"
+    m.run_monte_carlo()
+    plotter = plot_example_paths(m, use_pyvista=True, off_screen=True)
+    assert isinstance(plotter, pv.Plotter)
+    # the cuboid's wireframe and a polyline per path with more than one point
+    assert len(plotter.meshes) >= 2
+    ren = plotter.renderer
+
+    def screen(point):
+        ren.SetWorldPoint(*point, 1.0)
+        ren.WorldToDisplay()
+        return np.array(ren.GetDisplayPoint()[:2])
+
+    # the irradiated face z = 0 above the bottom z = Lz on the screen (display y points up),
+    # x across it, y along the line of sight (perspective moves it only up or down)
+    top, bottom = screen((0.0, 0.0, 0.0)), screen((0.0, 0.0, G.Lz))
+    assert top[1] > bottom[1] and top[0] == pytest.approx(bottom[0])
+    assert screen((G.Lx / 2, 0.0, 0.0))[0] != pytest.approx(top[0])
+    assert screen((0.0, G.Ly / 2, 0.0))[0] == pytest.approx(top[0])
+    plotter.close()

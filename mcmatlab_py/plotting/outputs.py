@@ -51,22 +51,33 @@ def _split_paths(P: np.ndarray) -> list[np.ndarray]:
     return [p[:, ~np.isnan(p[0])] for p in pieces if np.any(~np.isnan(p[0]))]
 
 
-def plot_example_paths(model, *, use_pyvista: bool = False, simulation: str = "MC"):
+def plot_example_paths(model, *, use_pyvista: bool = False, simulation: str = "MC",
+                       off_screen: bool = False):
     """The example paths (``MC.n_example_paths``) as 3-D polylines, coloured by weight, in the
-    cuboid (z down, as MCmatlab). With ``use_pyvista`` a ``pyvista.Plotter`` is returned."""
+    cuboid (z down, as MCmatlab).
+
+    With ``use_pyvista`` a ``pyvista.Plotter`` is returned (not shown; ``off_screen`` for
+    screenshots without a display), turned as MCmatlab draws the cuboid: z points down
+    the screen, the laser's face (z = 0) on top
+    (:func:`~mcmatlab_py.plotting.slice_viewer.laser_face_on_top`).
+    """
     G, (MC, prefix) = model.G, _run(model, simulation)
     lines = _split_paths(_need(MC.example_paths, "example paths (MC.n_example_paths)"))
     if use_pyvista:
         import pyvista as pv
 
-        plotter = pv.Plotter()
-        plotter.add_mesh(pv.Box((-G.Lx / 2, G.Lx / 2, -G.Ly / 2, G.Ly / 2, 0, G.Lz)), style="wireframe")
+        from .slice_viewer import laser_face_on_top
+
+        plotter = pv.Plotter(off_screen=off_screen)
+        plotter.add_mesh(pv.Box((-G.Lx / 2, G.Lx / 2, -G.Ly / 2, G.Ly / 2, 0, G.Lz)),
+                         style="wireframe")
         for p in lines:
             if p.shape[1] > 1:
                 poly = pv.lines_from_points(p[:3].T)
                 poly["weight"] = p[3]
                 plotter.add_mesh(poly, scalars="weight", cmap="viridis", clim=(0, 1))
-        return plotter
+        plotter.add_axes()
+        return laser_face_on_top(plotter)
     import matplotlib.pyplot as plt
     from matplotlib import cm
 
