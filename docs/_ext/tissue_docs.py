@@ -1,8 +1,13 @@
-"""Sphinx helpers of the tissue-enkf site: the gallery's coverage and the list of studies.
+"""Sphinx helpers of the tissue-enkf site: the gallery's coverage and quick runs, the studies.
 
 * Every script in ``examples/mcmatlab/`` must have its page ``docs/gallery/<stem>.md``
   and every such page its script: a missing one is a warning, so ``sphinx-build -W``
   fails on it.
+* Every gallery script runs with ``--quick`` when the site is built (its figures into
+  ``docs/_quick/<stem>/``, rerun only when the script changed), and ``{quick-figures}
+  <stem>`` shows them on the example's page: the page is made from the script itself,
+  beside the stored full-size figures. A script that fails is a warning. Environment
+  ``TISSUE_DOCS_QUICK=0`` skips the runs (the pages then say so).
 * ``{validation-studies}`` lists the studies of ``validation/`` from its registry
   (``validation/registry.toml``: group, what each establishes, its arguments, its report
   files, which are copied into the site as downloads); without a registry, each script
@@ -15,7 +20,10 @@ from __future__ import annotations
 import ast
 import os
 import re
+import subprocess
+import sys
 import tomllib
+from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 
 from docutils import nodes
@@ -43,6 +51,74 @@ def check_gallery(app: Sphinx) -> None:
         logger.warning("examples/mcmatlab/%s.py has no gallery page docs/gallery/%s.md", stem, stem)
     for stem in sorted(pages - scripts):
         logger.warning("docs/gallery/%s.md names no script in examples/mcmatlab/", stem)
+
+
+def _quick_dir(app: Sphinx) -> Path:
+    return Path(app.srcdir) / "_quick"
+
+
+def run_quick(app: Sphinx) -> None:
+    """Run every gallery script with ``--quick`` into ``_quick/<stem>/`` (2 at a time)."""
+    if os.environ.get("TISSUE_DOCS_QUICK", "1") == "0":
+        return
+    todo = []
+    for script in gallery_scripts():
+        out = _quick_dir(app) / script.stem
+        stamp = out / ".made"
+        if stamp.exists() and stamp.stat().st_mtime >= script.stat().st_mtime:
+            continue
+        todo.append((script, out, stamp))
+
+    def one(item):
+        script, out, stamp = item
+        out.mkdir(parents=True, exist_ok=True)
+        for old in out.glob("*.png"):
+            old.unlink()
+        env = dict(os.environ, MPLBACKEND="Agg")
+        r = subprocess.run([sys.executable, str(script), "--quick", "--out", str(out)],
+                           cwd=out, env=env, capture_output=True, text=True)
+        if r.returncode == 0:
+            stamp.write_text(r.stdout)
+        return script, r
+
+    with ThreadPoolExecutor(max_workers=2) as pool:
+        for script, r in pool.map(one, todo):
+            if r.returncode != 0:
+                logger.warning("examples/mcmatlab/%s --quick failed (exit %d): %s", script.name,
+                               r.returncode, r.stderr.strip().splitlines()[-1:] or "")
+
+
+class QuickFigures(SphinxDirective):
+    """The figures of ``examples/mcmatlab/<stem>.py --quick``, made when the site is built,
+    with what the script printed."""
+
+    required_arguments = 1
+    has_content = False
+
+    def run(self) -> list[nodes.Node]:
+        stem = self.arguments[0]
+        script = EXAMPLES / f"{stem}.py"
+        if not script.exists():
+            logger.warning("quick-figures: no script examples/mcmatlab/%s.py", stem,
+                           location=self.get_location())
+            return []
+        self.env.note_dependency(str(script))
+        out = _quick_dir(self.env.app) / stem
+        stamp = out / ".made"
+        if not stamp.exists():
+            return [nodes.paragraph(text=f"(The quick run of {stem}.py is made when the site is "
+                                         "built; this build skipped it.)")]
+        lines = [f"Made by this build: `python examples/mcmatlab/{stem}.py --quick` "
+                 "(small grid, few photons), which printed:", "", "```text",
+                 *[ln for ln in stamp.read_text().strip().splitlines()
+                   if not ln.startswith("figures in ")], "```", ""]
+        for png in sorted(out.glob("*.png")):
+            lines += [f"```{{image}} /_quick/{stem}/{png.name}", f":alt: {png.stem}",
+                      ":width: 48%", "```", ""]
+        container = nodes.container()
+        self.state.nested_parse(StringList(lines, source=str(script)), self.content_offset,
+                                container)
+        return container.children
 
 
 def _first_sentence(path: Path) -> str:
@@ -104,5 +180,7 @@ class ValidationStudies(SphinxDirective):
 
 def setup(app: Sphinx) -> dict:
     app.connect("builder-inited", check_gallery)
+    app.connect("builder-inited", run_quick)
     app.add_directive("validation-studies", ValidationStudies)
+    app.add_directive("quick-figures", QuickFigures)
     return {"parallel_read_safe": True, "parallel_write_safe": True}
