@@ -90,12 +90,13 @@ class HeatStepper:
         accurate away from them and, unlike P1, needs no per-member edge correction
         when every member has its own VHC and TC, so ensembles whose scales change at
         every step (joint estimation of VHC, TC) cost the same as fixed ones.
-    mass : {"lumped", "averaged"}
+    mass : {"lumped", "averaged", "consistent"}
         With ``operator="kronecker"``: the 1-D mass matrices of the tensor product
         (:func:`fem.fastdiag.one_d_mass`). ``"averaged"`` (the mean of the lumped and
         the consistent mass) cancels the leading dispersion error of both: fourth-order
         modes on the same mesh, at the cost of a 27-point mass stencil in the
-        right-hand side. Ignored (must stay ``"lumped"``) with ``operator="p1"``.
+        right-hand side. ``"consistent"``: the trilinear hexahedron's mass and stiffness.
+        Ignored (must stay ``"lumped"``) with ``operator="p1"``.
     method : {"auto", "fast", "direct", "pcg"}
     direct_max_nodes : int
         Largest mesh for the sparse LU path under ``"auto"``.
