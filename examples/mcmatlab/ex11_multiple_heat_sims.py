@@ -68,7 +68,9 @@ def build(quick: bool = False) -> Model:
     HS.T_initial = 37.0  # deg C
     HS.plot_temp_limits = (37.0, 100.0)
     HS.n_updates = 10
-    HS.slice_positions = (0.5, 0.6, 1.0)
+    # MCmatlab's (0.5, 0.6, 1) puts the xy slice on the bottom wall of its 3-D view; on the
+    # flat panels here that is the bottom face, unheated: slice through the hottest voxel
+    HS.slice_positions = None
     HS.temp_sensor_positions = [(0, 0, 0.038), (0, 0, 0.04), (0, 0, 0.042), (0, 0, 0.044)]
     HS.progress = not quick
     HS.make_movie = not quick

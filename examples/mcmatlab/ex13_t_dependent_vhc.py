@@ -88,7 +88,9 @@ def build(quick: bool = False) -> Model:
     HS.plot_temp_limits = (20.0, 45.0)
     HS.n_updates = 100
     HS.media_prop_recalc_period = 1  # the VHC follows the temperature at every update
-    HS.slice_positions = (0.5, 0.6, 1.0)
+    # MCmatlab's (0.5, 0.6, 1) puts the xy slice on the bottom wall of its 3-D view; on the
+    # flat panels here that is the bottom face, unheated: slice through the hottest voxel
+    HS.slice_positions = None
     HS.temp_sensor_positions = [(0, 0, 0.005), (0, 0, 0.015), (0, 0, 0.035), (0, 0, 0.065)]
     HS.progress = not quick
     if quick:
