@@ -276,6 +276,7 @@ def report(rows: list[dict], command: str, out: Path) -> None:
     conv = sum(r.get("converted", False) for r in rows)
     ran = sum(r.get("ran", False) for r in rows)
     same = sum(r.get("agrees") == "identical" for r in rows)
+    both = sum(r.get("ran", False) and r.get("agrees") == "identical" for r in rows)
     lines = ["# MCmatlab's examples through `tissue-enkf port`", "",
              f"Command: `{command}`.",
              "",
@@ -287,7 +288,8 @@ def report(rows: list[dict], command: str, out: Path) -> None:
              f"{SEED_IF_NONE} for both where the hand port's build() leaves the seed to its "
              "run(); Example 21 at "
              f"{'x'.join(map(str, COMPARE_GRID['ex21_custom_phase_functions']))} voxels, "
-             "where its fixed voxel M(51,51,:) is the hand port's centre column).", "",
+             "where its fixed voxel M(51,51,:) is the hand port's centre column); "
+             f"**{both} of {n} both run unchanged and give the hand port's numbers**.", "",
              "| example | converted | ran | agrees with the hand port | what needs a hand |",
              "|---|---|---|---|---|"]
     for r in rows:
