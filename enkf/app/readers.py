@@ -443,9 +443,10 @@ def read_sensor_csv(path: str | Path, n_columns: int | None = None, *,
     return times, values, ["time"] + [names[j + 1] for j in pick]
 
 
-def load_frames(path: str | Path, image: ThermalImage | None = None
+def load_frames(path: str | Path, image: ThermalImage | None = None, *, flat: bool = True
                 ) -> tuple[np.ndarray, np.ndarray]:
-    """``(times (n,), frames (n, ny*nx))`` from an NPZ with ``times`` and ``frames``.
+    """``(times (n,), frames (n, ny*nx))`` from an NPZ with ``times`` and ``frames``
+    (``flat=False``: frames (n, ny, nx)).
 
     Frames are (n, ny, nx) deg C, NaN for dead pixels; ``image`` checks the shape.
     Raises ValueError naming the problem (not an NPZ (zip) file, missing array, complex
@@ -489,4 +490,4 @@ def load_frames(path: str | Path, image: ThermalImage | None = None
                          f"{float(times[k + 1])!r}")
     if np.any(np.isinf(frames)):
         raise ValueError(f"{path}: 'frames' hold Inf (use NaN for a dead pixel)")
-    return times, frames.reshape(times.size, -1)
+    return times, frames.reshape(times.size, -1) if flat else frames
