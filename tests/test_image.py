@@ -278,3 +278,40 @@ def test_a_surface_point_under_a_camera_carries_the_camera_model_error(tissue):
     Y = (P_track @ ident._X.T).T
     assert last.tracked_std[1] == pytest.approx(Y[:, 1].std(ddof=1), rel=1e-12)
     assert last.tracked_std[0] > 1.05 * Y[:, 0].std(ddof=1)
+
+
+def test_a_registered_camera_maps_its_pixels_onto_the_tissue():
+    # 4 x 6 pixels of 0.05 cm, the spot at column 2.5, row 1.5: the image's centre
+    cam = ThermalImage.registered((4, 6), 0.05, (2.5, 1.5))
+    assert cam.x_range == pytest.approx((-0.15, 0.15)) and cam.y_range == pytest.approx((-0.1, 0.1))
+    np.testing.assert_allclose(cam.pixel_centers(), CAMERA.pixel_centers(), atol=1e-12)
+    # turned by 90 degrees: a pixel one column right of the spot lies along +y
+    turned = ThermalImage.registered((4, 6), 0.05, (2.0, 1.0), rotation=90.0)
+    c = turned.pixel_centers().reshape(4, 6, 3)
+    np.testing.assert_allclose(c[1, 3, :2], [0.0, 0.05], atol=1e-12)
+    np.testing.assert_allclose(c[2, 2, :2], [-0.05, 0.0], atol=1e-12)
+    mirrored = ThermalImage.registered((4, 6), 0.05, (2.0, 1.0), mirror=True)
+    np.testing.assert_allclose(mirrored.pixel_centers().reshape(4, 6, 3)[1, 3, :2], [-0.05, 0.0],
+                               atol=1e-12)
+    lo_x, hi_x, lo_y, hi_y = turned.footprint_bounds()
+    assert (lo_x, hi_x, lo_y, hi_y) == pytest.approx((-0.125, 0.075, -0.125, 0.175))
+    # distances between pixels, and so the model error's correlations, do not turn
+    np.testing.assert_allclose(turned.error_correlation(),
+                               ThermalImage.registered((4, 6), 0.05, (2.0, 1.0))
+                               .error_correlation(), atol=1e-12)
+
+
+def test_the_spot_centre_is_found_in_the_first_frames():
+    from enkf.tissue.image import estimate_spot_center
+
+    rng = np.random.default_rng(3)
+    y, x = np.mgrid[:32, :32]
+    # a round spot centred off the image's centre, rising over 10 frames, noise 0.1 deg C
+    shape = np.exp(-((x - 13.3) ** 2 + (y - 18.6) ** 2) / 20.0)
+    frames = 30 + np.linspace(0, 8, 10)[:, None, None] * shape + 0.1 * rng.standard_normal(
+        (10, 32, 32))
+    col, row = estimate_spot_center(frames, 0.1)
+    assert abs(col - 13.3) < 0.15 and abs(row - 18.6) < 0.15
+    assert estimate_spot_center(frames[:2], 0.1) is None  # too little rise yet
+    assert estimate_spot_center(frames[:8], 0.1, complete=False) is None  # waits for 5
+    assert estimate_spot_center(frames[:9], 0.1, complete=False) is not None

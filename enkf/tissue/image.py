@@ -21,7 +21,7 @@ from dataclasses import dataclass
 import numpy as np
 import scipy.sparse as sp
 
-__all__ = ["ThermalImage"]
+__all__ = ["ThermalImage", "estimate_spot_center"]
 
 
 @dataclass(frozen=True)
@@ -60,6 +60,41 @@ class ThermalImage:
     #: wide or too narrow, as the independent models' images differ from ours);
     #: docs/beyond.md, "The model's error in the image"
     model_error_lengths: tuple = (0.02, 0.1)
+    #: deg, counterclockwise: the angle from the tissue's x axis to the image's rows (the
+    #: camera turned about the beam's axis, x = y = 0); ``x_range`` and ``y_range`` are
+    #: then the image's extent along its own columns and rows, from the beam's axis
+    rotation: float = 0.0
+    #: the image is mirrored (its columns run along -x before the rotation)
+    mirror: bool = False
+
+    @classmethod
+    def registered(cls, shape, pixel_size, spot_center, rotation: float = 0.0,
+                   mirror: bool = False, **kw) -> ThermalImage:
+        """The camera of ``shape`` (ny, nx) whose pixels are ``pixel_size`` cm (one number
+        or (dx, dy)) and which sees the laser spot's centre at ``spot_center`` = (column,
+        row) in pixels (0-based indices of the pixels' centres, fractional), turned by
+        ``rotation`` degrees (see :attr:`rotation`, :attr:`mirror`)."""
+        ny, nx = (int(v) for v in shape)
+        dx, dy = (float(v) for v in np.broadcast_to(np.asarray(pixel_size, float), (2,)))
+        col, row = (float(v) for v in spot_center)
+        return cls(((-0.5 - col) * dx, (nx - 0.5 - col) * dx),
+                   ((-0.5 - row) * dy, (ny - 0.5 - row) * dy), (ny, nx),
+                   rotation=rotation, mirror=mirror, **kw)
+
+    def to_tissue(self, uv: np.ndarray) -> np.ndarray:
+        """(..., 2) cm on the top face of points (..., 2) in the image's own axes (along
+        its columns, along its rows, from the beam's axis)."""
+        uv = np.asarray(uv, float)
+        u = -uv[..., 0] if self.mirror else uv[..., 0]
+        c, s = np.cos(np.radians(self.rotation)), np.sin(np.radians(self.rotation))
+        return np.stack([c * u - s * uv[..., 1], s * u + c * uv[..., 1]], axis=-1)
+
+    def footprint_bounds(self) -> tuple[float, float, float, float]:
+        """``(x_lo, x_hi, y_lo, y_hi)`` cm: the box on the top face that the image covers."""
+        (x0, x1), (y0, y1) = self.x_range, self.y_range
+        xy = self.to_tissue(np.array([[x0, y0], [x1, y0], [x0, y1], [x1, y1]]))
+        return (float(xy[:, 0].min()), float(xy[:, 0].max()), float(xy[:, 1].min()),
+                float(xy[:, 1].max()))
 
     def __post_init__(self):
         for name in ("x_range", "y_range"):
@@ -84,6 +119,9 @@ class ThermalImage:
             raise ValueError(f"ThermalImage.model_error_lengths must be one or more finite "
                              f"lengths >= 0 (cm), got {self.model_error_lengths!r}")
         object.__setattr__(self, "model_error_lengths", tuple(float(x) for x in lengths))
+        if not np.isfinite(self.rotation):
+            raise ValueError(f"ThermalImage.rotation must be a finite angle (deg), got "
+                             f"{self.rotation!r}")
 
     def error_correlation(self) -> np.ndarray:
         """(n_pixels, n_pixels): the sum over ``model_error_lengths`` of the correlations
@@ -165,6 +203,8 @@ class ThermalImage:
         py = y0 + (np.arange(ny)[:, None] + u[None, :]) * dy  # (ny, s)
         X = np.broadcast_to(px[None, :, None, :], (ny, nx, s, s))
         Y = np.broadcast_to(py[:, None, :, None], (ny, nx, s, s))
+        if self.rotation or self.mirror:  # the image's axes onto the tissue's
+            X, Y = np.moveaxis(self.to_tissue(np.stack([X, Y], axis=-1)), -1, 0)
         pts = np.stack([X, Y, np.zeros_like(X)], axis=-1)
         return pts.reshape(ny * nx, s * s, 3)
 
@@ -208,6 +248,39 @@ class ThermalImage:
                            (np.repeat(np.arange(self.n_pixels), s2), np.arange(pts.shape[0]))),
                           shape=(self.n_pixels, pts.shape[0]))
         return (A @ P).tocsr()
+
+
+def estimate_spot_center(frames: np.ndarray, noise_sd: float, *, min_snr: float = 20.0,
+                         n_average: int = 5, complete: bool = True
+                         ) -> tuple[float, float] | None:
+    """(column, row) in pixels of the laser spot's centre, from a camera's first frames.
+
+    The rise of each frame over the first (the tissue before, or as, the laser starts) is
+    taken from the first frame whose largest rise exceeds ``min_snr`` times the noise of a
+    difference of two frames (``noise_sd`` deg C, one pixel's); the mean rise of that frame
+    and up to ``n_average - 1`` after it is averaged over the pixels above half its
+    maximum, each weighted by its rise: the centre of a symmetric spot, whatever the
+    camera's rotation, to a fraction of a pixel. None while no frame rises enough, or,
+    with ``complete=False`` (a follower, which then waits for more frames), while fewer
+    than ``n_average`` frames from the first that does are there.
+
+    ``frames`` (n, ny, nx) deg C, NaN for dead pixels.
+    """
+    f = np.asarray(frames, float)
+    if f.ndim != 3 or f.shape[0] < 2:
+        return None
+    rise = f[1:] - f[:1]
+    peak = np.nanmax(np.where(np.isfinite(rise), rise, -np.inf).reshape(rise.shape[0], -1), axis=1)
+    above = np.flatnonzero(peak > min_snr * np.sqrt(2.0) * float(noise_sd))
+    if above.size == 0:
+        return None
+    k = int(above[0])
+    if not complete and rise.shape[0] < k + n_average:
+        return None
+    mean = np.nanmean(rise[k:k + n_average], axis=0)
+    w = np.where(np.isfinite(mean) & (mean > 0.5 * np.nanmax(mean)), mean, 0.0)
+    rows, cols = np.indices(w.shape)
+    return float((w * cols).sum() / w.sum()), float((w * rows).sum() / w.sum())
 
 
 def _lagrange_stencil(u: np.ndarray, n: int) -> tuple[np.ndarray, np.ndarray]:
