@@ -96,6 +96,7 @@ from ._mc_tally import (  # noqa: F401 (re-exported: the Python layer reads them
 )
 from ._mc_track import track_walk
 from ._mc_uniform import transport_uniform_batch, uniform_path_applies
+from ._prefetch import prefetch
 from ._rng import next_azimuth, next_double, next_exponential, seed_stream
 from ._sources import SI_SURFACE, launch_from, sample_pwl
 
@@ -104,6 +105,18 @@ KILLRANGE = 5.0  # as MCmatlab: photons farther than 2.5 cuboid sizes from the c
 _INF = np.inf
 # fast-math without 'nnan'/'ninf': the kernel relies on inf distances
 _FASTMATH = {"nsz", "arcp", "contract", "afn", "reassoc"}
+
+@numba.njit(cache=True, inline="always")
+def _deposit_late(acc, M, safe, pj, pdep, j, dep):
+    """Add the pending deposit ``pdep`` to ``acc[pj]`` and make ``dep`` in voxel ``j`` the
+    pending one: ``(j, dep)``. Its line of ``acc``, and those the next move's look-ups may
+    read in voxel ``j``, are fetched meanwhile (:mod:`mcmatlab_py._prefetch`)."""
+    acc[pj] += pdep
+    prefetch(acc, j)
+    prefetch(M, j)
+    prefetch(safe, j)
+    return j, dep
+
 
 @numba.njit(cache=True, fastmath=_FASTMATH)
 def transport_batch(
@@ -211,6 +224,8 @@ def transport_batch(
         inside = True
         alive = True
         rs = 0.0  # the packet's safety: how far it may move freely, 0 if unknown
+        pj = 0  # the deposit not yet added, and its voxel
+        pdep = np.int64(0)
         mut = 0.0
         j = 0
         if oi is not None:
@@ -474,12 +489,12 @@ def transport_batch(
             w -= dep
             if inside:
                 if oi is None:
-                    acc[j] += dep
+                    pj, pdep = _deposit_late(acc, M, safe, pj, pdep, j, dep)
                 elif dc_end:
                     rec = O.push_record(rec, n_rec, j, dep)
                     n_rec += 1
                 elif O.criteria_met(oi, cnt, fate, False):
-                    acc[j] += dep
+                    pj, pdep = _deposit_late(acc, M, safe, pj, pdep, j, dep)
                 else:
                     tally[T_ABSORBED_EXCLUDED] += dep
             else:
@@ -534,6 +549,7 @@ def transport_batch(
                     else:
                         tally[T_OUTSIDE_ABSORBED] += w
                     break
+        acc[pj] += pdep  # the last deposit (0 if none is pending)
         if oi is not None:
             if dc_end:  # MCmatlab's evaluateOnlyAtEndOfLife: the whole path, or nothing
                 met = O.criteria_met(oi, cnt, fate, True)
