@@ -80,8 +80,8 @@ def _identify_one(cfg, absorption, seed, data_path, out_dir, quiet=True) -> dict
     from .report import write_identify_outputs
     from .rundir import write_json
 
+    times, data = cfg.read_data(data_path)  # first: it may register the camera
     setup = cfg.setup(absorption, seed=seed)
-    times, data = cfg.read_data(data_path)
     _check_smoother_size(cfg, data, data_path)  # before the filter, not after it
     fill_prior_points(setup)  # an on-demand emulator: the prior's points before the filter
     medium = cfg.model.G.media[cfg.medium]  # the estimated medium's damage law
@@ -119,6 +119,9 @@ def _identify_one(cfg, absorption, seed, data_path, out_dir, quiet=True) -> dict
     if cfg.smoother_iterations:
         summary["smoother"] = _smoother_summary(setup, times, data, cfg.smoother_iterations,
                                                 cfg.smoother_options, quiet)
+        write_json(Path(out_dir) / "summary.json", summary)
+    if cfg.camera_record():  # where the camera's frames put the spot
+        summary.update(cfg.camera_record())
         write_json(Path(out_dir) / "summary.json", summary)
     summary["data"] = str(data_path)
     summary["wall_s"] = time.perf_counter() - t0
@@ -322,6 +325,12 @@ def _follow(args, cfg, absorption, seed, t_emu) -> int:
 
     out = Path(args.out)
     created = not out.exists()
+    # a camera writing frames into a folder (one not there yet: a name without a suffix)
+    folder = Path(args.follow).is_dir() or (not Path(args.follow).exists()
+                                            and not Path(args.follow).suffix)
+    if cfg.camera_registration is not None and not folder:
+        raise ValueError("sensors.camera.spot_center = \"auto\" is estimated from frames: "
+                         "follow the camera's folder, or give spot_center = [column, row]")
     setup = cfg.setup(absorption, seed=seed)
     fill_prior_points(setup)  # before the first reading, not while the stream waits
     ident = OnlineIdentifier(setup, param_bounds=cfg.param_bounds,
@@ -373,11 +382,36 @@ def _follow(args, cfg, absorption, seed, t_emu) -> int:
             _live_figure(out, ident, setup)
             last_fig[0] = time.perf_counter()
 
+    def start(times, frames, final=False):
+        """The identifier, once the first frames are in (they may place the camera)."""
+        nonlocal setup, ident
+        image = setup.image
+        if frames.shape[1:] != tuple(int(v) for v in image.shape):
+            raise ValueError(f"{args.follow}: frames are {frames.shape[1:]} pixels, the camera "
+                             f"(sensors.camera.shape) {list(image.shape)}")
+        if cfg.camera_registration is None:
+            return ident
+        image = cfg.camera_registration.estimate(frames, args.follow, complete=final)
+        if image is None:
+            return None
+        cfg.setup_kw["image"] = image
+        setup = cfg.setup(absorption, seed=seed)
+        fill_prior_points(setup)
+        ident = OnlineIdentifier(setup, param_bounds=cfg.param_bounds,
+                                 dt_hint=1.0 / cfg.rate if cfg.rate else 0.1)
+        return ident
+
     stopped = None
     try:
-        n = follow_csv(args.follow, ident, on_update, idle_timeout_s=args.idle_timeout,
-                       columns=None if cfg.data.columns is None else ["time", *cfg.data.columns],
-                       skipped=skipped)
+        if folder:
+            from .follow_frames import follow_folder
+
+            n = follow_folder(args.follow, start, on_update, idle_timeout_s=args.idle_timeout,
+                              rate=cfg.rate, emissivity=cfg.camera_emissivity, skipped=skipped)
+        else:
+            n = follow_csv(args.follow, ident, on_update, idle_timeout_s=args.idle_timeout,
+                           columns=None if cfg.data.columns is None
+                           else ["time", *cfg.data.columns], skipped=skipped)
     except FilterDivergence as err:  # as for a file: the estimates up to then, exit 0
         n, stopped = len(ident.history), readable_stop(str(err), names)
     except BaseException as exc:
@@ -416,7 +450,7 @@ def _follow(args, cfg, absorption, seed, t_emu) -> int:
         w = ident.history[-1].drift_weight
         drift = {"drift": {"behaviour": "drifting" if w >= 0.5 else "still", "weight_final": w}}
         print(f"optics {drift['drift']['behaviour']} while heated (P(drift) = {w:.2g})")
-    run_json(n, innovation_persistence=persistence, **drift,
+    run_json(n, innovation_persistence=persistence, **drift, **cfg.camera_record(),
              **({"stopped": stopped} if stopped else {}))
     if stopped:
         print(f"warning: {args.follow}: the filter stopped early: {stopped} (estimates up to "

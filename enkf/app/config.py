@@ -65,6 +65,7 @@ from ..tissue.parameters import (
     tracked_points,
 )
 from ..tissue.smooth import MODE_SEARCH
+from .config_camera import CAMERA_KEYS, camera_settings
 from .readers import apply_time_offset, load_frames, read_sensor_csv
 
 __all__ = ["DataSpec", "IdentifyConfig", "check_identify_keys", "identify_config_from_dict",
@@ -80,8 +81,7 @@ class DataSpec:
     time_offset: float | None = None  #: s, the laser's start on the data's clock
 
 _SENSOR_KEYS = {"positions", "noise_var", "tracked", "camera", "rate"}
-_CAMERA_KEYS = {"x_range", "y_range", "shape", "noise_var", "subsamples", "model_error_rel_std",
-                "model_error_lengths"}
+_CAMERA_KEYS = CAMERA_KEYS
 _FILTER_KEYS = {
     "n_members", "method", "estimate", "grid", "prior_range", "model_noise_std",
     "random_walk_std", "random_walk_when_off", "inflation", "rtps", "mda", "seed",
@@ -137,6 +137,11 @@ class IdentifyConfig:
     #: the node grid of the beam's radius when it is estimated (``filter.emulator.
     #: radius_range``, ``radius_nodes``): BeamRadiusEmulator.build's arguments
     beam_nodes: dict = None
+    #: a camera whose spot's centre is estimated from its first frames
+    #: (``sensors.camera.spot_center = "auto"``): :class:`~enkf.app.config_camera.
+    #: CameraRegistration`, which :meth:`read_data` uses
+    camera_registration: object = None
+    camera_emissivity: float | None = None  #: replaces a FLIR file's emissivity
 
     @property
     def n_obs(self) -> int:
@@ -150,13 +155,11 @@ class IdentifyConfig:
         Raises ValueError naming the file and the problem (see :func:`read_sensor_csv`
         and :func:`enkf.app.readers.load_frames`).
         """
+        from .frames import FRAME_SUFFIXES
+
         data = self.data or DataSpec()
-        if Path(path).suffix.lower() == ".npz":
-            if "image" not in self.setup_kw or len(self.setup_kw["sensor_positions"]):
-                raise ValueError(f"{path}: an NPZ image series needs [sensors.camera] and no "
-                                 "point sensors (sensors.positions = [])")
-            times, frames = load_frames(path, self.setup_kw["image"])
-            times, values = apply_time_offset(path, times, frames, data.time_offset)
+        if Path(path).suffix.lower() in FRAME_SUFFIXES or Path(path).is_dir():
+            times, values = self._camera_data(path, data)
         else:
             times, values, _ = read_sensor_csv(path, self.n_obs, columns=data.columns,
                                                time_offset=data.time_offset)
@@ -168,6 +171,39 @@ class IdentifyConfig:
             raise ValueError(f"{path}: no usable reading: all {values.size} values are NaN "
                              "(the filter would report its prior as the estimate)")
         return times, values
+
+    def _camera_data(self, path, data: DataSpec) -> tuple[np.ndarray, np.ndarray]:
+        """The frames of a camera file or folder (enkf.app.frames), (n, ny*nx) deg C; with
+        ``spot_center = "auto"`` the camera is registered from them first."""
+        from .frames import read_frames
+
+        if "image" not in self.setup_kw or len(self.setup_kw["sensor_positions"]):
+            raise ValueError(f"{path}: camera frames: the config needs [sensors.camera] and no "
+                             "point sensors (sensors.positions = [])")
+        image = self.setup_kw["image"]
+        if Path(path).suffix.lower() == ".npz":
+            times, frames = load_frames(path, image, flat=False)
+            clock = False
+        else:
+            series = read_frames(path, rate=self.rate, emissivity=self.camera_emissivity)
+            times, frames, clock = series.times, series.frames, series.clock
+        if frames.shape[1:] != tuple(int(v) for v in image.shape):
+            raise ValueError(f"{path}: frames are {frames.shape[1:]} pixels, the camera "
+                             f"(sensors.camera.shape) {list(image.shape)}")
+        if self.camera_registration is not None:
+            self.setup_kw["image"] = self.camera_registration.estimate(frames, path)
+        # times from a clock start at the first frame: the laser's start, unless
+        # data.time_offset says otherwise
+        offset = 0.0 if clock and data.time_offset is None else data.time_offset
+        return apply_time_offset(path, times, frames.reshape(len(times), -1), offset)
+
+    def camera_record(self) -> dict:
+        """summary.json's ``camera``: where the spot's centre was found (or nothing)."""
+        reg = self.camera_registration
+        if reg is None or reg.spot_center is None:
+            return {}
+        return {"camera": {"spot_center_px": [round(v, 3) for v in reg.spot_center],
+                           "estimated_from": "the first frames"}}
 
     def emulator(self, *, cache_dir=None, progress=True, client=None):
         """The absorption emulator of this model on the filter's mesh (cached)."""
@@ -444,30 +480,11 @@ def identify_config_from_dict(cfg: dict) -> IdentifyConfig:
     default_tracked = tracked_points(TRACKED_DEPTHS, Lz=G.Lz).tolist()
     setup_kw["tracked_positions"] = _points("sensors.tracked",
                                             sens.get("tracked", default_tracked), G)
+    registration = emissivity = None
     if "camera" in sens:
         cam = check_keys("sensors.camera", sens["camera"], _CAMERA_KEYS)
-        from ..tissue.image import ThermalImage
-
-        for k in ("x_range", "y_range", "shape"):
-            if k not in cam:
-                raise ConfigError(f"sensors.camera.{k} is missing")
-        shape = cam["shape"]
-        if not (isinstance(shape, list) and len(shape) == 2):
-            raise ConfigError(f"sensors.camera.shape must be [ny, nx], got {shorten(repr(shape))}")
-        shape = tuple(_num(f"sensors.camera.shape[{i}]", v, integer=True, lo=1)
-                      for i, v in enumerate(shape))
-        xr, yr = _pair("sensors.camera.x_range", cam["x_range"]), \
-            _pair("sensors.camera.y_range", cam["y_range"])
-        if xr[0] < -G.Lx / 2 or xr[1] > G.Lx / 2 or yr[0] < -G.Ly / 2 or yr[1] > G.Ly / 2:
-            raise ConfigError(f"sensors.camera x_range {list(xr)}, y_range {list(yr)} reach "
-                              f"outside the top face ([-{G.Lx / 2}, {G.Lx / 2}] x "
-                              f"[-{G.Ly / 2}, {G.Ly / 2}] cm)")
-        setup_kw["image"] = ThermalImage(
-            xr, yr, shape, noise_var=_num("sensors.camera.noise_var",
-                                          cam.get("noise_var", 0.01), positive=True),
-            subsamples=_num("sensors.camera.subsamples", cam.get("subsamples", 4),
-                            integer=True, lo=1),
-            **_camera_model_error(cam))
+        setup_kw["image"], registration, emissivity = camera_settings(
+            cam, G, _num, _pair, _camera_model_error(cam))
     rate = None
     if "rate" in sens:
         rate = _num("sensors.rate", sens["rate"], positive=True)
@@ -607,7 +624,8 @@ def identify_config_from_dict(cfg: dict) -> IdentifyConfig:
     try:
         out = IdentifyConfig(model, setup_kw, grid, emulator_kw, exact, cfg, bounds, data, rate,
                              medium, method, on_demand, _smoother_iterations(flt, setup_kw),
-                             smoother_options, second, media_nodes, beam_nodes)
+                             smoother_options, second, media_nodes, beam_nodes,
+                             registration, emissivity)
         out.setup(absorption=lambda mua, mus: None)  # validates the filter settings
         n_nodes = int(np.prod([n + 1 for n in grid]))
         table = 0 if exact else emulator_kw.get("n_mua", 12) * emulator_kw.get("n_mus", 12)
