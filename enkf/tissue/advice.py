@@ -1,0 +1,433 @@
+r"""How long to keep the laser on: each member forecast to the target's coagulation.
+
+Every member of the filter carries its optics :math:`\theta_n`, its temperature field
+:math:`T_n` and (followed here along its analysed trajectory) its Arrhenius damage
+:math:`\Omega_n` at a few points: the **target** (every point of it must reach
+:math:`\Omega \ge 1`), the **protected** tissue (none of it may pass its damage or
+temperature limit) and the **surface** (its temperature limit). At each reading each
+member is forecast, with its optics held at their present values (the random walk's
+expectation), under the planned laser schedule and under "laser off now"; from its
+forecast come
+
+* the **target time**: when :math:`\min_\text{target}\Omega_n` reaches 1 under the plan
+  (``inf``: not within the horizon, the plan's last pulse plus ``tail``);
+* the **stop time**: the earliest switch-off (at the end of a forecast step, interpolated
+  in :math:`\log\Omega`) after which the target still reaches :math:`\Omega \ge 1` as the
+  tissue cools, at or before the target time;
+* whether the protected points or the surface pass their limits (so far or within the
+  horizon) under the plan, with the laser off now, and with the laser stopped at the
+  member's own stop time ("at target": what coagulating the target costs).
+
+Across the members (weighted, for a bank of filters) these are the medians and
+quantiles of the times and the probabilities of the risks (:class:`AdviceRow`).
+
+Each member's point temperatures come from :class:`~enkf.tissue.advice_forecast.
+PointForecast`: the forecast is linear in the state and the absorbed power, so rows
+computed once by the adjoint of the heat step (and stored as a low-rank product) turn
+any member's state and optics into its temperatures at the points after every step of
+the horizon: two small matrix products a reading. Members with their own heat capacity
+and conductivity are stepped forward one by one instead. The forecast steps as the
+filter does (``setup.max_dt``, the readings' 0.1 s by default), with the plan's power
+averaged over each step (:meth:`Plan.mean_power`), and the damage is the trapezoid in
+the Arrhenius rate over those steps, as :class:`~enkf.tissue.risk.RiskTracker`'s.
+
+The drift bank (``setup.drift``) runs several filters: the advice mixes their members,
+each filter's weight (its probability after the reading) shared evenly by its members,
+as the bank's own estimates do; online, a filter below ``min_weight`` is not forecast.
+
+Use it as the callback of :func:`enkf.tissue.identify` (then :meth:`Advisor.table`
+with the bank's weights), or after each :meth:`OnlineIdentifier.update` with
+:meth:`Advisor.online`.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+
+import fem
+
+from .advice_forecast import (
+    PointForecast,
+    damage,
+    first_crossing,
+    heat,
+    nominal_peak,
+    region_points,
+)
+
+__all__ = ["RISKS", "AdviceRow", "Advisor", "MemberAdvice", "Plan", "online_ensembles"]
+
+#: the risks reported: (region, scenario); "at_target": stopped at the member's stop time
+RISKS = tuple(f"{r}_{s}" for r in ("protected", "surface") for s in ("plan", "off", "at_target"))
+#: most points kept of a region (the hottest of a protected one, the coldest of a target)
+#: and of the surface (its hottest nodes), ranked under the plan at the nominal optics
+REGION_POINTS, SURFACE_POINTS = 8, 4
+
+
+@dataclass
+class Plan:
+    """The laser schedule of the forecast: ``power`` W during the ``pulses`` (s)."""
+
+    power: float  #: W while a pulse is on
+    pulses: tuple  #: ((start, end), ...) s, increasing and not overlapping
+
+    def __post_init__(self):
+        if isinstance(self.power, bool) or not (np.isfinite(self.power) and self.power >= 0):
+            raise ValueError(f"Plan.power must be a finite number >= 0 (W), got {self.power!r}")
+        try:
+            p = tuple((float(a), float(b)) for a, b in self.pulses)
+        except (TypeError, ValueError):
+            raise ValueError(f"Plan.pulses must be [(start, end), ...] in s, got "
+                             f"{self.pulses!r}") from None
+        for i, (a, b) in enumerate(p):
+            if not (np.isfinite(a) and np.isfinite(b) and 0 <= a < b):
+                raise ValueError(f"Plan.pulses[{i}] = {[a, b]} must have 0 <= start < end (s)")
+            if i and a < p[i - 1][1]:
+                raise ValueError(f"Plan.pulses[{i}] = {[a, b]} starts before the pulse "
+                                 f"before it ends ({p[i - 1][1]:g} s)")
+        self.power, self.pulses = float(self.power), p
+
+    @classmethod
+    def from_heat_simulation(cls, hs) -> Plan:
+        """The schedule of a :class:`mcmatlab_py.heat.HeatSimulation` (a number ``P``)."""
+        if callable(hs.P):
+            raise ValueError("a plan needs a constant power: HS.P is a function; give the "
+                             "plan's power")
+        period = hs.duration_on + hs.duration_off
+        return cls(float(hs.P), tuple((i * period, i * period + hs.duration_on)
+                                      for i in range(int(hs.n_pulses))))
+
+    @property
+    def end(self) -> float:
+        """s: when the last pulse ends (0 without pulses)."""
+        return self.pulses[-1][1] if self.pulses else 0.0
+
+    def mean_power(self, t0: float, t1: float) -> float:
+        """W averaged over ``[t0, t1)``: the energy the pulses deliver in it over its length."""
+        on = sum(max(0.0, min(t1, b) - max(t0, a)) for a, b in self.pulses)
+        return self.power * on / (t1 - t0)
+
+
+@dataclass
+class MemberAdvice:
+    """One filter's members at one reading: their times (s) and which risks they run."""
+
+    time: float  #: s, the reading
+    horizon_end: float  #: s, the forecast's end
+    target_time: np.ndarray  #: (N,) s, the target's Omega >= 1 under the plan (inf: not)
+    stop_time: np.ndarray  #: (N,) s, the earliest switch-off that still reaches it (inf)
+    risks: dict  #: {name in RISKS: (N,) bool}, the risks with a limit
+    wall_s: float  #: s spent on the forecast
+
+
+@dataclass
+class AdviceRow:
+    """The advice at one reading: the members' (weighted) distribution."""
+
+    time: float  #: s
+    target_time: tuple  #: s, (median, lower, upper quantile); inf: beyond the horizon
+    p_target: float  #: probability the target reaches Omega >= 1 under the plan
+    stop_time: tuple  #: s, (median, lower, upper quantile)
+    risks: dict  #: {name: probability}
+    wall_s: float  #: s, the forecast of every filter mixed here
+
+    def as_dict(self, quantiles) -> dict:
+        """Flat ``{column: value}`` (advice.csv's columns, times in s)."""
+        out = {"time_s": self.time}
+        for what, v in (("target_time", self.target_time), ("stop_time", self.stop_time)):
+            out[f"{what}_median_s"] = v[0]
+            for q, x in zip(quantiles, v[1:], strict=True):
+                out[f"{what}_q{100 * q:g}_s".replace(".", "p")] = x
+            if what == "target_time":
+                out["p_target"] = self.p_target
+        out.update({f"p_{k}": v for k, v in self.risks.items()})
+        out["advice_ms"] = 1e3 * self.wall_s
+        return out
+
+
+@dataclass
+class _Track:
+    """A filter's members followed so far: damage and hottest temperature at the points."""
+
+    time: float
+    T: np.ndarray  #: (N, p) deg C at the points
+    omega: np.ndarray  #: (N, p)
+    T_max: np.ndarray  #: (N, p) deg C
+    reached: np.ndarray  #: (N,) s when the target reached Omega >= 1 (nan: not yet)
+    advice: dict = field(default_factory=dict)  #: {step: MemberAdvice}
+
+
+class Advisor:
+    """Forecasts of the members towards the target (module docstring).
+
+    Parameters
+    ----------
+    setup : TissueFilterSetup
+    E, A : float
+        J/mol and 1/s: the Arrhenius law of the tissue (the medium's ``E`` and ``A``).
+    target : (n, 3) cm points, or a box ``((x0, x1), (y0, y1), (z0, z1))`` cm
+        Every point must reach Omega >= 1 (of a box, its :data:`REGION_POINTS` nodes that
+        heat least under the plan at the nominal optics).
+    plan : Plan, optional
+        Default: the setup's laser (a :meth:`HeatSimulation.laser_power`).
+    protected : points or box, optional
+        Tissue to spare (of a box, its :data:`REGION_POINTS` hottest nodes), with a damage
+        limit ``protected_omega`` and/or a temperature limit ``protected_T`` (deg C).
+    surface_T : float, optional
+        deg C, the surface's limit (at its :data:`SURFACE_POINTS` hottest nodes).
+    step : s, the forecast's heat step (default ``setup.max_dt``, else 0.1 s); tail : s
+        forecast after the plan's last pulse; max_horizon : s, the farthest a forecast
+        reaches.
+    quantiles : (lower, upper) of the reported interval (default 5% and 95%).
+    engine : "auto" (adjoint where the heat step is the members' shared one), "adjoint",
+        "direct".
+    """
+
+    def __init__(self, setup, *, E: float, A: float, target, plan: Plan | None = None,
+                 protected=None, protected_omega: float | None = None,
+                 protected_T: float | None = None, surface_T: float | None = None,
+                 step: float | None = None, tail: float = 5.0, max_horizon: float = 30.0,
+                 quantiles=(0.05, 0.95), min_weight: float = 0.01, engine: str = "auto"):
+        from .forward import TissueForwardModel
+
+        if setup.parameter_model == "coagulation":
+            raise ValueError("advice is not built for parameter_model = 'coagulation' (its "
+                             "optics follow the damage the forecast makes)")
+        if step is None:
+            step = setup.max_dt if setup.max_dt is not None else 0.1
+        for name, v, lo in (("E", E, 0.0), ("A", A, 0.0), ("step", step, 0.0),
+                            ("tail", tail, -1.0), ("max_horizon", max_horizon, 0.0)):
+            if isinstance(v, bool) or not (isinstance(v, int | float | np.number)
+                                           and np.isfinite(v) and v > lo):
+                raise ValueError(f"Advisor.{name} must be a finite number > {lo:g}, got {v!r}")
+        if tail < 0:
+            raise ValueError(f"Advisor.tail must be >= 0 (s), got {tail!r}")
+        q = tuple(float(v) for v in quantiles)
+        if len(q) != 2 or not 0 < q[0] < 0.5 < q[1] < 1:
+            raise ValueError(f"Advisor.quantiles must be (lower, upper) with 0 < lower < 0.5 "
+                             f"< upper < 1, got {quantiles!r}")
+        if protected is not None and protected_omega is None and protected_T is None:
+            raise ValueError("Advisor.protected needs a limit: protected_omega and/or "
+                             "protected_T")
+        for name, v in (("protected_omega", protected_omega), ("protected_T", protected_T),
+                        ("surface_T", surface_T)):
+            if v is not None and not (np.isfinite(v) and (v > 0 or name != "protected_omega")):
+                raise ValueError(f"Advisor.{name} must be a finite number"
+                                 f"{' > 0' if name == 'protected_omega' else ''}, got {v!r}")
+        if engine not in ("auto", "adjoint", "direct"):
+            raise ValueError(f"Advisor.engine must be 'auto', 'adjoint' or 'direct', got "
+                             f"{engine!r}")
+        self.setup, self.E, self.A, self.quantiles = setup, float(E), float(A), q
+        self.protected_omega, self.protected_T, self.surface_T = \
+            protected_omega, protected_T, surface_T
+        self.min_weight = float(min_weight)
+        if plan is None:
+            owner = getattr(setup.power, "__self__", None)
+            if owner is None or getattr(setup.power, "__name__", "") != "laser_power":
+                raise ValueError("Advisor needs a plan: the setup's power is not a "
+                                 "HeatSimulation's laser_power")
+            plan = Plan.from_heat_simulation(owner)
+        self.plan = plan
+        self.model = TissueForwardModel(setup)
+        mesh = self.model.mesh
+        self.step, self.tail, self.max_horizon = float(step), float(tail), float(max_horizon)
+        self.K = max(1, math.ceil(min(max(plan.end, 0.0) + tail, max_horizon) / step - 1e-9))
+        peak = nominal_peak(self.model, plan, self.step, self.K)
+        groups = {"target": region_points(mesh, target, peak, REGION_POINTS, coldest=True,
+                                          what="target")}
+        if protected is not None:
+            groups["protected"] = region_points(mesh, protected, peak, REGION_POINTS,
+                                                coldest=False, what="protected")
+        if surface_T is not None:
+            top = np.flatnonzero(np.isclose(mesh.p[2], mesh.p[2].min()))
+            groups["surface"] = mesh.p[:, top[np.argsort(-peak[top])[:SURFACE_POINTS]]].T
+        self.points = {k: np.asarray(v, float) for k, v in groups.items()}
+        sizes = np.cumsum([0] + [len(v) for v in self.points.values()])
+        self.slices = {k: slice(int(a), int(b)) for k, a, b in
+                       zip(self.points, sizes[:-1], sizes[1:], strict=True)}
+        P = fem.probe_matrix(mesh, np.vstack(list(self.points.values())).T)
+        stepper = self.model.stepper(self.step)
+        shared = not ({"VHC", "TC"} & set(setup.estimate)) and not np.any(
+            np.isnan(stepper.fixed_values))
+        if engine == "adjoint" and not shared:
+            raise ValueError("engine='adjoint' needs a heat step the members share (no VHC, "
+                             "TC estimated, no face held at each member's own temperature)")
+        self.engine = "adjoint" if engine == "adjoint" or (engine == "auto" and shared) \
+            else "direct"
+        self.forecast = PointForecast(self.model, P, self.step, self.K, self.engine)
+        self.P = self.forecast.P
+        self.tracks: dict = {}
+
+    def _track(self, key, t: float, X, step: int | None) -> _Track:
+        """Follow a filter's members to ``t`` (s) with the ensemble ``X`` (N, n) deg C
+        (``step`` 0 starts afresh; None: the online filter, whose members started from the
+        prior's uniform ``T_initial`` at 0 s)."""
+        Tp = (self.P @ np.asarray(X, float).T).T
+        tr = self.tracks.get(key)
+        if step == 0 or (tr is None and t <= 0):
+            N, p = Tp.shape
+            old = {} if tr is None else tr.advice  # a replay keeps the advice given
+            self.tracks[key] = _Track(float(t), Tp, np.zeros((N, p)), Tp.copy(),
+                                      np.full(N, np.nan), old)
+            return self.tracks[key]
+        if tr is None:
+            tr = self._track(key, 0.0, np.full_like(X, float(self.setup.T_initial)), 0)
+        if t > tr.time:
+            tg = self.slices["target"]
+            before = tr.omega[:, tg].min(axis=1)
+            fem.advance_damage(tr.omega, tr.T, Tp, t - tr.time, self.E, self.A,
+                               rule="trapezoid")
+            after = tr.omega[:, tg].min(axis=1)
+            new = np.isnan(tr.reached) & (after >= 1.0)
+            frac = (1.0 - before[new]) / np.maximum(after[new] - before[new], 1e-300)
+            tr.reached[new] = tr.time + np.clip(frac, 0, 1) * (t - tr.time)
+        np.maximum(tr.T_max, Tp, out=tr.T_max)
+        tr.time, tr.T = float(t), Tp
+        return tr
+
+    # ------------------------------------------------------------------ forecast
+    def member_advice(self, tr: _Track, X, theta) -> MemberAdvice:
+        """The members' advice from their state ``X`` (N, n) deg C, their parameters
+        ``theta`` (N, >= n_estimate) and what ``tr`` followed so far."""
+        tic = time.perf_counter()
+        t0, h = tr.time, self.step
+        end = min(max(self.plan.end, t0) + self.tail, t0 + self.max_horizon)
+        K = int(min(self.K, max(1, math.ceil((end - t0) / h - 1e-9))))
+        H, G = self.forecast.responses(X, theta, K)
+        P = np.array([self.plan.mean_power(t0 + j * h, t0 + (j + 1) * h) for j in range(K)])
+        N, tg = X.shape[0], self.slices["target"]
+        plan = heat(H, G, P, np.full(N, K))
+        _, path = damage(self.E, self.A, h, tr.omega[:, tg], plan[..., tg], path=True)
+        target = np.where(np.isnan(tr.reached), first_crossing(path, t0, h),
+                          tr.reached)
+        # switch-offs after c = 0 .. c_max intervals: the latest any member needs
+        need = np.ceil((target[np.isfinite(target)] - t0) / h - 1e-9)
+        stop = np.full(N, np.inf)
+        if need.size:
+            C = int(np.clip(need.max(), 0, K)) + 1
+            Yc = np.empty((C, N, K + 1, tg.stop - tg.start))
+            Yc[0] = H[..., tg]
+            for c in range(1, C):
+                Yc[c] = Yc[c - 1]
+                Yc[c, :, c:] += P[c - 1] * G[:, :K - c + 1, tg]
+            final = damage(self.E, self.A, h, np.tile(tr.omega[:, tg], (C, 1)),
+                           Yc.reshape(C * N, K + 1, -1)).min(axis=1).reshape(C, N)
+            for n in np.flatnonzero(np.isfinite(target)):
+                c = int(np.argmax(final[:, n] >= 1.0)) if (final[:, n] >= 1.0).any() else C
+                if c == 0:
+                    stop[n] = t0
+                elif c < C:
+                    lo, hi = final[c - 1, n], final[c, n]
+                    f = -np.log(lo) / np.log(hi / lo) if lo > 0 else (1 - lo) / (hi - lo)
+                    stop[n] = t0 + (c - 1 + float(np.clip(f, 0, 1))) * h
+                else:  # heated to the crossing it reaches; between samples, the crossing
+                    stop[n] = target[n]
+        risks = {}
+        own = np.where(np.isfinite(stop), np.ceil((stop - t0) / h - 1e-9), K).astype(int)
+        scenarios = (("plan", plan), ("off", H), ("at_target", heat(H, G, P, own)))
+        for region, T_lim, om_lim in (("protected", self.protected_T, self.protected_omega),
+                                      ("surface", self.surface_T, None)):
+            if region not in self.slices:
+                continue
+            sl = self.slices[region]
+            hit = np.zeros((3, N), bool)
+            Ys = np.stack([Y[..., sl] for _, Y in scenarios])  # (3, N, K+1, p)
+            if T_lim is not None:
+                hit |= (np.maximum(Ys.max(axis=2), tr.T_max[:, sl]) >= T_lim).any(axis=2)
+            if om_lim is not None:
+                om = damage(self.E, self.A, h, np.tile(tr.omega[:, sl], (3, 1)),
+                            Ys.reshape(3 * N, K + 1, -1))
+                hit |= (om.reshape(3, N, -1) >= om_lim).any(axis=2)
+            for i, (scen, _) in enumerate(scenarios):
+                risks[f"{region}_{scen}"] = hit[i]
+        return MemberAdvice(t0, t0 + K * h, target, stop, risks, time.perf_counter() - tic)
+
+    # ------------------------------------------------------------------ following a filter
+    def __call__(self, rep) -> None:
+        """The callback of :func:`~enkf.tissue.identify`: follow each filter's members
+        (a restart's replay re-runs their damage) and forecast after each reading."""
+        tr = self._track(rep.component, rep.time, rep.state_ensemble, rep.step)
+        if not rep.replayed:
+            tr.advice[rep.step] = self.member_advice(tr, rep.state_ensemble, rep.param_ensemble)
+
+    def table(self, est=None) -> list[AdviceRow]:
+        """The advice at each step followed: the members of the bank's filters weighed by
+        ``est.component_weights`` after each reading (one filter: its own members)."""
+        keys = list(self.tracks)
+        weights = getattr(est, "component_weights", None) or {k: None for k in keys}
+        comps = getattr(est, "components", None) or {}
+        # a bank runs the drifting filters once when none restarts: the others share it
+        same = {n: next((k for k in keys if k in comps and comps[k] is comps[n]), n)
+                for n in weights}
+        steps = sorted({s for k in keys for s in self.tracks[k].advice})
+        rows = []
+        for s in steps:
+            parts = {}
+            for n, w in weights.items():
+                tr = self.tracks.get(same[n])
+                adv = None if tr is None else tr.advice.get(s)
+                wk = 1.0 if w is None else float(w[min(s, len(w) - 1)])
+                if adv is not None and wk > 0:
+                    parts[same[n]] = (parts.get(same[n], (0.0,))[0] + wk, adv)
+            if parts:
+                rows.append(self.mix(list(parts.values())))
+        return rows
+
+    def online(self, ident) -> AdviceRow:
+        """The advice after an :meth:`OnlineIdentifier.update` (each filter of a bank with
+        weight >= ``min_weight`` forecast, identical ensembles once)."""
+        t = ident.time
+        parts, done = [], []
+        for name, w, X, theta in online_ensembles(ident):
+            tr = self._track(name, t, X, None)
+            if w < self.min_weight:
+                continue
+            # the drifting filters before their restarts are one filter: forecast once
+            same = [a for (X0, th0), a in done
+                    if np.array_equal(th0, theta) and np.array_equal(X0, X)]
+            adv = same[0] if same else self.member_advice(tr, X, theta)
+            done.append(((X, theta), adv))
+            parts.append((w, adv))
+        return self.mix(parts)
+
+    def mix(self, parts) -> AdviceRow:
+        """One :class:`AdviceRow` from ``[(weight, MemberAdvice), ...]``: each filter's
+        weight shared evenly by its members."""
+        from .drift import weighted_quantiles
+
+        w = np.array([p[0] for p in parts], float)
+        w = w / w.sum()
+        advs = [p[1] for p in parts]
+        end = max(a.horizon_end for a in advs)
+        big = end + 1e9  # inf (beyond the horizon) as a number the quantiles can order
+        vals = [np.column_stack([np.where(np.isfinite(a.target_time), a.target_time, big),
+                                 np.where(np.isfinite(a.stop_time), a.stop_time, big)])
+                for a in advs]
+        qs = weighted_quantiles(vals, w, [0.5, *self.quantiles])
+        qs = np.where(qs > end + 1e-6, np.inf, qs)
+
+        def prob(get):
+            return float(sum(wj * np.mean(get(a)) for wj, a in zip(w, advs, strict=True)))
+
+        return AdviceRow(
+            advs[0].time, tuple(float(v) for v in qs[:, 0]),
+            prob(lambda a: np.isfinite(a.target_time)), tuple(float(v) for v in qs[:, 1]),
+            {k: prob(lambda a, k=k: a.risks[k]) for k in advs[0].risks},
+            float(sum(a.wall_s for a in advs)))
+
+
+def online_ensembles(ident) -> list[tuple]:
+    """``[(name, weight, X (N, n) deg C, theta (N, n_par)), ...]``: the filters of an
+    :class:`~enkf.tissue.OnlineIdentifier` after its last update (one, weight 1, without a
+    bank; a bank's filters that stopped are left out)."""
+    bank = getattr(ident, "_bank", None)
+    if bank is None:
+        return [(None, 1.0, ident._X, ident._theta)]
+    w = np.where(ident._alive, ident._weights, 0.0)
+    w = w / w.sum()
+    return [(name, float(w[j]), c._X, c._theta) for j, (name, c) in enumerate(bank.items())
+            if ident._alive[j]]
