@@ -347,6 +347,11 @@ function model = mcmrec_heat(model, varargin)
   model.HS.useGPU = false;
   global MCMREC
   if isnan(MCMREC.T0); MCMREC.T0 = double(model.HS.T(1)); end  % the first heat run's start
+  if ~isempty(getenv('MCMREC_NA'))  % heat with a given absorption map (NA = mua(M) .* NFR)
+    src = load(getenv('MCMREC_NA'));
+    mua = model.MC.mediaProperties.mua;
+    model.MC.NFR = single(src.NA ./ reshape(mua(model.MC.M), size(src.NA)));
+  end
   model = simulateHeatDistribution(model, varargin{:});
   mcmrec_save(model, 'HS', MCMREC.T0);
 end
@@ -515,8 +520,10 @@ def mcmatlab_commit(mcm_root: Path) -> str:
     return "unknown"
 
 
-def run_mcmatlab(case: Case, mcm_root: Path, batch: int, log) -> list[dict]:
-    """One batch of MCmatlab's own run of the example (seed ``batch + 1``): the stage records."""
+def run_mcmatlab(case: Case, mcm_root: Path, batch: int, log, NA: np.ndarray | None = None
+                 ) -> list[dict]:
+    """One batch of MCmatlab's own run of the example (seed ``batch + 1``): the stage records.
+    ``NA``: the heat runs heat with this absorption map instead of MCmatlab's own."""
     script = edit_mcmatlab_script((mcm_root / f"{case.mcmatlab}.m").read_text(encoding="latin-1"), case)
     with tempfile.TemporaryDirectory(prefix=f"mcm_{case.name}_") as tmp:
         tmp = Path(tmp)
@@ -524,6 +531,11 @@ def run_mcmatlab(case: Case, mcm_root: Path, batch: int, log) -> list[dict]:
         env = {**os.environ, "MCM_ROOT": str(mcm_root), "MCMREC_OUT": str(tmp),
                "MCMREC_PHOTONS": str(case.photons), "MCMREC_FMC_PHOTONS": str(case.fmc_photons),
                "MCMATLAB_SEED": str(batch + 1), "OMP_NUM_THREADS": "1"}
+        if NA is not None:
+            from scipy.io import savemat
+
+            savemat(tmp / "NA.mat", {"NA": np.asarray(NA, dtype=np.float64)})
+            env["MCMREC_NA"] = str(tmp / "NA.mat")
         p = subprocess.run(["nice", "-n", "10", "octave-cli", "--norc", str(tmp / "run_case.m")],
                            env=env, capture_output=True, text=True)
         log.write(p.stdout + p.stderr)
@@ -904,6 +916,27 @@ def pencil_convergence(ns: tuple[int, ...], photons: int, mcm_root: Path | None,
     return out
 
 
+def heat_grids(case: Case, ns: tuple[int, ...], mcm_root: Path) -> dict:
+    """The heat stages of ``case`` on grids n x n x n, both solvers heating with our absorption
+    map of that grid (one batch): do they converge to one answer as the voxels shrink?"""
+    out = {"example": case.name, "ns": list(ns), "photons": case.photons, "ours": {},
+           "mcmatlab": {}, "wall_s": {}}
+    for n in ns:
+        c = dataclasses.replace(case, grid=(n, n, n))
+        t0 = time.perf_counter()
+        ours = run_ours(c, 0)
+        out["wall_s"][f"ours {n}"] = round(time.perf_counter() - t0, 1)
+        mc = next(r for r in ours if r["kind"] == "MC")
+        NA = mc["NA"] / (1.0 - float(mc["missed"]))  # per W entering, as MCmatlab's
+        t0 = time.perf_counter()
+        theirs = run_mcmatlab(c, mcm_root, 0, open(os.devnull, "w"), NA=NA)
+        out["wall_s"][f"mcmatlab {n}"] = round(time.perf_counter() - t0, 1)
+        for side, recs in (("ours", ours), ("mcmatlab", theirs)):
+            out[side][str(n)] = [summarize(r) for r in recs if r["kind"] == "HS"]
+        print(f"heat grids {case.name} n = {n}: {out['wall_s']}", flush=True)
+    return out
+
+
 # ----------------------------------------------------------------------------- report
 
 def _fmt(v) -> str:
@@ -1084,6 +1117,7 @@ PENCIL_FINDINGS = [
 
 OURS = ROOT / "validation" / "reports" / "mcmatlab_agreement.json"
 PENCIL_JSON = ROOT / "validation" / "reports" / "mcmatlab_pencil_heat.json"
+HEAT_GRIDS_JSON = ROOT / "validation" / "reports" / "mcmatlab_heat_grids.json"
 
 
 def _load(path: Path) -> dict:
@@ -1105,7 +1139,7 @@ def write_report() -> None:
 
 def main(argv=None) -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("step", choices=("mcmatlab", "compare", "pencil", "report"),
+    ap.add_argument("step", choices=("mcmatlab", "compare", "pencil", "heat-grids", "report"),
                     help="mcmatlab: MCmatlab's references; compare: ours against them; "
                          "pencil: the pencil-beam heat convergence; report: the report only")
     ap.add_argument("examples", nargs="*", help=f"default: all ({', '.join(CASES)}); "
@@ -1122,6 +1156,15 @@ def main(argv=None) -> None:
         out = pencil_convergence(ns, args.photons, mcm_root)
         out["mcmatlab_commit"] = mcmatlab_commit(mcm_root) if mcm_root else None
         PENCIL_JSON.write_text(json.dumps(out, indent=1) + "\n")
+        write_report()
+        return
+    if args.step == "heat-grids":  # heat-grids <example> <n> <n> ...
+        name, ns = args.examples[0], tuple(int(n) for n in args.examples[1:])
+        adapt_build(mcm_root)
+        out = heat_grids(CASES[name], ns, mcm_root)
+        grids = _load(HEAT_GRIDS_JSON)
+        grids[name] = out
+        HEAT_GRIDS_JSON.write_text(json.dumps(grids, indent=1) + "\n")
         write_report()
         return
     if args.step == "report":
