@@ -96,7 +96,9 @@ class HeatStepper:
         the consistent mass) cancels the leading dispersion error of both: fourth-order
         modes on the same mesh, at the cost of a 27-point mass stencil in the
         right-hand side. ``"consistent"``: the trilinear hexahedron's mass and stiffness.
-        Ignored (must stay ``"lumped"``) with ``operator="p1"``.
+        With ``operator="p1"``: ``"averaged"`` is the mean of the lumped and the
+        consistent P1 mass (any mesh and media; solved by PCG, preconditioned by the
+        Kronecker operator with the averaged mass on box meshes).
     method : {"auto", "fast", "direct", "pcg"}
     direct_max_nodes : int
         Largest mesh for the sparse LU path under ``"auto"``.
@@ -165,9 +167,15 @@ class HeatStepper:
         self.operator = operator
         if mass not in MASS_KINDS:
             raise ValueError(f"mass must be one of {MASS_KINDS}, got {mass!r}")
-        if mass != "lumped" and operator != "kronecker":
-            raise ValueError(f"mass={mass!r} needs operator='kronecker'")
+        if mass == "consistent" and operator != "kronecker":
+            raise ValueError("mass='consistent' needs operator='kronecker' (with 'p1': "
+                             "lumped=False)")
         self.mass = mass
+        if mass == "averaged" and operator == "p1":  # the mean of the lumped and consistent
+            if not lumped:
+                raise ValueError("mass='averaged' takes the place of lumped=False")
+            self.M = 0.5 * (self.M + mass_matrix(mesh, self.vhc, lumped=False))
+            self._m_lumped = None
         if operator == "kronecker":
             self._kronecker_operators()
 
@@ -267,7 +275,8 @@ class HeatStepper:
     def _kron_preconditioner(self):
         """Fast diagonalization of the volume-averaged operator, on structured meshes whose
         VHC and TC vary little (:data:`KRON_PRECONDITIONER_MAX_RATIO`); else None (Jacobi)."""
-        if not self.lumped or self.theta == 0 or not self.tc.any():
+        averaged = self.mass == "averaged"  # P1's averaged mass: the Kronecker one's
+        if not (self.lumped or averaged) or self.theta == 0 or not self.tc.any():
             return None
         for name, coefficient in (("vhc", self.vhc), ("tc", self.tc)):
             if coefficient.max() > KRON_PRECONDITIONER_MAX_RATIO[name] * coefficient.min():
@@ -280,7 +289,8 @@ class HeatStepper:
         k_mean = float(vol @ self.tc / vol.sum())
         try:
             kron = KroneckerSolver(grid, self.boundary, c_mean, k_mean, self.dt, self.theta,
-                                   None, None, None, self._free_mask(), exact=False)
+                                   None, None, None, self._free_mask(), exact=False,
+                                   mass="averaged" if averaged else "lumped")
         except NotApplicable:
             return None
         if not np.array_equal(kron.free_nodes, self.free):

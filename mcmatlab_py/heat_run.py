@@ -165,6 +165,16 @@ def run_heat(model) -> None:  # noqa: C901  (one loop with its callbacks)
     single_thermal = len(media) == 1 and not coupling.thermal_dependent
     steppers: dict = {}
 
+    def mass_options(vhc, tc):
+        if HS.mass == "lumped":
+            return {}
+        # one medium on the voxel-corner box: the tensor-product operator, exact and fast
+        homogeneous = (np.ndim(vhc) == 0 or np.ptp(vhc) == 0) and (np.ndim(tc) == 0
+                                                                   or np.ptp(tc) == 0)
+        if homogeneous and np.all(np.asarray(tc) > 0):
+            return {"operator": "kronecker", "mass": "averaged"}
+        return {"mass": "averaged"}
+
     def stepper_for(dt, vhc, tc, theta=HS.theta):
         key = (round(dt, 15), coupling.version, theta)
         if key not in steppers or not single_thermal and (HS.VHC_t or HS.TC_t):
@@ -174,7 +184,7 @@ def run_heat(model) -> None:  # noqa: C901  (one loop with its callbacks)
             for old in [k for k in steppers if k[1] != coupling.version]:
                 del steppers[old]
             steppers[key] = fem.HeatStepper(mesh, vhc, tc, dt, theta=theta,
-                                            boundary=boundary)
+                                            boundary=boundary, **mass_options(vhc, tc))
         return steppers[key]
 
     probes = fem.probe_matrix(mesh, np.asarray(HS.temp_sensor_positions, float)
@@ -272,7 +282,9 @@ def run_heat(model) -> None:  # noqa: C901  (one loop with its callbacks)
             if getattr(st, "_mass_rows", None) is None:  # the lumped capacity, once
                 st._mass_rows = (st._m_lumped if st._m_lumped is not None
                                  else np.asarray(st.M.sum(axis=1)).ravel())
-            return st.g, st._mass_rows, st.fixed
+            if st._m_lumped is not None:
+                return st.g, lambda X: st._m_lumped * X, st._mass_rows, st.fixed
+            return st.g, lambda X: st.M @ X, st._mass_rows, st.fixed
 
         controller = ErrorControlledSteps(
             be_solve, apply_a, operator, laser_load, HS.rtol, dt_base, start_level=6,

@@ -57,10 +57,11 @@ class ErrorControlledSteps:
         (``load``: W per node, or None), with the fixed nodes held.
     apply_a : callable ``apply_a(T) -> A T``
         W per node: the conduction and convection out of each node at temperatures ``T``.
-    operator : callable ``operator() -> (g, mass, fixed)``
+    operator : callable ``operator() -> (g, apply_m, mass, fixed)``
         The current operator's parts: ``g`` (npoints,) W, the convective boundary's
-        constant load; ``mass`` (npoints,) J/K, the lumped heat capacity of each node (for
-        the error estimate); ``fixed`` the nodes held at their temperature (no error there).
+        constant load; ``apply_m(X) -> M X`` the heat capacity matrix's product (J/K);
+        ``mass`` (npoints,) J/K, its row sums, the lumped capacity that scales the error
+        estimate; ``fixed`` the nodes held at their temperature (no error there).
         Read at every step (media re-binned at an update change them).
     load : callable ``load(t0, t1) -> array or None``
         W per node, the laser's heat over the step ``[t0, t1]`` (s).
@@ -102,7 +103,7 @@ class ErrorControlledSteps:
     def tr_bdf2(self, T: np.ndarray, t: float, h: float) -> tuple[np.ndarray, np.ndarray]:
         """One TR-BDF2 step of length ``h`` from ``T`` at ``t``: (new T, error estimate)."""
         g = GAMMA
-        g_load, m, fixed = self.operator()
+        g_load, apply_m, m, fixed = self.operator()
         f = self.load(t, t + h)
         F_n = g_load - self.apply_a(T)  # M dT/dt at T, before the laser's share
         if f is not None:
@@ -112,8 +113,8 @@ class ErrorControlledSteps:
         T_g = self.solve(T, sub, F_n if f is None else F_n + f)
         T_eff = (T_g - (1.0 - g) ** 2 * T) / (g * (2.0 - g))
         T_1 = self.solve(T_eff, sub, f)
-        F_g = m * (T_g - T) / sub - F_n
-        F_1 = m * (T_1 - T_eff) / sub
+        F_g = apply_m(T_g - T) / sub - F_n
+        F_1 = apply_m(T_1 - T_eff) / sub
         est = 2.0 * _C * h * (F_n / g - F_g / (g * (1.0 - g)) + F_1 / (1.0 - g)) / m
         if len(fixed):
             est[fixed] = 0.0

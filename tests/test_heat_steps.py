@@ -25,7 +25,7 @@ def one_mode(rtol, dt_base=1e-3, start_level=0):
         return (T / dt + (0.0 if load is None else load)) / (1.0 / dt + LAM)
 
     return ErrorControlledSteps(
-        solve, lambda T: LAM * T, lambda: (np.zeros(1), np.ones(1), np.array([], int)),
+        solve, lambda T: LAM * T, lambda: (np.zeros(1), lambda X: X, np.ones(1), np.array([], int)),
         lambda t0, t1: np.full(1, C0), rtol, dt_base, start_level=start_level)
 
 
@@ -49,7 +49,7 @@ def test_stiff_modes_decay():
         return T / dt / (1.0 / dt + 1e7)
 
     ctl = ErrorControlledSteps(solve, lambda T: 1e7 * T,
-                               lambda: (np.zeros(1), np.ones(1), np.array([], int)),
+                               lambda: (np.zeros(1), lambda X: X, np.ones(1), np.array([], int)),
                                lambda t0, t1: None, 1.0, 0.1)
     T1, _ = ctl.tr_bdf2(np.ones(1), 0.0, 0.1)
     assert abs(T1[0]) < 1e-5
@@ -127,7 +127,23 @@ def test_sensor_interval_gives_readings_on_a_grid(reference):
     assert np.abs(HS.sensor_temps - ref).max() <= 1e-3 * (reference.max_media_temps.max() - 37)
 
 
+def test_averaged_mass_is_closer_to_the_converged_field():
+    """HS.mass = "averaged" (the Kronecker operator with the averaged mass for one medium)
+    against a mesh four times finer: the peak within 1.3% where the lumped mass is 6.1%
+    low, the sensors within 0.05% where the lumped mass is 0.11% off."""
+    ref = block(mesh_divisions=(48, 48, 48), rtol=1e-5).HS
+    rise = ref.max_media_temps.max() - 37.0
+    err = {}
+    for mass in ("lumped", "averaged"):
+        HS = block(mass=mass).HS
+        err[mass] = (abs(HS.max_media_temps.max() - ref.max_media_temps.max()) / rise,
+                     np.abs(HS.sensor_temps[-1] - ref.sensor_temps[-1]).max() / rise)
+    assert err["averaged"][0] < 0.02 < 0.05 < err["lumped"][0]
+    assert err["averaged"][1] < 6e-4 < 1e-3 < err["lumped"][1]
+
+
 @pytest.mark.parametrize("field, value, match", [
+    ("mass", "consistent", r"HS.mass must be 'lumped' or 'averaged', got 'consistent'"),
     ("step_control", "explicit", r"HS.step_control must be 'accuracy' or 'stability', got 'explicit'"),
     ("rtol", 0.0, r"HS.rtol must be >= 1e-09, got 0.0"),
     ("rtol", math.nan, r"HS.rtol must be finite, got nan"),
