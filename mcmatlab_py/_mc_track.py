@@ -12,52 +12,44 @@ import numpy as np
 
 from ._mc_steps import _clamp, _plane_distance
 
+_INF = np.inf
+
 _FASTMATH = {"nsz", "arcp", "contract", "afn", "reassoc"}
 
 
-@numba.njit(cache=True, fastmath=_FASTMATH)
+@numba.njit(cache=True, inline="always", fastmath=_FASTMATH)
 def track_walk(flu, w, fscale, px, py, pz, ux, uy, uz, s, ix, iy, iz, nx, ny, nz, dx, dy, dz):
     """Add ``w * length * fscale`` (rounded) to ``flu`` for each voxel along the move of
     length ``s`` (cm) from ``(px, py, pz)`` in voxel ``(ix, iy, iz)`` along ``u``, which stays
-    inside the cuboid. ``flu`` (nx*ny*nz,) int64; ``w`` the packet's fixed-point weight."""
-    left = s
+    inside the cuboid. ``flu`` (nx*ny*nz,) int64; ``w`` the packet's fixed-point weight.
+
+    The voxel traversal of Amanatides & Woo (1987): the distances along the move to the
+    next plane of each axis grow by a voxel's side over the direction's component.
+    """
+    wf = w * fscale
+    t0 = _plane_distance(px, ux, ix, nx, dx)
+    t1 = _plane_distance(py, uy, iy, ny, dy)
+    t2 = _plane_distance(pz, uz, iz, nz, dz)
+    d0 = dx / abs(ux) if ux != 0.0 else _INF
+    d1 = dy / abs(uy) if uy != 0.0 else _INF
+    d2 = dz / abs(uz) if uz != 0.0 else _INF
+    t = 0.0
     while True:
-        ixc = _clamp(ix, nx)
-        iyc = _clamp(iy, ny)
-        izc = _clamp(iz, nz)
-        j = (ixc * ny + iyc) * nz + izc
-        d0 = _plane_distance(px, ux, ix, nx, dx)
-        d1 = _plane_distance(py, uy, iy, ny, dy)
-        d2 = _plane_distance(pz, uz, iz, nz, dz)
-        if d0 <= d1 and d0 <= d2:
-            axis = 0
-            dmin = d0
-        elif d1 <= d2:
-            axis = 1
-            dmin = d1
-        else:
-            axis = 2
-            dmin = d2
-        if left <= dmin:
-            flu[j] += np.int64(w * (left * fscale) + 0.5)
+        j = (_clamp(ix, nx) * ny + _clamp(iy, ny)) * nz + _clamp(iz, nz)
+        tn = min(t0, min(t1, t2))
+        if tn >= s:
+            flu[j] += np.int64(wf * (s - t) + 0.5)
             return
-        flu[j] += np.int64(w * (dmin * fscale) + 0.5)
-        left -= dmin
-        px += dmin * ux
-        py += dmin * uy
-        pz += dmin * uz
-        if axis == 0:
-            px = (ix + 1) * dx if ux > 0.0 else ix * dx
+        flu[j] += np.int64(wf * (tn - t) + 0.5)
+        t = tn
+        if t0 == tn:
             ix += 1 if ux > 0.0 else -1
-            if ix < 0 or ix >= nx:
-                return
-        elif axis == 1:
-            py = (iy + 1) * dy if uy > 0.0 else iy * dy
+            t0 += d0
+        elif t1 == tn:
             iy += 1 if uy > 0.0 else -1
-            if iy < 0 or iy >= ny:
-                return
+            t1 += d1
         else:
-            pz = (iz + 1) * dz if uz > 0.0 else iz * dz
             iz += 1 if uz > 0.0 else -1
-            if iz < 0 or iz >= nz:
-                return
+            t2 += d2
+        if ix < 0 or ix >= nx or iy < 0 or iy >= ny or iz < 0 or iz >= nz:
+            return
