@@ -19,6 +19,7 @@ from .cmd_identify import cmd_identify
 from .cmd_model import cmd_heat, cmd_mc
 from .cmd_paper import cmd_paper
 from .cmd_port import cmd_port
+from .cmd_replay import cmd_replay
 from .cmd_validate import cmd_validate
 from .common import EXIT_BAD_INPUT, EXIT_UNEXPECTED, MAX_SEED, shorten
 
@@ -151,10 +152,30 @@ def build_parser() -> argparse.ArgumentParser:
     p_id.add_argument("--idle-timeout", type=float, default=10.0,
                       help="--follow: stop after this many seconds without a new line "
                            "(a finite number > 0; default 10)")
+    p_id.add_argument("--serve", type=int, nargs="?", const=5006, default=None, metavar="PORT",
+                      help="--follow: a live page at http://127.0.0.1:PORT/ (default 5006; 0 "
+                           "a free port): the frame, the optics, the temperatures beneath, "
+                           "the damage risk; it stays after the run until Ctrl-C (needs "
+                           "bokeh: pip install \"tissue-enkf[camera]\")")
     p_id.add_argument("--cache-dir", default=None, help="emulator cache directory")
     _common(p_id)
     _dask_options(p_id)
     p_id.set_defaults(func=cmd_identify)
+
+    p_rep = sub.add_parser(
+        "replay", help="the live page over a recorded run",
+        description="Serve the page of identify --follow --serve over a finished run "
+                    "directory: its estimates revealed at the data's pace (or --speed times "
+                    "it), the frames of its camera files, the recorded damage-risk map. "
+                    "Until Ctrl-C.")
+    p_rep.add_argument("run_dir", metavar="RUN_DIR", help="an identify run's --out")
+    p_rep.add_argument("--port", type=int, default=5006,
+                       help="http://127.0.0.1:PORT/ (default 5006; 0 a free port)")
+    p_rep.add_argument("--speed", type=float, default=1.0,
+                       help="times the data's own pace (default 1)")
+    p_rep.add_argument("--debug", action="store_true", default=argparse.SUPPRESS,
+                       help="show the traceback of an error instead of one line")
+    p_rep.set_defaults(func=cmd_replay)
 
     p_val = sub.add_parser(
         "validate", help="run the validation suite and write a Markdown report",

@@ -14,7 +14,8 @@ __all__ = ["EXIT_BATCH_FAILED", "cmd_identify"]
 
 EXIT_BATCH_FAILED = 1  #: every file of a batch failed (batch.csv says why)
 #: what ``identify`` writes at the top of --out: what ``--follow --force`` clears first
-_OUTPUTS = ("estimates.csv", "summary.json", "run.json", "batch.csv", "fields", "figures")
+_OUTPUTS = ("estimates.csv", "advice.csv", "summary.json", "run.json", "batch.csv", "fields", "figures",
+            "live")
 
 def _smoother_summary(setup, times, data, n_iter: int, options: dict, quiet: bool) -> dict:
     """summary.json's ``smoother``: ES-MDA over the whole window, for constant optics
@@ -84,6 +85,8 @@ def _identify_one(cfg, absorption, seed, data_path, out_dir, quiet=True) -> dict
     setup = cfg.setup(absorption, seed=seed)
     _check_smoother_size(cfg, data, data_path)  # before the filter, not after it
     fill_prior_points(setup)  # an on-demand emulator: the prior's points before the filter
+    # [advice]: each member forecast to the target after each reading (enkf.tissue.advice)
+    advisor = None if cfg.advice is None else cfg.advice.advisor(setup)
     medium = cfg.model.G.media[cfg.medium]  # the estimated medium's damage law
     risks = {}  # one tracker per filter (a drift bank runs several)
     n_filters = 1 if setup.drift is None else len(setup.drift.restart_knots) + 1
@@ -97,6 +100,8 @@ def _identify_one(cfg, absorption, seed, data_path, out_dir, quiet=True) -> dict
             if rep.component not in risks:
                 risks[rep.component] = RiskTracker(E=medium.E, A=medium.A, record_every=10)
             risks[rep.component](rep)  # a restart's replay from step 0 recomputes the damage
+        if advisor is not None:
+            advisor(rep)
         if not rep.replayed:
             bar.update(rep.step + len(times) * seen.setdefault(rep.component, len(seen)))
 
@@ -115,7 +120,8 @@ def _identify_one(cfg, absorption, seed, data_path, out_dir, quiet=True) -> dict
         if cfg.second_medium is not None:
             names.update(mua2=media[cfg.second_medium].name, mus2=media[cfg.second_medium].name)
     summary = write_identify_outputs(Path(out_dir), setup, est, times, data,
-                                     absorption=absorption, risk=risk, media=names)
+                                     absorption=absorption, risk=risk, media=names,
+                                     advisor=advisor)
     if cfg.smoother_iterations:
         summary["smoother"] = _smoother_summary(setup, times, data, cfg.smoother_iterations,
                                                 cfg.smoother_options, quiet)
@@ -144,6 +150,13 @@ def cmd_identify(args) -> int:
     if (args.data is None) == (args.follow is None):
         raise ValueError("give --data FILE [FILE ...] or --follow FILE (or data.file in the "
                          "config)")
+    if getattr(args, "serve", None) is not None:
+        from .cmd_replay import check_port
+
+        check_port("--serve", args.serve)
+        if args.follow is None:
+            raise ValueError("--serve shows a --follow stream; for a finished run: "
+                             "tissue-enkf replay RUN_DIR")
     if args.follow is not None and cfg.smoother_iterations:
         raise ValueError("filter.smoother_iterations is not used with --follow (the smoother "
                          "needs the whole window): run identify --data on the finished file")
@@ -340,7 +353,12 @@ def _follow(args, cfg, absorption, seed, t_emu) -> int:
     cols = ["time_s"] + [f"{n}_{s}" for n in names for s in ("mean", "std")] + [
         f"sensor{j + 1}_offset_{s}" for j in range(n_off) for s in ("mean", "std")] + [
         f"T{j}_{s}" for j in range(len(setup.tracked_positions)) for s in ("mean", "std")] + (
-        ["drift_weight"] if setup.drift is not None else [])
+        ["drift_weight"] if setup.drift is not None else []) + (
+        ["target_time_median_s"] if cfg.advice is not None else [])
+    # [advice]: after each reading, when the target is coagulated (advice.csv, and its
+    # median in each line of estimates.csv); the bank's filters mixed by weight
+    advisor = None if cfg.advice is None else cfg.advice.advisor(setup)
+    advice_rows = []
     skipped = []
     t0 = time.perf_counter()
 
@@ -360,11 +378,19 @@ def _follow(args, cfg, absorption, seed, t_emu) -> int:
             trash = _set_aside_outputs(out)
         run_json(0, running=True)
         fh = open(out / "estimates.csv", "w", encoding="utf-8")
+        afh = None if advisor is None else open(out / "advice.csv", "w", encoding="utf-8")
     if trash is not None:
         shutil.rmtree(trash, ignore_errors=True)
     fh.write(",".join(cols) + "\n")
     fh.flush()
     last_fig = [0.0]
+    recorder = page = None
+    if getattr(args, "serve", None) is not None:  # the live page, in a process of its own
+        from .live import LiveRecorder, start_page
+
+        recorder = LiveRecorder(out, setup, cfg.model.G.media[cfg.medium])
+        page, url = start_page(out, args.serve)
+        print(f"live page: {url}", flush=True)
 
     def on_update(est, line):
         vals = [est.time] + [v for i in range(len(names))
@@ -375,11 +401,20 @@ def _follow(args, cfg, absorption, seed, t_emu) -> int:
                  for v in (est.tracked_mean[j], est.tracked_std[j])]
         if est.drift_weight is not None:  # which behaviour of the optics the data support
             vals.append(est.drift_weight)
+        if advisor is not None:
+            from ..tissue.outputs import write_advice_csv
+
+            advice_rows.append(advisor.online(ident))
+            vals.append(advice_rows[-1].target_time[0])
+            write_advice_csv(afh, advice_rows[-1:], advisor.quantiles, len(advice_rows) == 1)
         fh.write(",".join(f"{v:.8g}" for v in vals) + "\n")
         fh.flush()  # the estimate is on disk before the next frame is read
+        if recorder is not None:  # the page draws; the filter only writes the damage
+            recorder.reading(est.time, ident)
+            return
         now = time.perf_counter()
         if now - last_fig[0] > 2.0:  # the figure, at most every 2 s (it takes ~0.3 s)
-            _live_figure(out, ident, setup)
+            _live_figure(out, ident, setup, advice_rows)
             last_fig[0] = time.perf_counter()
 
     def start(times, frames, final=False):
@@ -399,6 +434,9 @@ def _follow(args, cfg, absorption, seed, t_emu) -> int:
         fill_prior_points(setup)
         ident = OnlineIdentifier(setup, param_bounds=cfg.param_bounds,
                                  dt_hint=1.0 / cfg.rate if cfg.rate else 0.1)
+        if recorder is not None:
+            recorder.setup = setup
+            recorder.write_meta(setup)
         return ident
 
     stopped = None
@@ -407,7 +445,8 @@ def _follow(args, cfg, absorption, seed, t_emu) -> int:
             from .follow_frames import follow_folder
 
             n = follow_folder(args.follow, start, on_update, idle_timeout_s=args.idle_timeout,
-                              rate=cfg.rate, emissivity=cfg.camera_emissivity, skipped=skipped)
+                              rate=cfg.rate, emissivity=cfg.camera_emissivity, skipped=skipped,
+                              on_frame=None if recorder is None else recorder.frame)
         else:
             n = follow_csv(args.follow, ident, on_update, idle_timeout_s=args.idle_timeout,
                            columns=None if cfg.data.columns is None
@@ -416,6 +455,10 @@ def _follow(args, cfg, absorption, seed, t_emu) -> int:
         n, stopped = len(ident.history), readable_stop(str(err), names)
     except BaseException as exc:
         fh.close()
+        if afh is not None:
+            afh.close()
+        if page is not None:
+            page.terminate()
         k = len(ident.history)
         if isinstance(exc, Exception) and k == 0:  # nothing assimilated: nothing left
             for name in _OUTPUTS:
@@ -443,13 +486,19 @@ def _follow(args, cfg, absorption, seed, t_emu) -> int:
         raise
     finally:
         fh.close()
-    _live_figure(out, ident, setup)
+        if afh is not None:
+            afh.close()
+    _live_figure(out, ident, setup, advice_rows)
     persistence = persistence_summary(ident)
     drift = {}
     if setup.drift is not None and ident.history:
         w = ident.history[-1].drift_weight
         drift = {"drift": {"behaviour": "drifting" if w >= 0.5 else "still", "weight_final": w}}
         print(f"optics {drift['drift']['behaviour']} while heated (P(drift) = {w:.2g})")
+    if advice_rows:
+        from ..tissue.advice import advice_summary
+
+        drift["advice"] = advice_summary(advisor, advice_rows)
     run_json(n, innovation_persistence=persistence, **drift, **cfg.camera_record(),
              **({"stopped": stopped} if stopped else {}))
     if stopped:
@@ -462,7 +511,24 @@ def _follow(args, cfg, absorption, seed, t_emu) -> int:
               f"skipped (listed in {out / 'run.json'})", file=sys.stderr)
     # the result, even with --quiet (it hides the progress bars only)
     print(f"{n} readings assimilated -> {out}")
+    if page is not None:
+        _keep_page(page, url, recorder)
     return 0
+
+
+def _keep_page(page, url: str, recorder) -> None:
+    """The finished run's page stays until Ctrl-C (or a terminating signal), which closes
+    it: the run is complete, the status stays 0."""
+    recorder.write_risk()
+    print(f"the live page stays at {url} with the final estimate: Ctrl-C closes it",
+          flush=True)
+    try:
+        page.wait()
+    except BaseException:  # noqa: BLE001 - Ctrl-C, SIGTERM: the page was what was left
+        pass
+    finally:
+        page.terminate()
+        page.wait()
 
 
 def _follow_restarts(ident, setup) -> dict:
@@ -475,7 +541,7 @@ def _follow_restarts(ident, setup) -> dict:
                                   for t in ident.restart_times]}
 
 
-def _live_figure(out, ident, setup) -> None:
+def _live_figure(out, ident, setup, advice=None) -> None:
     import numpy as np
 
     from ..tissue import TissueEstimates
@@ -498,5 +564,5 @@ def _live_figure(out, ident, setup) -> None:
     tmp = Path(out) / "figures" / ".estimates.png.tmp.png"
     # the caution when the innovations persist, from the identifier's own record
     plot_identification(tmp, est, None, None, setup.power,
-                        persistence=persistence_summary(ident))
+                        persistence=persistence_summary(ident), advice=advice)
     tmp.replace(Path(out) / "figures" / "estimates.png")  # a viewer never sees half a file

@@ -119,6 +119,15 @@ class OnlineIdentifier:
             self._noise.reset()
         return True
 
+    @property
+    def state_ensemble(self) -> np.ndarray:
+        """(N, n_nodes) deg C: the members' temperatures after the last reading (with a
+        drift bank, those of the filter the data support most)."""
+        if self._bank is not None:
+            comps = list(self._bank.values())
+            return comps[int(np.argmax(np.where(self._alive, self._weights, -1.0)))].state_ensemble
+        return self._X
+
     def innovation_persistence(self, laser: str = "off") -> tuple[float, int]:
         """Lag-1 correlation of the normalized innovations of the readings so far, while
         the laser is ``"off"`` (default), ``"on"``, or over ``"all"``, and the number of
