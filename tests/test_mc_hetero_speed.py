@@ -1,0 +1,176 @@
+"""The general kernel's free moves through runs of voxels of one kind of medium.
+
+:mod:`mcmatlab_py.safety` gives each voxel the distance within which a packet meets no
+voxel of other optics, and the kernel moves a whole free path there at once
+(:mod:`mcmatlab_py._mc_kernel`). These tests hold the distances against a brute-force
+search, and the moves against the walk face by face that a safety map of zeros gives
+(the kernel's behaviour before free moves): with matched interfaces the two cross the same
+voxels and draw the same random numbers, so the same seed gives the same numbers up to
+the rounding of positions; with refraction, where a rounding can tip a decision about a
+smoothed normal, the two agree within the photon noise.
+"""
+
+import itertools
+import math
+
+import numba
+import numpy as np
+import pytest
+
+from mcmatlab_py import Medium, Model
+from mcmatlab_py import monte_carlo as mc
+from mcmatlab_py.safety import medium_kinds, safety_distances
+
+
+def test_safety_is_the_distance_to_the_nearest_voxel_of_another_kind():
+    """Against the distance between voxel boxes, by brute force, on a random grid of three
+    kinds with unequal voxel sides; a kind alone in the grid has no limit."""
+    rng = np.random.default_rng(4)
+    M = rng.choice(3, size=(7, 6, 5), p=[0.8, 0.15, 0.05])
+    d = (0.01, 0.02, 0.015)
+    got = safety_distances(M, np.arange(3), d).reshape(M.shape)
+    for v in itertools.product(*map(range, M.shape)):
+        others = np.argwhere(M != M[v])
+        gap = np.maximum(np.abs(others - np.array(v)) - 1, 0) * np.array(d)
+        exact = np.sqrt((gap**2).sum(axis=1)).min()
+        assert exact * (1 - 2e-6) <= got[v] <= exact, (v, got[v], exact)
+    assert np.all(safety_distances(np.zeros((3, 4, 5), int), np.arange(1), d) == np.inf)
+
+
+def test_media_of_equal_optics_are_one_kind():
+    mua, mus, g, n = (np.array(a, float) for a in ([1, 1, 1, 2], [100, 100, 100, 100],
+                                                     [0.9, 0.9, 0.8, 0.9], [1.3, 1.3, 1.3, 1.3]))
+    k = medium_kinds(mua, mus, g, n)
+    assert k[0] == k[1] and len(set(k)) == 3
+    assert len(set(medium_kinds(mua, mus, g, n, np.array([-1, 0, -1, -1])))) == 4  # a table
+    assert len(set(medium_kinds(mua, mus, g, n, by_medium=True))) == 4
+
+
+def test_a_voxel_of_an_identical_medium_leaves_the_block_one_kind():
+    """The paper's block with one voxel of a copy of its tissue: no limit anywhere (the
+    free moves of one medium); a voxel of other optics limits the moves around it."""
+    assert np.all(_safety(_block(Medium("copy", mua=1.0, mus=100.0, g=0.9, n=1.3))) == np.inf)
+    safe = _safety(_block(Medium("other", mua=2.0, mus=100.0, g=0.9, n=1.3)))
+    assert safe[0, 0, -1] == 0.0 and safe[1, 1, -2] == 0.0
+    assert safe[3, 0, -1] == pytest.approx(0.1, rel=1e-5)  # two voxels of 0.05 cm between
+
+
+def _block(second: Medium) -> Model:
+    model = Model()
+    G = model.G
+    G.nx, G.ny, G.nz = 10, 10, 5
+    G.Lx, G.Ly, G.Lz = 0.5, 0.5, 0.25
+    G.media = [Medium("tissue", mua=1.0, mus=100.0, g=0.9, n=1.3), second]
+
+    def corner(X, Y, Z):
+        M = np.zeros(X.shape, dtype=int)
+        M[0, 0, -1] = 1
+        return M
+
+    G.geom_func = corner
+    model.MC.n_photons_requested = 1000
+    model.MC.progress = False
+    return model
+
+
+def _safety(model) -> np.ndarray:
+    """(nx, ny, nz) the safety distances of ``model``'s grid, as a run computes them."""
+    G = model.G
+    kinds = medium_kinds(*mc.optical_arrays(G.media, model.MC.wavelength))
+    return safety_distances(G.medium_map(), kinds, (G.dx, G.dy, G.dz)).reshape(G.nx, G.ny,
+                                                                              G.nz)
+
+
+def skin(n_photons: int, *, matched: bool = True, boundary_type: int = 1, seed: int = 3) -> Model:
+    """Air (thin: its fluence is tallied along the path) over a layer, a dermis and a vessel
+    of other optics, a top-hat beam: every kind of move of the kernel."""
+    model = Model()
+    G = model.G
+    G.nx, G.ny, G.nz = 24, 24, 20
+    G.Lx = G.Ly = 0.24
+    G.Lz = 0.2
+    G.media = [Medium("air", mua=1e-8, mus=1e-8, g=1.0, n=1.0),
+               Medium("epidermis", mua=15.0, mus=300.0, g=0.8, n=1.45),
+               Medium("dermis", mua=1.0, mus=150.0, g=0.9, n=1.38),
+               Medium("blood", mua=50.0, mus=90.0, g=0.95, n=1.36)]
+
+    def geometry(X, Y, Z):
+        M = np.zeros(X.shape, dtype=int)
+        M[Z > 0.03] = 1
+        M[Z > 0.05] = 2
+        M[X**2 + (Z - 0.1) ** 2 < 0.03**2] = 3
+        return M
+
+    G.geom_func = geometry
+    MC = model.MC
+    MC.n_photons_requested = n_photons
+    MC.seed = seed
+    MC.progress = False
+    MC.matched_interfaces = matched
+    MC.boundary_type = boundary_type
+    MC.light_source.source_type = "tophat"
+    MC.light_source.radius = 0.05
+    return model
+
+
+def run(model, *, walk: bool = False, monkeypatch=None, threads: int | None = None):
+    """``model``'s Monte Carlo; ``walk``: with a safety map of zeros (face by face)."""
+    if walk:
+        monkeypatch.setattr(mc, "kernel_safety",
+                            lambda args, spec=None: np.zeros(args[0].size, np.float32))
+    model.MC.n_threads = threads
+    model.run_monte_carlo()
+    if walk:
+        monkeypatch.undo()
+    return model
+
+
+def slab_fractions(model) -> np.ndarray:
+    """(nz,) fraction of the launched power absorbed in each voxel layer."""
+    G = model.G
+    return model.MC.NA.sum(axis=(0, 1)) * G.dx * G.dy * G.dz
+
+
+@pytest.mark.parametrize("boundary_type", [1, 2, 3])
+def test_free_moves_give_the_numbers_of_the_walk_face_by_face(boundary_type, monkeypatch):
+    """Matched interfaces, the same seed: the same escapes and layer absorptions to within
+    the weight of 3 packets (a rounding that tipped a packet's voxel or face would move at
+    most its own weight), and the same fluence rate in the air, where both split each path
+    at the same voxel faces (each piece rounded to 2^-24 of a voxel's diagonal, so 1e-4 of
+    the rate covers the rounding)."""
+    N = 3000
+    free = run(skin(N, boundary_type=boundary_type))
+    walk = run(skin(N, boundary_type=boundary_type), walk=True, monkeypatch=monkeypatch)
+    a, b = free.MC, walk.MC
+    for face in ("top", "bottom", "sides"):
+        assert abs(a.escaped[face] - b.escaped[face]) <= 3 / N
+    np.testing.assert_allclose(slab_fractions(free), slab_fractions(walk), rtol=0, atol=3 / N)
+    air = free.G.medium_map() == 0
+    np.testing.assert_allclose(a.NFR[air], b.NFR[air], rtol=1e-4, atol=0)
+    assert a.NFR[air].max() > 0.0
+
+
+def test_free_moves_agree_with_the_walk_at_refracting_interfaces(monkeypatch):
+    """Mismatched interfaces with MCmatlab's smoothed normals, only the top face escaping:
+    the absorption per medium and the escape agree within 4 standard errors of the
+    difference of two runs (bound sqrt(2 p (1 - p) / N) of a [0, 1] tally of mean p)."""
+    N = 20_000
+    free = run(skin(N, matched=False, boundary_type=2, seed=5))
+    walk = run(skin(N, matched=False, boundary_type=2, seed=5), walk=True,
+               monkeypatch=monkeypatch)
+    assert free.MC.matched_interfaces is False and free.MC.smoothing_length_scale
+    M = free.G.medium_map()
+    dV = free.G.dx * free.G.dy * free.G.dz
+    pairs = [(free.MC.escaped["top"], walk.MC.escaped["top"])]
+    pairs += [(free.MC.NA[M == k].sum() * dV, walk.MC.NA[M == k].sum() * dV) for k in (1, 2, 3)]
+    for p, q in pairs:
+        m = 0.5 * (p + q)
+        assert abs(p - q) < 4 * math.sqrt(2 * m * (1 - m) / N) + 1e-12, (p, q)
+
+
+def test_heterogeneous_tissue_gives_the_same_numbers_for_any_thread_count():
+    runs = [run(skin(3000, matched=False, boundary_type=3), threads=t).MC
+            for t in (1, min(2, numba.config.NUMBA_NUM_THREADS))]
+    np.testing.assert_array_equal(runs[0].NA, runs[1].NA)
+    np.testing.assert_array_equal(runs[0].NFR, runs[1].NFR)
+    assert runs[0].escaped == runs[1].escaped
