@@ -81,7 +81,7 @@ _CRITERIA_KEYS = {f"{b}_{what}" for b in ("min", "max")
 _CRITERIA_KEYS |= {"only_collected", "evaluate_only_at_end_of_life"}
 _SOURCE_KEYS = {"source_type", "radius", "x_focus", "y_focus", "z_focus"}
 #: the tables of a config file: the model here, the rest for ``tissue-enkf identify``
-TOP_LEVEL_KEYS = {"G", "MC", "HS", "sensors", "filter", "data", "run"}
+TOP_LEVEL_KEYS = {"G", "MC", "HS", "sensors", "filter", "data", "run", "advice"}
 _HS_KEYS = {
     "P", "duration_on", "duration_off", "n_pulses", "dt", "T_initial", "heat_boundary_type",
     "temp_sensor_positions", "heat_transfer_coefficient", "T_ambient", "theta",

@@ -142,6 +142,8 @@ class IdentifyConfig:
     #: CameraRegistration`, which :meth:`read_data` uses
     camera_registration: object = None
     camera_emissivity: float | None = None  #: replaces a FLIR file's emissivity
+    #: the ``[advice]`` table (:class:`~enkf.app.config_advice.AdviceSpec`), None without one
+    advice: object = None
 
     @property
     def n_obs(self) -> int:
@@ -627,6 +629,9 @@ def identify_config_from_dict(cfg: dict) -> IdentifyConfig:
                              smoother_options, second, media_nodes, beam_nodes,
                              registration, emissivity)
         out.setup(absorption=lambda mua, mus: None)  # validates the filter settings
+        from .config_advice import advice_settings
+
+        out.advice = advice_settings(cfg.get("advice"), model, medium, grid, setup_kw)
         n_nodes = int(np.prod([n + 1 for n in grid]))
         table = 0 if exact else emulator_kw.get("n_mua", 12) * emulator_kw.get("n_mus", 12)
         table *= 1 if media_nodes is None else media_nodes["n_nodes"] ** 2
@@ -850,6 +855,9 @@ def check_identify_keys(cfg: dict) -> None:
 
     check_keys("filter.drift", flt.get("drift", {}), DRIFT_KEYS)
     check_keys("data", cfg.get("data", {}), _DATA_KEYS)
+    from .config_advice import ADVICE_KEYS
+
+    check_keys("advice", cfg.get("advice", {}), ADVICE_KEYS)
     run_table(cfg)
 
 

@@ -45,10 +45,12 @@ def manifest(path: Path, *, command: str, config: dict | None, seed, timings: di
 
 def plot_identification(path, est, times, data, power, data_column: int = 0,
                         data_label: str = "data (first column)",
-                        persistence: dict | None = None) -> None:
+                        persistence: dict | None = None, advice: list | None = None) -> None:
     """Temperature tracks (top, with ``data[:, data_column]`` beside the first tracked
     point, labelled ``data_label``) and parameters (bottom); a caution above them when
-    ``persistence`` (:func:`~enkf.tissue.identify.persistence_summary`) is flagged.
+    ``persistence`` (:func:`~enkf.tissue.identify.persistence_summary`) is flagged; with
+    ``advice`` (:class:`~enkf.tissue.advice.AdviceRow` per reading) a panel of when the
+    target is coagulated and the risks (:func:`~enkf.tissue.advice.plot_advice`).
 
     Temperature bands are mean +- 2 sd; parameter bands are the ensemble's 2.3 % and 97.7 %
     quantiles (positive, like the members: the filter works on log parameters, where a
@@ -61,7 +63,7 @@ def plot_identification(path, est, times, data, power, data_column: int = 0,
     t = est.times
     drift = getattr(est, "drift_weight", None)
     n_tr, n_par = est.tracked_mean.shape[1], len(est.names)
-    n_bottom = n_par + (drift is not None)
+    n_bottom = n_par + (drift is not None) + bool(advice)
     cols = max(n_tr, n_bottom)
     fig = plt.figure(figsize=(4.2 * cols, 7.5), constrained_layout=True)
     top, bottom = fig.subfigures(2, 1)
@@ -105,6 +107,10 @@ def plot_identification(path, est, times, data, power, data_column: int = 0,
         ax.set(title="P(optics drift while heated)", xlabel="time [s]", ylim=(-0.03, 1.03))
         ax.text(0.98, 0.04, "still" if drift[-1] < 0.5 else "drifting",
                 transform=ax.transAxes, ha="right", va="bottom", fontsize=9)
+    if advice:  # how long to keep the laser on
+        from ..tissue.advice import plot_advice
+
+        plot_advice(axes_p[-1], advice)
     # a model that misses the data's physics: said where the bands are drawn
     if persistence is not None and persistence["flagged"]:
         fig.suptitle(f"Caution: the innovations persist while the laser is off (lag-1 "
@@ -165,8 +171,11 @@ def _data_beside_first_point(setup) -> tuple[int, str]:
 
 
 def write_identify_outputs(out: Path, setup, est, times, data, *, absorption=None,
-                           risk=None, media: dict | None = None) -> dict:
+                           risk=None, media: dict | None = None, advisor=None) -> dict:
     """estimates.csv, summary.json, figures/estimates.png, fields/final.vtu into ``out``.
+
+    ``advisor``: an :class:`enkf.tissue.advice.Advisor` that followed the run: its advice
+    at each reading into advice.csv, summary.json's ``advice`` and a panel of the figure.
 
     ``media``: ``{parameter: medium name}`` (several media), written into summary.json.
     ``risk``: an :class:`enkf.risk.RiskTracker` that followed the run (media with E, A):
@@ -181,12 +190,18 @@ def write_identify_outputs(out: Path, setup, est, times, data, *, absorption=Non
     (out / "figures").mkdir(exist_ok=True)
     (out / "fields").mkdir(exist_ok=True)
     write_estimates_csv(out / "estimates.csv", est)
+    advice = None if advisor is None else advisor.table(est)
+    if advice:
+        from ..tissue.outputs import write_advice_csv
+
+        write_advice_csv(out / "advice.csv", advice, advisor.quantiles)
     # "final": the last step the health check accepted (when it stopped the run, the
     # rejected step is the last row of estimates.csv and summary["rejected"])
     k = len(est.times) - (2 if est.diverged and len(est.times) > 1 else 1)
     persistence = persistence_summary(est)
     plot_identification(out / "figures" / "estimates.png", est, times, data, setup.power,
-                        *_data_beside_first_point(setup), persistence=persistence)
+                        *_data_beside_first_point(setup), persistence=persistence,
+                        advice=advice)
     summary = {
         "parameters": {n: {"estimate_final": float(est.param_mean[k, i]),
                            "std_final": float(est.param_std[k, i]),
@@ -219,6 +234,10 @@ def write_identify_outputs(out: Path, setup, est, times, data, *, absorption=Non
                    "step_latency_max_s": float(np.max(est.step_latency_s))
                    if len(est.step_latency_s) else 0.0},
     }
+    if advice:  # how long to keep the laser on (enkf.tissue.advice)
+        from ..tissue.advice import advice_summary
+
+        summary["advice"] = advice_summary(advisor, advice)
     if getattr(est, "restarts", ()):  # the restarts from the smoother (smoother_restarts)
         summary["smoother_restarts"] = list(est.restarts)
     if getattr(est, "drift_weight", None) is not None:

@@ -65,14 +65,13 @@ class PointForecast:
         r = self.P.toarray()
         R, W = np.empty((K + 1, p, n)), np.empty((K, p, n))
         R[0] = r
-        r[:, fixed] = 0.0
         for m in range(K):
-            w = st.step(np.zeros((p, n)), load=r) - z1  # A^-1 r on the free nodes
+            # A^-1 r on the free nodes (a step ignores loads on fixed ones); B w's entries on
+            # fixed nodes: how the state there before the step moves the free ones
+            w = st.step(np.zeros((p, n)), load=r) - z1
             w[:, fixed] = 0.0
             W[m] = w
-            r = np.asarray(B @ w.T).T
-            r[:, fixed] = 0.0
-            R[m + 1] = r
+            R[m + 1] = r = np.asarray(B @ w.T).T
         self.a = self._series(np.zeros((1, n)), None, 0.0)[0]
         return R, W
 

@@ -8,7 +8,8 @@ from pathlib import Path
 
 import numpy as np
 
-__all__ = ["jsonable", "readable_stop", "write_estimates_csv", "write_json"]
+__all__ = ["jsonable", "readable_stop", "write_advice_csv", "write_estimates_csv",
+           "write_json"]
 
 
 def readable_stop(message: str | None, names) -> str | None:
@@ -52,6 +53,27 @@ def write_estimates_csv(path, est, truth=None, data=None) -> None:
         arrays.append(np.r_[np.nan, data][: len(est.times)])
     table = np.column_stack(arrays)
     np.savetxt(path, table, delimiter=",", header=",".join(cols), comments="", fmt="%.8g")
+
+
+def write_advice_csv(out, rows, quantiles, header: bool = True) -> None:
+    """``advice.csv`` (:mod:`enkf.tissue.advice`): one line per reading, the columns of
+    :meth:`~enkf.tissue.advice.AdviceRow.as_dict` (times in s; ``inf``: the target is not
+    reached within the forecast's horizon). ``out``: a path, or an open text file to which
+    the lines are added (``header``: the column names first)."""
+    import csv
+
+    fh = open(out, "w", encoding="utf-8", newline="") if isinstance(out, str | Path) else out
+    try:
+        w = csv.writer(fh, lineterminator="\n")
+        for i, row in enumerate(rows):
+            d = row.as_dict(quantiles)
+            if header and i == 0:
+                w.writerow(list(d))
+            w.writerow([f"{v:.6g}" for v in d.values()])
+        fh.flush()
+    finally:
+        if fh is not out:
+            fh.close()
 
 
 def jsonable(obj):
