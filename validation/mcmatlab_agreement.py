@@ -108,7 +108,11 @@ CASES: dict[str, Case] = {c.name: c for c in [
     Case("ex02", "ex02_beam_definitions", "Example2_BeamDefinitions", (41, 41, 20), 100_000),
     Case("ex03", "ex03_refraction_reflection", "Example3_RefractionReflection", (20, 20, 20),
          20_000),
-    Case("ex04", "ex04_blood_vessel", "Example4_BloodVessel", (20, 20, 20), 100_000),
+    Case("ex04", "ex04_blood_vessel", "Example4_BloodVessel", (20, 20, 20), 100_000,
+         explained=((r"rise|damaged", "heat on 20^3 voxels: the two solvers discretise the "
+                     "vessel's sharp edge differently; on finer grids they meet (section 'Heat "
+                     "on finer grids'). The damage integral follows the temperature at the "
+                     "vessel's top, exponentially."),)),
     Case("ex05", "ex05_fluorescence_and_imaging", "Example5_FluorescenceAndImaging",
          (20, 20, 20), 100_000, fmc_photons=100_000),
     Case("ex06", "ex06_time_tagging", "Example6_TimeTagging", (20, 20, 20), 200_000,
@@ -1053,6 +1057,7 @@ def report(results: dict, pencil: dict) -> list[str]:
               "## MCmatlab's conventions, converted before the comparison", "",
               *[f"* {c}" for c in CONVENTIONS], ""]
     lines += pencil_section(pencil)
+    lines += heat_grid_section(_load(HEAT_GRIDS_JSON))
     lines += ["## Example by example", "", *body]
     return lines
 
@@ -1090,6 +1095,49 @@ def pencil_section(pencil: dict) -> list[str]:
     out += ["", *PENCIL_FINDINGS, ""]
     return out
 
+
+def heat_grid_section(grids: dict) -> list[str]:
+    """The heat runs of examples on finer grids, both solvers on our absorption map."""
+    if not grids:
+        return []
+    out = ["## Heat on finer grids", "",
+           "    MCM_ROOT=/tmp/mcm/mcm python validation/mcmatlab_agreement.py heat-grids ex04 "
+           "20 30 40 60", "",
+           "The example's heat runs on n x n x n voxels, both solvers heating with our absorption "
+           "map of that grid (one batch): the heat solvers alone, as the voxels shrink. Each "
+           "cell: ours / MCmatlab's.", ""]
+    for name, g in grids.items():
+        ns = [str(n) for n in g["ns"]]
+        out += [f"### {name}", "", "| number | " + " | ".join(f"n = {n}" for n in ns) + " |",
+                "|---|" + "---:|" * len(ns)]
+        stages = len(next(iter(g["ours"].values())))
+        for k in range(stages):
+            for q in g["ours"][ns[0]][k]:
+                if "damaged" in q:
+                    continue
+                cells = [f"{g['ours'][n][k][q]:.3g} / {g['mcmatlab'][n][k][q]:.3g}" for n in ns]
+                out.append(f"| {q} | " + " | ".join(cells) + " |")
+        out += ["", *HEAT_GRID_FINDINGS.get(name, []), ""]
+    return out
+
+
+#: what the heat grid studies show (written from their tables)
+HEAT_GRID_FINDINGS: dict[str, list[str]] = {
+    "ex04": [
+        "The sensors lie at the top of the blood vessel (z = 0.038 to 0.044 cm, the vessel from "
+        "0.04 to 0.06), where the absorbed power jumps by two orders of magnitude from one voxel "
+        "to the next. On 20^3 voxels (0.005 cm, the vessel 4 voxels across) the two solvers "
+        "differ by up to 35% there: MCmatlab reads a voxel's centre, ours interpolates between "
+        "its corners, where the voxel's heat goes (linear elements). As the voxels shrink the "
+        "two meet from either side: at 25% of the time sensor 1 reads 17.5 / 11.3 deg C "
+        "(ours / MCmatlab's) on 20^3 and 13.3 / 12.9 on 60^3, sensor 3 28.7 / 38.8 and 37.4 / "
+        "38.0, sensor 4 31.2 / 36.8 and 31.8 / 31.8; the media's mean rises agree within 1% on "
+        "60^3 (11% apart in the vessel on 20^3). The differences of the reduced comparison "
+        "above are this discretisation, not an error of either solver; neither is nearer the "
+        "fine answer on every sensor (ours is on sensor 4, MCmatlab's on sensor 3). (Odd and "
+        "even n voxelise the 60 um epidermis differently: the media's means change with n on "
+        "both sides alike.)"],
+}
 
 #: what the pencil-beam convergence study shows (written from its table)
 PENCIL_FINDINGS = [
@@ -1163,6 +1211,11 @@ def main(argv=None) -> None:
         adapt_build(mcm_root)
         out = heat_grids(CASES[name], ns, mcm_root)
         grids = _load(HEAT_GRIDS_JSON)
+        if name in grids:  # add the grids to those stored
+            old = grids[name]
+            for key in ("ours", "mcmatlab", "wall_s"):
+                out[key] = {**old[key], **out[key]}
+            out["ns"] = sorted(set(old["ns"]) | set(out["ns"]))
         grids[name] = out
         HEAT_GRIDS_JSON.write_text(json.dumps(grids, indent=1) + "\n")
         write_report()
