@@ -18,7 +18,11 @@ One thread each, photons per CPU-second, in one run:
 Run::
 
     python benchmarks/bench_mc_engines.py [--photons N] [--rounds K] [--mcmatlab DIR]
-                                          [--problems block,ex01,ex04,ex05]
+                                          [--problems block,ex01,ex04,ex05] [--breakdown]
+
+``--breakdown`` instead times the general kernel against itself with a part switched off:
+walking every packet face by face (a safety map of zeros, the kernel before its free
+moves) and without the track-length tally of thin media.
 
 A rate is marginal: each engine runs N/5 and N photons and the rate is 4N/5 over the
 difference of the CPU times (ours: this process's CPU time around ``run_monte_carlo``,
@@ -216,6 +220,45 @@ def mcmatlab(name: str, build, n: int, mcm_root: Path) -> tuple[float, float]:
     return _marginal(n1, t1, n2, t2), absorbed
 
 
+# ----------------------------------------------------------------------------- breakdown
+def breakdown(names: list[str], n: int, rounds: int) -> None:
+    """Where the general kernel's time goes, by switching its parts off in turn (one
+    thread, this process): the free moves (a safety map of zeros walks every packet face by
+    face, as the kernel did before them) and the track-length tally of thin media
+    (``MC.calc_normalized_fluence_rate = False``)."""
+    from mcmatlab_py import monte_carlo as mc
+
+    real = mc.kernel_safety
+
+    def walk(args, spec=None):
+        return np.zeros(args[0].size, dtype=np.float32)
+
+    def no_track(build):
+        def b(k, one=False):
+            model = build(k, one)
+            model.MC.calc_normalized_fluence_rate = False
+            return model
+        return b
+
+    print("| problem | as run | walking face by face | without the track-length tally |")
+    print("|---|---|---|---|")
+    for name in names:
+        build = PROBLEMS[name]
+        best = {"as run": 0.0, "walk": 0.0, "no track": 0.0}
+        for _ in range(rounds):
+            best["as run"] = max(best["as run"], ours(build, n)[0])
+            mc.kernel_safety = walk
+            try:
+                best["walk"] = max(best["walk"], ours(build, n)[0])
+            finally:
+                mc.kernel_safety = real
+            best["no track"] = max(best["no track"], ours(no_track(build), n)[0])
+        r = best["as run"]
+        print(f"| {name} | {r:.3g} | {best['walk']:.3g} ({r / best['walk']:.2f}x slower) | "
+              f"{best['no track']:.3g} (the tally: {1 - r / best['no track']:.0%} of the time) |",
+              flush=True)
+
+
 # ----------------------------------------------------------------------------- the table
 def main(argv=None) -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
@@ -224,8 +267,14 @@ def main(argv=None) -> None:
     parser.add_argument("--problems", default="block,ex01,ex04,ex05")
     parser.add_argument("--mcmatlab", default=os.environ.get("MCM_ROOT"),
                         help="MCmatlab built for Octave (../shared/tools/mcmatlab-octave)")
+    parser.add_argument("--breakdown", action="store_true",
+                        help="instead: the general kernel with its parts switched off in turn")
     args = parser.parse_args(argv)
     names = args.problems.split(",")
+    if args.breakdown:
+        numba.set_num_threads(1)
+        breakdown(names, args.photons, args.rounds)
+        return
     mcm = Path(args.mcmatlab) if args.mcmatlab else None
     if mcm is not None and not (shutil.which("octave-cli") and (mcm / "+MCmatlab").is_dir()):
         print(f"MCmatlab: no octave-cli or no MCmatlab at {mcm}; its column is left out")
