@@ -327,6 +327,8 @@ def _follow(args, cfg, absorption, seed, t_emu) -> int:
     """
     import shutil
 
+    import numpy as np
+
     from ..problem import FilterDivergence
     from ..tissue import OnlineIdentifier
     from ..tissue.absorption import fill_prior_points
@@ -499,7 +501,10 @@ def _follow(args, cfg, absorption, seed, t_emu) -> int:
         from ..tissue.advice import advice_summary
 
         drift["advice"] = advice_summary(advisor, advice_rows)
-    run_json(n, innovation_persistence=persistence, **drift, **cfg.camera_record(),
+    lat = np.array([h.latency_s for h in ident.history])
+    step_s = {"step_s": {"mean": float(lat.mean()), "p95": float(np.percentile(lat, 95)),
+                         "max": float(lat.max())}} if lat.size else {}
+    run_json(n, innovation_persistence=persistence, **drift, **cfg.camera_record(), **step_s,
              **({"stopped": stopped} if stopped else {}))
     if stopped:
         print(f"warning: {args.follow}: the filter stopped early: {stopped} (estimates up to "
