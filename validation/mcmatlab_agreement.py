@@ -1057,13 +1057,13 @@ def report(results: dict, pencil: dict) -> list[str]:
               "## MCmatlab's conventions, converted before the comparison", "",
               *[f"* {c}" for c in CONVENTIONS], ""]
     lines += pencil_section(pencil)
-    lines += heat_grid_section(_load(HEAT_GRIDS_JSON))
+    lines += heat_grid_section(_load("heat_grids"))
     lines += ["## Example by example", "", *body]
     return lines
 
 
 def pencil_section(pencil: dict) -> list[str]:
-    """The pencil-beam heat convergence, from ``PENCIL_JSON``."""
+    """The pencil-beam heat convergence (``OURS``'s "pencil")."""
     if not pencil:
         return []
     sensors = pencil["sensors"]
@@ -1163,18 +1163,24 @@ PENCIL_FINDINGS = [
 ]
 
 
+#: our side's numbers: {"examples": our statistics per example, "pencil": the pencil-beam
+#: study, "heat_grids": the heat grid studies}
 OURS = ROOT / "validation" / "reports" / "mcmatlab_agreement.json"
-PENCIL_JSON = ROOT / "validation" / "reports" / "mcmatlab_pencil_heat.json"
-HEAT_GRIDS_JSON = ROOT / "validation" / "reports" / "mcmatlab_heat_grids.json"
 
 
-def _load(path: Path) -> dict:
-    return json.loads(path.read_text()) if path.exists() else {}
+def _load(part: str) -> dict:
+    return json.loads(OURS.read_text()).get(part, {}) if OURS.exists() else {}
+
+
+def _store(part: str, value: dict) -> None:
+    every = json.loads(OURS.read_text()) if OURS.exists() else {}
+    every[part] = value
+    OURS.write_text(json.dumps(every, indent=1) + "\n")
 
 
 def write_report() -> None:
     """``REPORT`` from the stored references, our stored statistics and the pencil study."""
-    ours = _load(OURS)
+    ours = _load("examples")
     results = {}
     for name, case in CASES.items():
         ref_path = DATA / f"{name}.json"
@@ -1182,7 +1188,7 @@ def write_report() -> None:
             ref = json.loads(ref_path.read_text())
             results[name] = (case, ref, compare(ref["stages"], ours[name]["stages"], case),
                              ours[name])
-    REPORT.write_text("\n".join(report(results, _load(PENCIL_JSON))) + "\n")
+    REPORT.write_text("\n".join(report(results, _load("pencil"))) + "\n")
 
 
 def main(argv=None) -> None:
@@ -1203,21 +1209,21 @@ def main(argv=None) -> None:
             adapt_build(mcm_root)
         out = pencil_convergence(ns, args.photons, mcm_root)
         out["mcmatlab_commit"] = mcmatlab_commit(mcm_root) if mcm_root else None
-        PENCIL_JSON.write_text(json.dumps(out, indent=1) + "\n")
+        _store("pencil", out)
         write_report()
         return
     if args.step == "heat-grids":  # heat-grids <example> <n> <n> ...
         name, ns = args.examples[0], tuple(int(n) for n in args.examples[1:])
         adapt_build(mcm_root)
         out = heat_grids(CASES[name], ns, mcm_root)
-        grids = _load(HEAT_GRIDS_JSON)
+        grids = _load("heat_grids")
         if name in grids:  # add the grids to those stored
             old = grids[name]
             for key in ("ours", "mcmatlab", "wall_s"):
                 out[key] = {**old[key], **out[key]}
             out["ns"] = sorted(set(old["ns"]) | set(out["ns"]))
         grids[name] = out
-        HEAT_GRIDS_JSON.write_text(json.dumps(grids, indent=1) + "\n")
+        _store("heat_grids", grids)
         write_report()
         return
     if args.step == "report":
@@ -1254,10 +1260,10 @@ def main(argv=None) -> None:
                 print(f"   stage {r['stage']} {r['name']}: ours {_fmt(r['ours'])} MCmatlab "
                       f"{_fmt(r['mcmatlab'])} z {_fmt(r.get('z'))} {r['verdict']}")
         if not trial:
-            ours = _load(OURS)
+            ours = _load("examples")
             ours[name] = {"batches": n_b, "wall_s": round(time.perf_counter() - t0, 1),
                           "stages": stats}
-            OURS.write_text(json.dumps(ours, indent=1) + "\n")
+            _store("examples", ours)
     if not trial:
         write_report()
 
