@@ -66,7 +66,7 @@ def one_run(work: Path, cfg: Path, f: np.ndarray, rate: float, serve: bool, cach
            "--out", str(out), "--quiet", "--cache-dir", cache, "--idle-timeout", "10"]
     if serve:
         cmd += ["--serve", "0"]
-    proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, text=True,
+    proc = subprocess.Popen(cmd, stdout=subprocess.PIPE if serve else subprocess.DEVNULL, text=True,
                             env=dict(os.environ, PYTHONUNBUFFERED="1"))
     browser = pw = None
     if serve:

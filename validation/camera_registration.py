@@ -118,6 +118,9 @@ def main(argv=None):
              f"Command: `python validation/camera_registration.py --seeds "
              f"{' '.join(map(str, args.seeds))}`", "",
              " ".join(__doc__.split("\n\n")[1].split()), "",
+             *[f"- {' '.join(item.split())}" for item in
+               __doc__.split("\n\n")[2].split("- ")[1:]], "",
+             " ".join(__doc__.split("\n\n")[3].split()), "",
              f"The shifted camera sees the spot's centre at column {true_centre[0]:g}, row "
              f"{true_centre[1]:g} (the image's centre is {CENTRE[0]:g}, {CENTRE[1]:g}), turned by "
              f"{TURN:g} degrees.", "",

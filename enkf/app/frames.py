@@ -1,22 +1,19 @@
 """What thermal cameras write: FLIR radiometric JPEGs, TIFF stacks, HDF5, NPZ, folders.
 
 :func:`read_frames` reads one file or a folder of frames into a :class:`FrameSeries`:
-frames ``(n, ny, nx)`` deg C and their times, each format through a kept library:
+frames ``(n, ny, nx)`` deg C and their times, each format through a kept library (the
+times, in this order):
 
-========================  ============================  =====================================
-format                    library (``[camera]`` extra)  times, in this order
-========================  ============================  =====================================
-FLIR radiometric JPEG     ``flyr``                      FLIR's own ``DateTimeOriginal`` (ms),
-(``.jpg``, ``.jpeg``)                                   EXIF ``DateTimeOriginal`` with
-                                                        ``SubSecTimeOriginal``
-TIFF stack (``.tif``)     ``tifffile``                  ``times`` in tifffile's JSON
-                                                        metadata, ImageJ's ``finterval``, each
-                                                        page's ``DateTime`` (+ ``SubSecTime``)
-HDF5 (``.h5``, ``.hdf5``) ``h5py``                      dataset ``times``, or attribute
-                                                        ``rate`` (Hz) of ``frames``
-NPZ (``.npz``)            numpy                         array ``times`` (required)
-folder                    each file's reader            each file's, or the file order
-========================  ============================  =====================================
+- FLIR radiometric JPEG (``.jpg``, ``.jpeg``), through ``flyr``: FLIR's own
+  ``DateTimeOriginal`` (ms), else EXIF ``DateTimeOriginal`` with ``SubSecTimeOriginal``;
+- TIFF stack (``.tif``), through ``tifffile``: ``times`` in tifffile's JSON metadata,
+  ImageJ's ``finterval``, or each page's ``DateTime`` (and ``SubSecTime``);
+- HDF5 (``.h5``, ``.hdf5``), through ``h5py``: dataset ``times``, or attribute ``rate``
+  (Hz) of ``frames``;
+- NPZ (``.npz``), through numpy: array ``times`` (required);
+- a folder of these: each file's times, or the order of the names.
+
+The libraries are the ``[camera]`` extra.
 
 A FLIR file holds the detector's raw counts; the temperatures come from them with the
 file's emissivity, distance, reflected and atmospheric temperatures and Planck constants

@@ -1,5 +1,4 @@
-"""``identify --follow ... --serve``: what the filter hands to the live page, and the page's
-process.
+"""What the filter hands to the live page of ``identify --follow FILE --serve``; its process.
 
 The page is served by another process (:mod:`enkf.app.live_page`, bokeh), so that drawing
 never takes the filter's time nor its interpreter: the filter writes what the page shows
