@@ -213,6 +213,12 @@ def test_identify_from_an_npz_image_series(tmp_path, cache):
     from enkf.app.config import load_identify
 
     assert load_identify(cfg).smoother_options["discrepancy"] == 0.0  # a camera's default
+    # so are the drift bank's restarts: no discrepancy with a camera, and a value refused
+    assert load_identify(cfg).setup_kw["drift"].restart_discrepancy == 0.0
+    cfg.write_text(cfg.read_text() + "\n[filter.drift]\nrestart_discrepancy = 0.01\n")
+    with pytest.raises(ValueError, match="filter.drift.restart_discrepancy = 0.01 is for point"):
+        load_identify(cfg)
+    cfg.write_text(cfg.read_text().replace("\n[filter.drift]\nrestart_discrepancy = 0.01\n", ""))
     np.savez(tmp_path / "wrong.npz", times=times, frames=frames[:, :1])
     assert run("identify", cfg, "--data", tmp_path / "wrong.npz", "--out", tmp_path / "w") == 2
     # the camera's model error: defaults, set, refused when negative (exit 2, nothing written)

@@ -181,6 +181,13 @@ def drift_settings(flt: dict, setup_kw: dict) -> None:
         kw["restart_knots"] = tuple(int(_cfg._num(f"filter.drift.restart_knots[{i}]", v,
                                                   integer=True, lo=2, hi=50))
                                     for i, v in enumerate(k))
+    if "image" in setup_kw:  # a camera: the restarts' smoother takes no discrepancy (its
+        # dense covariance over every pixel and reading would not fit), as smoother_* does
+        if kw.get("restart_discrepancy", 0.0) > 0:
+            raise ConfigError(f"filter.drift.restart_discrepancy = {kw['restart_discrepancy']:g} "
+                              "is for point sensors: with [sensors.camera] its covariance over "
+                              "every pixel and reading is too large; set it to 0")
+        kw["restart_discrepancy"] = 0.0
     try:
         setup_kw["drift"] = DriftBank(**kw)
     except ValueError as err:
