@@ -95,6 +95,19 @@ class Case:
     kw: dict = field(default_factory=dict)  #: keyword arguments of ``ours_run`` besides quick
 
 
+_DC_THIN = ("with deposition criteria ours takes NFR = NA / mua in every medium: the track-length "
+            "tally that gives the fluence rate of nearly transparent media does not apply the "
+            "criteria, so it is off. MCmatlab absorbs continuously along the path, so its NFR "
+            "is the track length of the packets that meet the criteria. In air, where no packet "
+            "interacts, ours is 0; in a thin scatterer (Example 21: mua = 1e-8, mus = 10 cm^-1 "
+            "in one column of voxels) ours credits 1 / (mua + mus) = 0.1 cm of path to each "
+            "interaction, where MCmatlab's counts the path the packet travelled, which for "
+            "packets selected by their number of scatterings is not the same (the criteria make "
+            "the two estimators differ, without them both are unbiased). Not mended: the "
+            "track-length tally would have to be recorded per packet as the deposits are.")
+DC_AIR = ("NFR block .* z1/4", "the fluence rate in the air layer, " + _DC_THIN)
+DC_THIN = ("NFR block", "the fluence rate of the scatterer and the air, " + _DC_THIN)
+
 #: absorbed power below this (W per W incident) in both engines: a nearly transparent medium
 AIR_ABSORBED = 1e-6
 AIR_NA = ("the absorption of air (mua = 1e-8 cm^-1, below 1e-6 of the power in both): MCmatlab's "
@@ -122,7 +135,10 @@ CASES: dict[str, Case] = {c.name: c for c in [
     Case("ex07", "ex07_far_field", "Example7_FarField", (21, 21, 21), 100_000,
          fmc_photons=100_000),
     Case("ex08", "ex08_collected_fluence_rate", "Example8_CollectedFluenceRate", (20, 20, 20),
-         200_000),
+         200_000, explained=(DC_AIR,),
+         note="boundaryType 2: MCmatlab's NI_zneg covers the top plane 5 cuboids wide (light "
+              "that comes back up outside the cuboid); ours covers the cuboid's top face. With "
+              "`onlyCollected` both hold only collected light, which leaves through the face."),
     Case("ex09", "ex09_geometry_parametric_sweep", "Example9_GeometryParametricSweep",
          (11, 21, 21), 20_000),
     Case("ex10", "ex10_media_property_parametric_sweep", "Example10_MediaPropertyParametricSweep",
@@ -136,15 +152,24 @@ CASES: dict[str, Case] = {c.name: c for c in [
     Case("ex15", "ex15_thermally_induced_scattering", "Example15_ThermallyInducedScattering",
          (24, 24, 24), 50_000),
     Case("ex16", "ex16_cuda_acceleration", "Example16_CUDAacceleration", (20, 20, 20), 100_000,
-         mcmatlab_stages=(0, 1)),
+         mcmatlab_stages=(0, 1),
+         note="MCmatlab's two Monte Carlo runs (its GPU run falls back to its CPU engine here, "
+              "as ours); the gallery script runs no heat, so MCmatlab's two heat runs are not "
+              "compared."),
     Case("ex17", "ex17_curved_refraction_reflection", "Example17_CurvedRefractionReflection",
          (41, 41, 21), 50_000),
     Case("ex19", "ex19_deposition_criteria", "Example19_DepositionCriteria", (21, 21, 30),
-         100_000),
+         100_000, explained=(DC_AIR,)),
     Case("ex20", "ex20_reflectance_statistics", "Example20_ReflectanceStatisticsAndCyclicBoundaries",
-         (21, 21, 20), 20_000),
+         (21, 21, 20), 20_000,
+         note="MCmatlab's five runs of each case take one seed (MCMATLAB_SEED is fixed for a "
+              "batch's Octave process) and give the same numbers: stages 1-5 (matched) and "
+              "6-10 (mismatched) are each held against one MCmatlab mean, so their z share its "
+              "error."),
     Case("ex21", "ex21_custom_phase_functions", "Example21_CustomPhaseFunctions", (21, 21, 30),
-         100_000, ours_stages=(0,),
+         100_000, ours_stages=(0,), explained=(DC_THIN,),
+         note="The gallery also runs two Henyey-Greenstein checks of its own; the Rayleigh run "
+              "is MCmatlab's.",
          # the scatterer is the centre column: M(51,51,:) of the 101 x 101 grid
          edits=((r"M\(51,51,:\)", "M((end+1)/2,(end+1)/2,:)"),)),
     Case("ex22", "ex22_combining_model_objects", "Example22_CombiningModelObjects", (21, 21, 30),
@@ -166,9 +191,12 @@ CASES: dict[str, Case] = {c.name: c for c in [
                 (r"emission\.Emission_AU_",
                  'mcmrec_col("helperfuncs/LuciferYellowCHinWater-ems.txt", 2)'))),
     Case("ex24", "ex24_az_fz_reflectance_transmittance", "Example24_AzFzReflectanceTransmittance",
-         (21, 21, 30), 100_000, ours_stages=(0,)),
+         (21, 21, 30), 100_000, ours_stages=(0,),
+         note="The gallery also runs MCML's published slab (its check); the layered model is "
+              "MCmatlab's."),
     Case("ex25", "ex25_deposition_criteria2", "Example25_DepositionCriteria2", (30, 30, 30),
-         100_000, ours_stages=(0,)),
+         100_000, ours_stages=(0,),
+         note="The gallery also runs the model without criteria (its check)."),
     Case("ex26", "ex26_distributed_source", "Example26_DistributedSource", (21, 21, 30),
          100_000),
 ]}
@@ -659,7 +687,8 @@ def reduced_and_recorded(case: Case, photons: int, fmc_photons: int, seed: int,
                                              else self.HS.T_initial)[0]))
             depth[0] += 1
             P = self.HS.P
-            missed = float(np.nan_to_num(np.max(self.MC.missed_fraction or 0.0)))
+            missed = self.MC.missed_fraction
+            missed = 0.0 if missed is None else float(np.nanmax(np.atleast_1d(missed)))
             if kind == "HS" and missed > 0 and not callable(P):
                 # MCmatlab's NA is per W entering the cuboid (a launch that misses is drawn
                 # again): its heat source is P / (1 - missed) of ours; heat as MCmatlab does
@@ -995,13 +1024,12 @@ def report(results: dict, pencil: dict) -> list[str]:
     commit = next((r[1]["mcmatlab_commit"] for r in results.values()), "?")
     lines = [
         "# MCmatlab's engine against ours, example by example", "",
-        "    MCMATLAB_GIT=<bare clone of github.com/ankrh/MCmatlab> W=/tmp/mcm \\",
-        "        bash ../shared/tools/mcmatlab-octave/build.sh",
-        "    MCM_ROOT=/tmp/mcm/mcm python validation/mcmatlab_agreement.py mcmatlab  "
-        "# MCmatlab's numbers",
-        "    python validation/mcmatlab_agreement.py compare  # ours against them, this report",
-        "    MCM_ROOT=/tmp/mcm/mcm python validation/mcmatlab_agreement.py pencil  "
-        "# the heat study below", "",
+        "Made by `python validation/mcmatlab_agreement.py compare` (ours, against MCmatlab's "
+        "numbers in `validation/data/mcmatlab/`); those by `MCM_ROOT=/tmp/mcm/mcm python "
+        "validation/mcmatlab_agreement.py mcmatlab` after `MCMATLAB_GIT=<bare clone of "
+        "github.com/ankrh/MCmatlab> W=/tmp/mcm bash ../shared/tools/mcmatlab-octave/build.sh`; "
+        "the heat studies by its `pencil` and `heat-grids` steps (commands in their sections).",
+        "",
         f"MCmatlab commit `{commit}`, its C engines built for GNU Octave 7 and run through its "
         "own `runMonteCarlo` and `simulateHeatDistribution` on its own example scripts (edited "
         "on the fly: reduced grid, a fixed photon count per call, one thread, plots removed); "
@@ -1068,6 +1096,8 @@ def pencil_section(pencil: dict) -> list[str]:
         return []
     sensors = pencil["sensors"]
     out = ["## Pencil-beam heat: which solver converges", "",
+           "    MCM_ROOT=/tmp/mcm/mcm python validation/mcmatlab_agreement.py pencil 21 31 41 61",
+           "",
            "The heat case of the issue (Example 1's cuboid, 0.1 W pencil beam for 1 s, then 0.5 s "
            "dark, insulating faces). On each grid n x n x 1.5n both heat solvers get the same "
            f"source, our absorption map from {pencil['photons']:g} photons; MCmatlab's is its "
