@@ -39,6 +39,9 @@ def test_every_report_file_belongs_to_one_entry():
     on_disk = {p.name for p in (ROOT / "reports").iterdir()}
     assert on_disk == set(listed)
     assert len(on_disk) <= 40
+    results = [f for s in STUDIES for f in s.get("results", [])]
+    assert len(results) == len(set(results))
+    assert {p.name for p in (ROOT / "results").iterdir()} == set(results)
     for s in STUDIES:  # the report at the script's default name comes first
         assert s["files"][0] == f"{s['name']}.md", s["name"]
 

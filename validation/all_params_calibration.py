@@ -17,7 +17,6 @@ from __future__ import annotations
 
 import argparse
 import functools
-import json
 import sys
 from concurrent.futures import ProcessPoolExecutor
 from contextlib import nullcontext
@@ -26,6 +25,9 @@ from pathlib import Path
 import numpy as np
 
 from enkf.paper.runner import run_experiment
+
+sys.path.insert(0, str(Path(__file__).parent))
+from reporting import results_note, write_results  # noqa: E402
 
 ROOT = Path(__file__).parents[1]
 #: relative Cramér-Rao sd at 15 s (identifiability.md): ramp shape known; 5 knots
@@ -137,17 +139,17 @@ def main(argv=None) -> None:
                   f"{np.median([r['seconds'] for r in rows]):.1f} s per run. Bands: the "
                   "2.3-97.7% quantiles. With 2 knots the smoother's model is the ramp with its "
                   "shape known: that bound is the yardstick.",
-                  "", "Per-seed numbers: the `.json` next to this report."]
+                  "", results_note(Path(args.out))]
     else:
         tc = {z: np.mean([r["temperature_coverage"][z] for r in rows])
               for z in rows[0]["temperature_coverage"]}
         lines += ["", "Temperature coverage (mean over seeds): "
                   + ", ".join(f"{z} {v:.2f}" for z, v in tc.items()) + ".", "",
                   "The filter's random walk does not know the ramp's shape: the 5-knot bound is "
-                  "the closer yardstick. Per-seed numbers: the `.json` next to this report."]
+                  "the closer yardstick. " + results_note(Path(args.out))]
     out = Path(args.out)
     out.write_text("\n".join(lines) + "\n")
-    out.with_suffix(".json").write_text(json.dumps(rows, indent=1))
+    write_results(out, rows)
     print("\n".join(lines))
 
 

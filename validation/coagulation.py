@@ -40,8 +40,9 @@ decides which model the data prefer.
     python validation/coagulation.py [--seeds 0 1 ... 19] [--cases ...] [--n-members 50]
         [--model-error structured|white] [--mean-field-rel-std 0.25]
 
-Writes validation/reports/coagulation.md (``--out``), its ``.json`` and, named after it, the
-figure of seed 0, ``*_seed0.png``: the optics of the single pulse and of the paper's ramp,
+Writes validation/reports/coagulation.md (``--out``), its numbers as
+validation/results/coagulation.json and, named after it, the figure of seed 0,
+``*_seed0.png``: the optics of the single pulse and of the paper's ramp,
 the temperatures beneath the sensor of the single pulse and of the pulse train.
 """
 
@@ -289,7 +290,9 @@ def main(argv=None):
     wall = time.perf_counter() - tic
     out = Path(args.out)
     out.parent.mkdir(parents=True, exist_ok=True)
-    out.with_suffix(".json").write_text(json.dumps(
+    from reporting import results_path
+
+    results_path(out).write_text(json.dumps(
         {"seeds": args.seeds, "n_members": args.n_members, "wall_s": wall,
          "model_error": args.model_error, "mean_field_rel_std": args.mean_field_rel_std,
          "results": results}, indent=1, default=float) + "\n")

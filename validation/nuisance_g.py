@@ -193,7 +193,9 @@ def main(argv=None) -> int:
     rows = study(tissues, a.models, a.seeds, a.estimate_radius, a.camera)
     command = "python validation/nuisance_g.py " + " ".join(argv or sys.argv[1:])
     a.out.write_text(report(rows, command.strip()))
-    a.out.with_suffix(".json").write_text(json.dumps(
+    from reporting import results_path
+
+    results_path(a.out).write_text(json.dumps(
         [{k: (v.tolist() if isinstance(v, np.ndarray) else v) for k, v in r.items()}
          for r in rows], indent=1))
     print(f"report written to {a.out}")

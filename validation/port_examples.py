@@ -19,7 +19,7 @@ every other setting is the conversion's.
 checkout (``git clone https://github.com/ankrh/MCmatlab``); without either, a report
 elsewhere than the default says the study was skipped. MCmatlab's files are read from
 there, never copied into this repository (GPL). Writes
-``validation/reports/port_examples.md`` (and ``.json``).
+``validation/reports/port_examples.md`` (its numbers in ``validation/results/port_examples.json``).
 """
 
 from __future__ import annotations

@@ -50,7 +50,8 @@ def render(studies: list[dict]) -> str:
         "Each study is one script, `validation/NAME.py`, that checks one part of the project "
         "against an analytic, published or independent result and writes one report into "
         "`validation/reports/` (a Markdown file whose header states the command that made "
-        "it, with its per-run numbers as JSON and its figures beside it where it has them). "
+        "it, with its figures beside it where it has them) and, where it has them, its per-run "
+        "numbers as JSON into `validation/results/`. "
         "The command under each study regenerates its report; on 2 cores most take from "
         "minutes to a few hours.",
         "",
@@ -78,8 +79,9 @@ def render(studies: list[dict]) -> str:
         for s in members:
             report = ", ".join(f"[{f}](reports/{f})" for f in s["files"])
             quick = " (quick suite: `" + " ".join(s["quick"]) + "`)" if "quick" in s else ""
+            results = "".join(f"; numbers: [{f}](results/{f})" for f in s.get("results", []))
             lines += [f"### {s['name']}", "", " ".join(s["establishes"].split()), "",
-                      f"`{command(s)}`{quick}", "", f"Report: {report}", ""]
+                      f"`{command(s)}`{quick}", "", f"Report: {report}{results}", ""]
     lines += ["## Helper modules", "",
               *(f"- `{name}`: {text}." for name, text in HELPERS.items()), ""]
     return "\n".join(lines)

@@ -9,7 +9,7 @@ temperature's analysis spread a fraction alpha of the way back to its forecast s
 this records over the seeds: the seeds whose band covers the truth on >= 0.9 of the steps
 at z = 0, 0.1, 0.2 cm, the mean coverage, the mean band sd and the RMS error of the mean,
 and the parameter targets (mus within 10% at 15 s; mua's mean relative error; stopped
-runs). Writes ``validation/reports/rtps.md`` (and ``.json``).
+runs). Writes ``validation/reports/rtps.md`` (its numbers in ``validation/results/rtps.json``).
 
     python validation/rtps.py [--seeds 20] [--alphas 0 0.1 0.25] [--scenarios ...] [--adaptive]
 
@@ -20,7 +20,7 @@ the forecast's temperature covariance estimated from the innovations) in RTPS's 
 from __future__ import annotations
 
 import argparse
-import json
+import sys
 import time
 import warnings
 from pathlib import Path
@@ -28,6 +28,9 @@ from pathlib import Path
 import numpy as np
 
 from enkf.paper import SCENARIOS, run_experiment
+
+sys.path.insert(0, str(Path(__file__).parent))
+from reporting import results_note, write_results  # noqa: E402
 
 DEFAULT_OUT = str(Path(__file__).parent / "reports" / "rtps.md")
 
@@ -105,10 +108,10 @@ def main(argv=None):
         "(deg C) | RMS error (deg C) | mus within 10% at 15 s | mean mua error | stopped |",
         "|---|---|---|---|---|---|---|---|---|---|", *rows, "",
         "A calibrated band has its RMS error close to its sd and covers about 0.95 of the "
-        "steps. Per-run numbers: the `.json` next to this report.", ""]
+        "steps. " + results_note(Path(args.out)), ""]
     out = Path(args.out)
     out.parent.mkdir(parents=True, exist_ok=True)
-    out.with_suffix(".json").write_text(json.dumps(raw, indent=1))
+    write_results(out, raw)
     out.write_text("\n".join(lines))
     print(f"report written to {out}")
     return 0

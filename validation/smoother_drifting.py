@@ -25,7 +25,6 @@ of 20 seeds), and the parameters' own coverage: the seeds whose +-2 sd band (the
 from __future__ import annotations
 
 import argparse
-import json
 import sys
 import time
 from pathlib import Path
@@ -99,9 +98,9 @@ def report(rows: list, path: Path, command: str) -> None:
                      f"({tr[0]:g}), mus {fin[1]:.1f} ({tr[1]:g}) | {sd[0]:.3f}, {sd[1]:.1f} | "
                      f"{cov[0]}/{n}, {cov[1]}/{n} | "
                      f"{np.mean([r['wall_s'] for r in rs]):.1f} |")
-    lines += ["", f"Per-run numbers: `{path.with_suffix('.json').name}`."]
-    path.write_text("\n".join(lines) + "\n")
-    path.with_suffix(".json").write_text(json.dumps(rows, indent=1))
+    from reporting import write_report
+
+    write_report(path, lines, rows)
 
 
 def main(argv=None):
