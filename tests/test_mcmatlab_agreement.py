@@ -39,6 +39,10 @@ def test_the_references_are_there():
 
 @pytest.mark.parametrize("case", CASES, ids=[c.name for c in CASES])
 def test_ours_agrees_with_mcmatlab(case):
+    try:
+        case.run_kw()
+    except KeyError:
+        pytest.skip(f"{case.name} reads files from MCmatlab's folder: set MCM_ROOT")
     rows = ma.ci_check(case, z=5.0, heat=False)
     assert rows, f"{case.name}: nothing compared"
     bad = [f"{name}: ours {ours:.6g}, MCmatlab {ref:.6g}, tolerance {tol:.3g}"
