@@ -200,13 +200,12 @@ class Advisor:
                              "optics follow the damage the forecast makes)")
         if step is None:
             step = setup.max_dt if setup.max_dt is not None else 0.1
-        for name, v, lo in (("E", E, 0.0), ("A", A, 0.0), ("step", step, 0.0),
-                            ("tail", tail, -1.0), ("max_horizon", max_horizon, 0.0)):
+        for name, v in (("E", E), ("A", A), ("step", step), ("max_horizon", max_horizon),
+                        ("tail", tail)):
             if isinstance(v, bool) or not (isinstance(v, int | float | np.number)
-                                           and np.isfinite(v) and v > lo):
-                raise ValueError(f"Advisor.{name} must be a finite number > {lo:g}, got {v!r}")
-        if tail < 0:
-            raise ValueError(f"Advisor.tail must be >= 0 (s), got {tail!r}")
+                                           and np.isfinite(v) and (v > 0 or name == "tail" and v == 0)):
+                raise ValueError(f"Advisor.{name} must be a finite number "
+                                 f"{'>=' if name == 'tail' else '>'} 0, got {v!r}")
         q = tuple(float(v) for v in quantiles)
         if len(q) != 2 or not 0 < q[0] < 0.5 < q[1] < 1:
             raise ValueError(f"Advisor.quantiles must be (lower, upper) with 0 < lower < 0.5 "
