@@ -163,8 +163,13 @@ CASES: dict[str, Case] = {c.name: c for c in [
                      "10^5 photons per call the deepest slab absorbs 0.03729 (ours) and 0.03816 "
                      "(MCmatlab); at 8 x 10^5 (5 batches each) 0.03767 and 0.03760, |z| <= 2.7 "
                      "over all 28 numbers: both move with the photon count and meet."),)),
-    Case("ex13", "ex13_t_dependent_vhc", "Example13_TdependentVHC", (20, 20, 20), 100_000),
-    Case("ex14", "ex14_thermochromism", "Example14_Thermochromism", (24, 24, 24), 50_000),
+    Case("ex13", "ex13_t_dependent_vhc", "Example13_TdependentVHC", (20, 20, 20), 100_000,
+         explained=((r"rise", "heat on 20^3 voxels next to the water-absorber interface: the "
+                     "two solvers discretise it differently and meet on finer grids (section "
+                     "'Heat on finer grids')."),)),
+    # ny = 23: on 24^3 the wedge's planes 0.2 y + z = 0.03 and -0.2 y + z = 0.05 pass exactly
+    # through voxel centres, which the two sides' rounding puts into different media
+    Case("ex14", "ex14_thermochromism", "Example14_Thermochromism", (24, 23, 24), 50_000),
     Case("ex15", "ex15_thermally_induced_scattering", "Example15_ThermallyInducedScattering",
          (24, 24, 24), 50_000),
     Case("ex16", "ex16_cuda_acceleration", "Example16_CUDAacceleration", (20, 20, 20), 100_000,
@@ -402,6 +407,7 @@ function model = mcmrec_run(model, varargin)
 end
 
 function model = mcmrec_heat(model, varargin)
+  if ~isempty(getenv('MCMREC_NOHEAT')); return; end  % Monte Carlo stages only
   model.HS.silentMode = true;   % no live plots (Octave here has no graphics toolkit)
   model.HS.makeMovie = false;
   model.HS.useAllCPUs = false;
@@ -1182,6 +1188,16 @@ def heat_grid_section(grids: dict) -> list[str]:
 
 #: what the heat grid studies show (written from their tables)
 HEAT_GRID_FINDINGS: dict[str, list[str]] = {
+    "ex13": [
+        "A 0.1 mm water layer over an absorber (mua = 30 cm^-1) whose VHC rises steeply near "
+        "40 deg C: the water heats only through the interface, two voxels thick on 20^3. There "
+        "ours puts the absorber's top voxels' heat on the interface nodes, shared with the "
+        "water, and MCmatlab's finite differences pass it on one voxel later: the water's mean "
+        "rise is 3.46 / 2.24 deg C (ours / MCmatlab's) on 20^3 and 3.19 / 2.79 on 40^3; the "
+        "sensor in the water 8.09 / 6.41 and 8.10 / 7.41 at the end (ours already near its "
+        "40^3 value, MCmatlab's moving towards it); the sensor just under the interface "
+        "21.26 / 19.80 and 20.00 / 19.93 (ours moving towards MCmatlab's). The deeper sensors "
+        "agree within 1% on both grids. Discretisation, converging from either side."],
     "ex04": [
         "The sensors lie at the top of the blood vessel (z = 0.038 to 0.044 cm, the vessel from "
         "0.04 to 0.06), where the absorbed power jumps by two orders of magnitude from one voxel "
