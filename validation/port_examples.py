@@ -278,7 +278,8 @@ def report(rows: list[dict], command: str, out: Path) -> None:
     same = sum(r.get("agrees") == "identical" for r in rows)
     both = sum(r.get("ran", False) and r.get("agrees") == "identical" for r in rows)
     lines = ["# MCmatlab's examples through `tissue-enkf port`", "",
-             f"Command: `{command}`.",
+             f"Command: `{command}`, with MCMATLAB_DIR (MCmatlab's git directory or checkout) in "
+             "the environment.",
              "",
              f"**{conv} of {n} convert, {ran} of {n} run unchanged** at reduced size "
              "(`MCMATLAB_PY_QUICK=1`: at most 61 voxels a side, 2000 photons a run, 5 heat "
@@ -348,7 +349,7 @@ def main(argv=None) -> int:
         print(f"{name}: converted={row.get('converted')} ran={row.get('ran')} "
               f"agrees={row.get('agrees')} {row.get('error', '')}", flush=True)
     only = f" --only {' '.join(args.only)}" if args.only else ""
-    report(rows, f"python validation/port_examples.py MCMATLAB_DIR{only}", args.out)
+    report(rows, f"python validation/port_examples.py{only}", args.out)
     print(f"report: {args.out}")
     return 0
 
