@@ -172,9 +172,15 @@ CASES: dict[str, Case] = {c.name: c for c in [
                      "'Heat on finer grids')."),)),
     # ny = 23: on 24^3 the wedge's planes 0.2 y + z = 0.03 and -0.2 y + z = 0.05 pass exactly
     # through voxel centres, which the two sides' rounding puts into different media
-    Case("ex14", "ex14_thermochromism", "Example14_Thermochromism", (24, 23, 24), 50_000),
+    Case("ex14", "ex14_thermochromism", "Example14_Thermochromism", (24, 23, 24), 50_000,
+         note="The heat run, whose Monte Carlo is re-run as the thermochromic medium clears "
+              "with temperature, differs (sensor 4, 0.078 cm deep, ends at 9.5 deg C in ours and "
+              "16.3 in MCmatlab's): open, not measured on finer grids (the coupled runs take "
+              "long). Its first Monte Carlo agrees."),
     Case("ex15", "ex15_thermally_induced_scattering", "Example15_ThermallyInducedScattering",
-         (24, 24, 24), 50_000),
+         (24, 24, 24), 50_000,
+         note="The heat run's differences are open: they do not shrink on 36^3 voxels (section "
+              "'Heat on finer grids')."),
     Case("ex16", "ex16_cuda_acceleration", "Example16_CUDAacceleration", (20, 20, 20), 100_000,
          mcmatlab_stages=(0, 1),
          note="MCmatlab's two Monte Carlo runs (its GPU run falls back to its CPU engine here, "
@@ -189,7 +195,12 @@ CASES: dict[str, Case] = {c.name: c for c in [
          note="MCmatlab's five runs of each case take one seed (MCMATLAB_SEED is fixed for a "
               "batch's Octave process) and give the same numbers: stages 1-5 (matched) and "
               "6-10 (mismatched) are each held against one MCmatlab mean, so their z share its "
-              "error."),
+              "error. Pooled over our five runs of each case, ours absorbs 0.27% more than "
+              "MCmatlab (0.5992 +- 0.0003 vs 0.5976 +- 0.0007 matched, z = 2.3; 0.7205 vs "
+              "0.7186 mismatched, z = 2.9) and reflects correspondingly less (0.4008 vs 0.4024, "
+              "0.2795 vs 0.2813). Adding-doubling (iadpython) does not settle it: its diffuse "
+              "reflectance of this slab moves by 0.7% between 16 and 32 quadrature points. Left "
+              "open."),
     Case("ex21", "ex21_custom_phase_functions", "Example21_CustomPhaseFunctions", (21, 21, 30),
          100_000, ours_stages=(0,), explained=(DC_THIN,),
          note="The gallery also runs two Henyey-Greenstein checks of its own; the Rayleigh run "
@@ -1084,7 +1095,14 @@ def report(results: dict, pencil: dict) -> list[str]:
     body = []
     total = {"n": 0, "agree": 0, "explained": 0, "differ": 0}
     clean = 0
+    light = {"n": 0, "differ": 0, "scripts": 0, "clean": 0}  # the Monte Carlo stages alone
     for name, (case, ref, rows, ours) in results.items():
+        mc_rows = [r for r in rows if ref["stages"][r["stage"] - 1]["kind"] != "HS"]
+        light["n"] += len(mc_rows)
+        mc_bad = sum(r["verdict"] == "DIFFER" for r in mc_rows)
+        light["differ"] += mc_bad
+        light["scripts"] += bool(mc_rows)
+        light["clean"] += bool(mc_rows) and mc_bad == 0
         n_ok = sum(r["verdict"] == "agree" for r in rows)
         n_ex = sum(r["verdict"].startswith("explained") for r in rows)
         n_bad = len(rows) - n_ok - n_ex
@@ -1117,8 +1135,15 @@ def report(results: dict, pencil: dict) -> list[str]:
     lines += ["## Summary", "", *summary, "",
               f"{total['agree']} of {total['n']} numbers agree, {total['explained']} differ for a "
               f"reason measured below, {total['differ']} differ unexplained; {clean} of "
-              f"{len(results)} compared scripts have no unexplained difference. Not compared: "
-              + "; ".join(f"{k} ({v})" for k, v in NOT_COMPARED.items()), "",
+              f"{len(results)} compared scripts have no unexplained difference. The light alone "
+              f"(Monte Carlo and fluorescence stages): {light['n']} numbers, "
+              f"{light['differ']} differ unexplained, {light['clean']} of {light['scripts']} "
+              "scripts clean. With this many numbers some lie beyond 3 SE by chance: at "
+              "Student's t with 9 to 19 degrees of freedom (10 and 20 batches) 0.7% to 1.5% of "
+              f"them, {0.007 * light['n']:.0f} to {0.015 * light['n']:.0f} here. The "
+              "unexplained light differences all have |z| < 4.3; Example 20's eight come from a "
+              "small difference left open (see there). "
+              "Not compared: " + "; ".join(f"{k} ({v})" for k, v in NOT_COMPARED.items()), "",
               "## What ours had wrong, now mended", "", *[f"* {f}" for f in FIXES], "",
               "## MCmatlab's conventions, converted before the comparison", "",
               *[f"* {c}" for c in CONVENTIONS], ""]
@@ -1201,6 +1226,14 @@ HEAT_GRID_FINDINGS: dict[str, list[str]] = {
         "40^3 value, MCmatlab's moving towards it); the sensor just under the interface "
         "21.26 / 19.80 and 20.00 / 19.93 (ours moving towards MCmatlab's). The deeper sensors "
         "agree within 1% on both grids. Discretisation, converging from either side."],
+    "ex15": [
+        "Egg white around a strong absorber (mua = 300 cm^-1), its scattering growing with "
+        "the damage (mus = 1 + 1000 FD), faces held at 20 deg C; the Monte Carlo is re-run "
+        "as the damage grows. Here the gap does not close: the absorber's mean rise is 3.51 / "
+        "3.66 deg C (ours / MCmatlab's) on 24^3 and 3.47 / 3.60 on 36^3, the sensor next to "
+        "it (0, 0, 0.085) at 25% of the time 67.0 / 77.1 and 80.0 / 100.1. MCmatlab's "
+        "largeTimeSteps changes nothing here (the same numbers with it off). A difference of "
+        "the coupled heat and damage-dependent optics, not found."],
     "ex11": [
         "Example 4's vessel under a pulse train (first run) and a long pulse (second run). The "
         "first run's 5 ms pulses, 2 voxels of epidermis on 20^3, give the largest gaps: the "
