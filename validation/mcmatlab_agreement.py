@@ -1285,7 +1285,7 @@ PENCIL_FINDINGS = [
 
 #: our side's numbers: {"examples": our statistics per example, "pencil": the pencil-beam
 #: study, "heat_grids": the heat grid studies}
-OURS = ROOT / "validation" / "reports" / "mcmatlab_agreement.json"
+OURS = ROOT / "validation" / "results" / "mcmatlab_agreement.json"
 
 
 def _load(part: str) -> dict:
@@ -1367,6 +1367,12 @@ def main(argv=None) -> None:
         return
     for name in names:
         case = CASES[name]
+        try:
+            case.run_kw()
+        except KeyError:
+            print(f"{name}: skipped, it reads files from MCmatlab's folder: set MCM_ROOT "
+                  "(its stored numbers are kept)", flush=True)
+            continue
         ref = json.loads((where / (f"mcmatlab_{name}.json" if trial else f"{name}.json"))
                          .read_text())
         t0 = time.perf_counter()
