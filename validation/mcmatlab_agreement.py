@@ -1202,8 +1202,8 @@ def heat_grid_section(grids: dict) -> list[str]:
     if not grids:
         return []
     out = ["## Heat on finer grids", "",
-           "    MCM_ROOT=/tmp/mcm/mcm python validation/mcmatlab_agreement.py heat-grids ex04 "
-           "20 30 40 60", "",
+           *[f"    MCM_ROOT=/tmp/mcm/mcm python validation/mcmatlab_agreement.py heat-grids {k} "
+             + " ".join(map(str, g["ns"])) for k, g in grids.items()], "",
            "The example's heat runs on n x n x n voxels, both solvers heating with our absorption "
            "map of that grid (one batch): the heat solvers alone, as the voxels shrink. Each "
            "cell: ours / MCmatlab's.", ""]
