@@ -121,7 +121,7 @@ def start_page(run_dir: Path, port: int) -> tuple[subprocess.Popen, str]:
     log = Path(run_dir) / "live" / "server.log"
     with open(log, "w") as err:  # the server's messages; stdout gives only its address
         proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=err, text=True,
-                                start_new_session=True)  # Ctrl-C reaches the filter only
+                                process_group=0)  # its own process group: Ctrl-C reaches the filter only
     line = proc.stdout.readline().strip()
     if not line.startswith("http"):
         proc.kill()
