@@ -9,11 +9,12 @@ figures here use log colour scales.
     python examples/mcmatlab/ex01_standard_tissue.py [--quick] [--out DIR]
 
 Differences from MCmatlab: a fixed photon count instead of
-``simulationTimeRequested = 0.1`` min (the same seed gives the same figures). NFR
-is ``NA / mua`` scored where packets interact; in this air (mus = 1e-8 cm^-1) none
-do, so the air stays empty in the NFR figures, where MCmatlab shows the beam.
-``model.plot("MC")`` cuts its xy slice at the top face (in the air):
-``ex01_NFR_tissue.png`` cuts it 0.1 mm below the tissue surface.
+``simulationTimeRequested = 0.1`` min (the same seed gives the same figures). In thin
+media such as this air (mus = 1e-8 cm^-1) NFR is the track length per voxel, as
+MCmatlab's continuous absorption gives it, so the beam shows in the air as in
+MCmatlab's figures; in the tissue it is ``NA / mua``. ``model.plot("MC")`` cuts its xy
+slice at the top face (in the air): ``ex01_NFR_tissue.png`` cuts it 0.1 mm below the
+tissue surface.
 """
 
 from __future__ import annotations
