@@ -13,6 +13,10 @@
   files, which are copied into the site as downloads); without a registry, each script
   with a report in ``validation/reports/`` and the first sentence of its docstring.
   Nothing is run.
+* ``{mcmatlab-agreement} <stem>`` states, on an example's page, how its numbers compare
+  with MCmatlab's own engine: the example's row and explanations in
+  ``validation/reports/mcmatlab_agreement.md`` (written by
+  ``validation/mcmatlab_agreement.py compare``). Nothing is run.
 """
 
 from __future__ import annotations
@@ -178,9 +182,100 @@ class ValidationStudies(SphinxDirective):
         return container.children
 
 
+AGREEMENT = VALIDATION / "reports" / "mcmatlab_agreement.md"
+
+
+def agreement_rows(report: str) -> dict[str, list[str]]:
+    """The summary table of the agreement report: example key -> its eight cells."""
+    rows = {}
+    for line in report.splitlines():
+        cells = [c.strip() for c in line.strip().strip("|").split("|")]
+        if len(cells) == 8 and re.fullmatch(r"(ex\d+|test\d+)", cells[0]):
+            rows[cells[0]] = cells
+    return rows
+
+
+def agreement_of(key: str, report: str) -> list[str]:
+    """The lines (MyST) that say how example ``key`` (``ex04``, ``test1``) compares with
+    MCmatlab's engine in the report's text ``report``: its counts and its explanations,
+    or why it was not compared; ``[]`` when the report does not name it."""
+    rows = agreement_rows(report)
+    if key in rows:
+        _, script, grid, photons, n, agree, explained, differ = rows[key]
+        lines = [f"On {grid} voxels, {photons} photons per call and batches (MCmatlab's, "
+                 f"ours), {n} numbers of `{script}.m` compared: **{agree} agree** within 3 "
+                 f"combined standard errors, {explained} differ for a reason the report "
+                 f"measures, {differ} differ unexplained.", ""]
+        section = re.search(rf"^### {key}: .*?$(.*?)(?=^\| stage |^### |\Z)", report,
+                            flags=re.M | re.S)
+        if section:
+            paragraphs = [" ".join(p.split()) for p in section.group(1).split("\n\n")]
+            lines += [f"* {p}" for p in paragraphs if p and not p.startswith("Grid ")] + [""]
+        return lines
+    skipped = re.search(rf"\b{key} \((.*?)\)(?:; |\s*$)", report, flags=re.M)
+    if skipped:
+        return [f"Not compared with MCmatlab's engine: {skipped.group(1)}", ""]
+    return []
+
+
+class MCmatlabAgreement(SphinxDirective):
+    """How one gallery example's numbers compare with MCmatlab's engine, from the report of
+    ``validation/mcmatlab_agreement.py`` (read when the site is built; nothing is run)."""
+
+    required_arguments = 1
+    has_content = False
+
+    def run(self) -> list[nodes.Node]:
+        key = self.arguments[0].split("_")[0]
+        if not AGREEMENT.exists():
+            return [nodes.paragraph(text="(No report validation/reports/mcmatlab_agreement.md.)")]
+        self.env.note_dependency(str(AGREEMENT))
+        lines = agreement_of(key, AGREEMENT.read_text(encoding="utf-8"))
+        if not lines:
+            logger.warning("mcmatlab-agreement: %s is not in %s", key, AGREEMENT.name,
+                           location=self.get_location())
+            return []
+        here = Path(self.env.doc2path(self.env.docname)).parent
+        lines += [f"The numbers, stage by stage: {{download}}`mcmatlab_agreement.md "
+                  f"<{os.path.relpath(AGREEMENT, here)}>` (section {key}); how they were made: "
+                  "[Agreement with MCmatlab's engine](../agreement.md).", ""]
+        container = nodes.container()
+        self.state.nested_parse(StringList(lines, source=str(AGREEMENT)), self.content_offset,
+                                container)
+        return container.children
+
+
+class MCmatlabAgreementTable(SphinxDirective):
+    """Every gallery example's agreement with MCmatlab's engine in one table, each row
+    linked to its page (from the report; nothing is run)."""
+
+    has_content = False
+
+    def run(self) -> list[nodes.Node]:
+        if not AGREEMENT.exists():
+            return [nodes.paragraph(text="(No report validation/reports/mcmatlab_agreement.md.)")]
+        self.env.note_dependency(str(AGREEMENT))
+        rows = agreement_rows(AGREEMENT.read_text(encoding="utf-8"))
+        lines = ["| example | numbers | agree | explained | differ |", "|---|---:|---:|---:|---:|"]
+        for script in gallery_scripts():
+            key = script.stem.split("_")[0]
+            link = f"[{script.stem}](gallery/{script.stem}.md)"
+            if key in rows:
+                n, agree, explained, differ = rows[key][4:]
+                lines.append(f"| {link} | {n} | {agree} | {explained} | {differ} |")
+            else:
+                lines.append(f"| {link} | not compared (see its page) | | | |")
+        container = nodes.container()
+        self.state.nested_parse(StringList(lines + [""], source=str(AGREEMENT)),
+                                self.content_offset, container)
+        return container.children
+
+
 def setup(app: Sphinx) -> dict:
     app.connect("builder-inited", check_gallery)
     app.connect("builder-inited", run_quick)
     app.add_directive("validation-studies", ValidationStudies)
     app.add_directive("quick-figures", QuickFigures)
+    app.add_directive("mcmatlab-agreement", MCmatlabAgreement)
+    app.add_directive("mcmatlab-agreement-table", MCmatlabAgreementTable)
     return {"parallel_read_safe": True, "parallel_write_safe": True}
