@@ -20,6 +20,10 @@ S, L, f
 vhc, tc
     Volumetric heat capacity c (J cm^-3 K^-1) and thermal conductivity k
     (W cm^-1 K^-1), per element.
+layers
+    Media that vary only with depth: vhc, tc constant over each element layer of a
+    box mesh (:func:`layer_coefficients`), solved directly by
+    :class:`LayeredKroneckerSolver` with the tensor-product operator.
 M, K, R, g
     Mass (J/K, lumped by default), stiffness (W/K), convective boundary
     matrix (W/K) and convective load (W).
@@ -57,6 +61,7 @@ from .damage import (
     update_damage,
 )
 from .fastdiag import KroneckerSolver, NotApplicable
+from .layered import LayeredKroneckerSolver, layer_coefficients
 from .locate import locate
 from .march import march
 from .mesh import (
@@ -89,6 +94,7 @@ __all__ = [
     "HeatBoundary",
     "HeatStepper",
     "KroneckerSolver",
+    "LayeredKroneckerSolver",
     "NotApplicable",
     "TimeSeriesWriter",
     "advance_damage",
@@ -102,6 +108,7 @@ __all__ = [
     "face_facets",
     "face_nodes",
     "fractional_damage",
+    "layer_coefficients",
     "load_vector",
     "locate",
     "lumped_mass",

@@ -326,8 +326,9 @@ def lumped_rhs(T, a, m, g, f, out):
 def tridiag3_rhs(T, a, dx, ox, dy, oy, dz, oz, scale, g, f, out):
     """out[n] = a[n] scale (Mx ⊗ My ⊗ Mz) T[n] + g + f[n or 0] for tridiagonal 1-D masses.
 
-    T (N, nx, ny, nz) C order; ``d*`` the 1-D diagonals, ``o*`` the constant
-    off-diagonals; ``g`` (nx*ny*nz,), ``f`` (1 or N, nx*ny*nz); out (N, nx*ny*nz).
+    T (N, nx, ny, nz) C order; ``d*`` the 1-D diagonals, ``o*`` the off-diagonals
+    (``o*[i]`` couples nodes i and i + 1: constant on a homogeneous box, weighted by the
+    layers' VHC along z); ``g`` (nx*ny*nz,), ``f`` (1 or N, nx*ny*nz); out (N, nx*ny*nz).
     The three 1-D products are applied one axis at a time (9 instead of 27 flops
     per node).
     """
@@ -342,18 +343,18 @@ def tridiag3_rhs(T, a, dx, ox, dy, oy, dz, oz, scale, g, f, out):
                 for k in range(nz):
                     v = dz[k] * X[i, j, k]
                     if k > 0:
-                        v += oz * X[i, j, k - 1]
+                        v += oz[k - 1] * X[i, j, k - 1]
                     if k < nz - 1:
-                        v += oz * X[i, j, k + 1]
+                        v += oz[k] * X[i, j, k + 1]
                     A[i, j, k] = v
         for i in range(nx):  # y
             for j in range(ny):
                 for k in range(nz):
                     v = dy[j] * A[i, j, k]
                     if j > 0:
-                        v += oy * A[i, j - 1, k]
+                        v += oy[j - 1] * A[i, j - 1, k]
                     if j < ny - 1:
-                        v += oy * A[i, j + 1, k]
+                        v += oy[j] * A[i, j + 1, k]
                     B[i, j, k] = v
         fn = f[0] if one else f[n]
         c = a[n] * scale
@@ -362,8 +363,55 @@ def tridiag3_rhs(T, a, dx, ox, dy, oy, dz, oz, scale, g, f, out):
                 for k in range(nz):
                     v = dx[i] * B[i, j, k]
                     if i > 0:
-                        v += ox * B[i - 1, j, k]
+                        v += ox[i - 1] * B[i - 1, j, k]
                     if i < nx - 1:
-                        v += ox * B[i + 1, j, k]
+                        v += ox[i] * B[i + 1, j, k]
                     q = (i * ny + j) * nz + k
                     out[n, q] = c * v + g[q] + fn[q]
+
+
+@numba.njit(cache=True, nogil=True)
+def layered_modes_solve(Y, mux, muy, alpha, beta, cd, co, kd, ko, md, mo, hd):
+    """Solve, in place, the z-tridiagonal system of every member and (x, y) mode.
+
+    Y (B, Px, Pz, Py): right-hand sides in x-y modal coordinates, z nodal; mode (p, q)
+    of member b solves ``(alpha[b] Mc + beta[b] (Kk + (mux[p] + muy[q]) Mk) + Hd) y = Y``
+    with ``Mc`` (``cd`` diagonal, ``co`` off-diagonal), ``Kk`` (``kd``, ``ko``) and
+    ``Mk`` (``md``, ``mo``) symmetric tridiagonal and ``Hd`` diagonal. The matrices
+    are symmetric positive definite and diagonally dominant: Thomas's algorithm,
+    without pivoting, factorizing on the fly (per-member coefficients cost nothing).
+    The y modes are the innermost, contiguous axis: the recurrences in z of the Py
+    systems run side by side (SIMD lanes, overlapping divisions) instead of one
+    latency-bound chain per system.
+    """
+    B, Px, Pz, Py = Y.shape
+    cp = np.empty((Pz, Py))
+    bl = np.empty(Py)
+    ad = np.empty(Pz)
+    ao = np.empty(Pz)
+    for b in range(B):
+        a = alpha[b]
+        bb = beta[b]
+        for r in range(Pz):
+            ad[r] = a * cd[r] + bb * kd[r] + hd[r]
+        for r in range(Pz - 1):
+            ao[r] = a * co[r] + bb * ko[r]
+        for p in range(Px):
+            for q in range(Py):
+                bl[q] = bb * (mux[p] + muy[q])
+            X = Y[b, p]
+            for q in range(Py):
+                inv = 1.0 / (ad[0] + bl[q] * md[0])
+                X[0, q] *= inv
+                if Pz > 1:
+                    cp[0, q] = (ao[0] + bl[q] * mo[0]) * inv
+            for r in range(1, Pz):
+                for q in range(Py):
+                    lo = ao[r - 1] + bl[q] * mo[r - 1]
+                    inv = 1.0 / (ad[r] + bl[q] * md[r] - lo * cp[r - 1, q])
+                    X[r, q] = (X[r, q] - lo * X[r - 1, q]) * inv
+                    if r < Pz - 1:
+                        cp[r, q] = (ao[r] + bl[q] * mo[r]) * inv
+            for r in range(Pz - 2, -1, -1):
+                for q in range(Py):
+                    X[r, q] -= cp[r, q] * X[r + 1, q]

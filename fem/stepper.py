@@ -18,7 +18,10 @@ Three solvers, chosen automatically (``method="auto"``):
 ``"fast"``
     structured :func:`fem.mesh.box_mesh`, homogeneous VHC and TC, lumped
     mass: fast diagonalization (:class:`fem.fastdiag.KroneckerSolver`),
-    exact for the P1 system, per-member scales at no extra cost;
+    exact for the P1 system, per-member scales at no extra cost; with
+    ``operator="kronecker"`` also media that vary only with depth z
+    (:class:`fem.layered.LayeredKroneckerSolver`: x-y modes, a tridiagonal
+    solve in z per mode) when the x and y faces are insulating or fixed;
 ``"direct"``
     up to ``direct_max_nodes`` (30,000) nodes: sparse LU, cached per
     distinct pair of member scales (the LU of a 3-D mesh fills in: at 115,000 nodes of
@@ -46,6 +49,7 @@ from .assembly import (
 )
 from .bc import FACES, HeatBoundary, face_nodes
 from .fastdiag import MASS_KINDS, KroneckerSolver, NotApplicable, one_d_mass, one_d_operators
+from .layered import LayeredKroneckerSolver, layer_coefficients, layered_one_d
 from .linsolve import BatchedPCG, DirectSolver
 from .mesh import element_volumes, structured_grid
 from .threads import run_blocks
@@ -61,6 +65,7 @@ _METHODS = ("auto", "fast", "direct", "pcg")
 #: 25 / 23 at TC ratios 2 / 4 / 8 (equal time near 4); MCmatlab's Example 14 (VHC ratio 477)
 #: 40 against 13, ten times slower.
 KRON_PRECONDITIONER_MAX_RATIO = {"vhc": 2.0, "tc": 4.0}
+_INHOMOGENEOUS = "VHC and TC must be homogeneous"
 
 
 class HeatStepper:
@@ -89,7 +94,10 @@ class HeatStepper:
         edges, where the Kuhn split weighs mass and stiffness by 4/3 or 2/3; it is as
         accurate away from them and, unlike P1, needs no per-member edge correction
         when every member has its own VHC and TC, so ensembles whose scales change at
-        every step (joint estimation of VHC, TC) cost the same as fixed ones.
+        every step (joint estimation of VHC, TC) cost the same as fixed ones. VHC and TC
+        may also vary with depth only (constant over each element layer): the z factors
+        are then weighted layer by layer (:mod:`fem.layered`), and with insulating or
+        fixed x and y faces the solve is direct (:class:`fem.layered.LayeredKroneckerSolver`).
     mass : {"lumped", "averaged", "consistent"}
         With ``operator="kronecker"``: the 1-D mass matrices of the tensor product
         (:func:`fem.fastdiag.one_d_mass`). ``"averaged"`` (the mean of the lumped and
@@ -202,16 +210,34 @@ class HeatStepper:
     def _kronecker_operators(self) -> None:
         """Replace M, K, R, g by their tensor-product forms (``operator="kronecker"``)."""
         why = self._fast_unavailable()
-        if why is not None:
+        layers = None
+        if why == _INHOMOGENEOUS:
+            layers = self._layers_or_none()
+            if layers is None:
+                why = "VHC and TC must be homogeneous or vary only with depth z"
+        if why is not None and layers is None:
             raise ValueError(f"operator='kronecker' is not applicable: {why}")
+        self._layers = layers
         grid = self._grid
         K1 = [one_d_operators(n, h)[1] for n, h in zip(grid.shape, grid.spacing, strict=True)]
         M1 = [one_d_mass(n, h, self.mass) for n, h in zip(grid.shape, grid.spacing, strict=True)]
-        c, k = float(self.vhc[0]), float(self.tc[0])
         Ms = [sp.csr_array(m) for m in M1]
-        K = (sp.kron(sp.kron(sp.csr_array(K1[0]), Ms[1]), Ms[2])
-             + sp.kron(sp.kron(Ms[0], sp.csr_array(K1[1])), Ms[2])
-             + sp.kron(sp.kron(Ms[0], Ms[1]), sp.csr_array(K1[2])))
+        if layers is None:
+            c, k = float(self.vhc[0]), float(self.tc[0])
+            K = (sp.kron(sp.kron(sp.csr_array(K1[0]), Ms[1]), Ms[2])
+                 + sp.kron(sp.kron(Ms[0], sp.csr_array(K1[1])), Ms[2])
+                 + sp.kron(sp.kron(Ms[0], Ms[1]), sp.csr_array(K1[2])))
+        else:  # z factors weighted layer by layer; c, k are then folded into them
+            c = k = 1.0
+            cd, co, _, _ = layered_one_d(grid.dz, layers[0], self.mass)
+            md, mo, kd, ko = layered_one_d(grid.dz, layers[1], self.mass)
+            Mzc = sp.csr_array(sp.diags_array([co, cd, co], offsets=[-1, 0, 1]))
+            Mzk = sp.csr_array(sp.diags_array([mo, md, mo], offsets=[-1, 0, 1]))
+            Kzk = sp.csr_array(sp.diags_array([ko, kd, ko], offsets=[-1, 0, 1]))
+            K = (sp.kron(sp.kron(sp.csr_array(K1[0]), Ms[1]), Mzk)
+                 + sp.kron(sp.kron(Ms[0], sp.csr_array(K1[1])), Mzk)
+                 + sp.kron(sp.kron(Ms[0], Ms[1]), Kzk))
+            M1c = [M1[0], M1[1], Mzc.toarray()]
         R = sp.csr_array((K.shape[0], K.shape[0]))
         g = np.zeros(K.shape[0])
         for face in FACES:
@@ -226,6 +252,8 @@ class HeatStepper:
             area = sp.kron(sp.kron(w[0], w[1]), w[2]).tocsr()  # face mass, cm^2
             R = R + bc.h * area
             g += bc.h * bc.temperature * np.asarray(area.sum(axis=1)).ravel()
+        if layers is not None:  # the mass carries the layers' VHC
+            M1, Ms = M1c, [Ms[0], Ms[1], Mzc]
         if self.mass == "lumped":
             mass = np.einsum("i,j,k->ijk", *(np.diag(m) for m in M1)).ravel()
             self._m_lumped = c * mass
@@ -237,7 +265,8 @@ class HeatStepper:
             self.R = sp.csr_matrix(R)
             # the right-hand side's mass product, axis by axis (numba), not the 27-point M
             self._m_tridiag = (c, grid.node_shape, [np.ascontiguousarray(np.diagonal(m))
-                                                    for m in M1], [float(m[0, 1]) for m in M1])
+                                                    for m in M1],
+                               [np.ascontiguousarray(np.diagonal(m, 1)) for m in M1])
         self.K = sp.csr_matrix(k * K)
         self.g = g
 
@@ -253,6 +282,19 @@ class HeatStepper:
                         self.dt, self.theta, self._m_lumped if exact else None,
                         self.K if exact else None, self.R.diagonal() if exact else None,
                         self._free_mask(), exact=exact, mass=self.mass)
+                    self._order = self._solver.free_nodes
+                    self._identity_order = np.array_equal(self._order, np.arange(self.npoints))
+                    return "fast"
+                except NotApplicable as exc:
+                    why = str(exc)
+            layers = getattr(self, "_layers", None)  # set by _kronecker_operators
+            if why == _INHOMOGENEOUS and layers is not None:
+                try:
+                    self._solver = LayeredKroneckerSolver(
+                        self._grid, self.boundary, layers[0], layers[1], self.dt, self.theta,
+                        mass=self.mass)
+                    if not np.array_equal(np.sort(self._solver.free_nodes), f):
+                        raise NotApplicable("fixed nodes are not whole faces of the box")
                     self._order = self._solver.free_nodes
                     self._identity_order = np.array_equal(self._order, np.arange(self.npoints))
                     return "fast"
@@ -307,11 +349,23 @@ class HeatStepper:
         mask[self.free] = True
         return mask
 
+    def _layers_or_none(self):
+        """(vhc, tc) per element layer ((nz,) each) on a box mesh whose media vary only
+        with z and conduct somewhere, with a Kronecker-product mass; else None."""
+        if not self.lumped and self.mass == "lumped" or not self.tc.any():
+            return None
+        grid = getattr(self, "_grid", None) or structured_grid(self.mesh)
+        if grid is None:
+            return None
+        self._grid = grid
+        c, k = layer_coefficients(grid, self.vhc), layer_coefficients(grid, self.tc)
+        return None if c is None or k is None else (c, k)
+
     def _fast_unavailable(self) -> str | None:
         if not self.lumped and self.mass == "lumped":
             return "consistent mass is not a Kronecker product"
         if np.ptp(self.vhc) != 0 or np.ptp(self.tc) != 0:
-            return "VHC and TC must be homogeneous"
+            return _INHOMOGENEOUS
         if not self.tc.any():
             return "TC = 0 (no conduction: the step is a diagonal solve)"
         self._grid = structured_grid(self.mesh)
