@@ -97,7 +97,7 @@ def main(argv=None):
         if args.bank:  # the still filter: the paper's walk of the constant scenario
             from enkf.tissue.drift import DriftBank
 
-            setup.random_walk_std, setup.rtps, setup.drift = 0.002, 0.0, DriftBank()
+            setup.parameters.random_walk_std, setup.model_error.rtps, setup.drift = 0.002, 0.0, DriftBank()
             setup.__post_init__()
         identify(setup, truth.times[1:4], data[:3])  # warm up the JIT and the solvers
         walls, med, mx, ratios, rest = [], [], [], [], []

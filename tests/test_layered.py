@@ -162,7 +162,7 @@ def test_identify_two_layers_end_to_end(tmp_path):
     est = identify(setup, times, data)
     assert est.diverged is None
     assert (tmp_path / f"emulator-{cfg_key(cfg)}.npz").exists() and emu.have.any()
-    lo, hi = setup.prior_bounds()
+    lo, hi = setup.parameters.prior_bounds()
     assert np.all((lo <= est.param_mean[-1]) & (est.param_mean[-1] <= hi))
     assert est.param_std[-1, 0] < est.param_std[0, 0]  # the data told something about mua
 
@@ -231,8 +231,8 @@ def test_config_estimates_both_layers():
     np.testing.assert_allclose(out.media_nodes["mua2_range"], (2.5 / 1.5, 15.0))
     np.testing.assert_allclose(out.media_nodes["mus2_range"], (50.0, 450.0))
     setup = out.setup(lambda *a: None)
-    assert setup.nominal["mua2"] == 5.0 and setup.nominal["mus2"] == 150.0
-    lo, hi = setup.prior_bounds()
+    assert setup.parameters.nominal["mua2"] == 5.0 and setup.parameters.nominal["mus2"] == 150.0
+    lo, hi = setup.parameters.prior_bounds()
     np.testing.assert_allclose(lo, [0.5, 50.0, 2.5, 75.0])
     cfg = both_layers()
     cfg["filter"]["prior"] = {"mua2": [3.0, 8.0]}

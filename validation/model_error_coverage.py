@@ -86,7 +86,7 @@ def run_one(cfg, emulator, model: str, case: str, seed: int, variant: str,
     if camera:
         from independent_models import independent_surface
 
-        image = setup.image
+        image = setup.sensors.image
         clean = image.average(independent_surface(model, case, image.sample_points()[:, :2]))
         data = clean[1:] + 0.1 * rng.standard_normal(clean[1:].shape)
     else:

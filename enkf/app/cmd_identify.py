@@ -89,7 +89,7 @@ def _identify_one(cfg, absorption, seed, data_path, out_dir, quiet=True) -> dict
     advisor = None if cfg.advice is None else cfg.advice.advisor(setup)
     medium = cfg.model.G.media[cfg.medium]  # the estimated medium's damage law
     risks = {}  # one tracker per filter (a drift bank runs several)
-    n_filters = 1 if setup.drift is None else len(setup.drift.restart_knots) + 1
+    n_filters = 1 if setup.parameters.drift is None else len(setup.parameters.drift.restart_knots) + 1
     bar = Progress(len(times) * n_filters, "filter", enabled=not quiet)
     seen = {}  # the bank's filters run one after the other
 
@@ -332,7 +332,7 @@ def _follow(args, cfg, absorption, seed, t_emu) -> int:
     from ..problem import FilterDivergence
     from ..tissue import OnlineIdentifier
     from ..tissue.absorption import fill_prior_points
-    from ..tissue.identify import persistence_summary
+    from ..tissue.estimates import persistence_summary
     from ..tissue.outputs import readable_stop
     from .readers import follow_csv
     from .report import manifest
@@ -350,12 +350,12 @@ def _follow(args, cfg, absorption, seed, t_emu) -> int:
     fill_prior_points(setup)  # before the first reading, not while the stream waits
     ident = OnlineIdentifier(setup, param_bounds=cfg.param_bounds,
                              dt_hint=1.0 / cfg.rate if cfg.rate else 0.1)
-    names = list(setup.parameter_names)
-    n_off = setup.n_sensor_offsets
+    names = list(setup.parameters.names)
+    n_off = setup.sensors.n_offsets
     cols = ["time_s"] + [f"{n}_{s}" for n in names for s in ("mean", "std")] + [
         f"sensor{j + 1}_offset_{s}" for j in range(n_off) for s in ("mean", "std")] + [
-        f"T{j}_{s}" for j in range(len(setup.tracked_positions)) for s in ("mean", "std")] + (
-        ["drift_weight"] if setup.drift is not None else []) + (
+        f"T{j}_{s}" for j in range(len(setup.sensors.tracked)) for s in ("mean", "std")] + (
+        ["drift_weight"] if setup.parameters.drift is not None else []) + (
         ["target_time_median_s"] if cfg.advice is not None else [])
     # [advice]: after each reading, when the target is coagulated (advice.csv, and its
     # median in each line of estimates.csv); the bank's filters mixed by weight
@@ -422,7 +422,7 @@ def _follow(args, cfg, absorption, seed, t_emu) -> int:
     def start(times, frames, final=False):
         """The identifier, once the first frames are in (they may place the camera)."""
         nonlocal setup, ident
-        image = setup.image
+        image = setup.sensors.image
         if frames.shape[1:] != tuple(int(v) for v in image.shape):
             raise ValueError(f"{args.follow}: frames are {frames.shape[1:]} pixels, the camera "
                              f"(sensors.camera.shape) {list(image.shape)}")
@@ -493,7 +493,7 @@ def _follow(args, cfg, absorption, seed, t_emu) -> int:
     _live_figure(out, ident, setup, advice_rows)
     persistence = persistence_summary(ident)
     drift = {}
-    if setup.drift is not None and ident.history:
+    if setup.parameters.drift is not None and ident.history:
         w = ident.history[-1].drift_weight
         drift = {"drift": {"behaviour": "drifting" if w >= 0.5 else "still", "weight_final": w}}
         print(f"optics {drift['drift']['behaviour']} while heated (P(drift) = {w:.2g})")
@@ -539,7 +539,7 @@ def _keep_page(page, url: str, recorder) -> None:
 def _follow_restarts(ident, setup) -> dict:
     """run.json's ``smoother_restarts`` of a --follow run (summary.json's shape, without
     the wall time): the time of each restart and the readings it used."""
-    if not setup.smoother_restarts and setup.drift is None:
+    if not setup.restarts.times and setup.parameters.drift is None:
         return {}
     times = [h.time for h in ident.history]
     return {"smoother_restarts": [{"time_s": t, "readings": times.index(t) + 1}
@@ -550,21 +550,21 @@ def _live_figure(out, ident, setup, advice=None) -> None:
     import numpy as np
 
     from ..tissue import TissueEstimates
-    from ..tissue.identify import persistence_summary
+    from ..tissue.estimates import persistence_summary
     from .report import plot_identification
 
     h = ident.history
     if not h:
         return
     est = TissueEstimates(
-        times=np.array([e.time for e in h]), names=setup.parameter_names,
+        times=np.array([e.time for e in h]), names=setup.parameters.names,
         param_mean=np.array([e.param_mean for e in h]), param_std=np.array([e.param_std for e in h]),
-        tracked_positions=setup.tracked_positions,
+        tracked_positions=setup.sensors.tracked,
         tracked_mean=np.array([e.tracked_mean for e in h]),
         tracked_std=np.array([e.tracked_std for e in h]),
         analysed=np.array([e.analysed for e in h]),
         step_latency_s=np.array([e.latency_s for e in h]), filter_wall_s=0.0,
-        drift_weight=None if setup.drift is None else np.array([e.drift_weight for e in h]))
+        drift_weight=None if setup.parameters.drift is None else np.array([e.drift_weight for e in h]))
     (Path(out) / "figures").mkdir(exist_ok=True)
     tmp = Path(out) / "figures" / ".estimates.png.tmp.png"
     # the caution when the innovations persist, from the identifier's own record

@@ -248,7 +248,7 @@ class IdentifyConfig:
             HS.heat_boundary_type,
             temperature=None if HS.heat_boundary_type != 2 else HS.T_ambient,
             h=HS.heat_transfer_coefficient if HS.heat_boundary_type == 2 else 0.0)
-        return TissueFilterSetup(
+        return TissueFilterSetup.build(
             grid=fem.BoxGrid(*self.grid, G.Lx, G.Ly, G.Lz), absorption=absorption,
             power=HS.laser_power, nominal=nominal, T_initial=float(HS.T_initial),
             heat_boundary=boundary, **kw)
