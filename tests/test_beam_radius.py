@@ -92,7 +92,7 @@ def test_config_carries_the_beam_radius(tiny):
     cfg["filter"]["prior"] = {"beam_radius": [0.08, 0.12]}
     out = identify_config_from_dict(cfg)
     assert out.beam_nodes == {"n_nodes": 3, "radius_range": (0.07, 0.13)}
-    np.testing.assert_allclose(out.setup(lambda *a: None).prior_bounds()[0][2], 0.08)
+    np.testing.assert_allclose(out.setup(lambda *a: None).parameters.prior_bounds()[0][2], 0.08)
 
 
 @pytest.mark.parametrize("change, message", [

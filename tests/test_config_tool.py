@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from enkf.app.cli import main
-from enkf.app.config import _FILTER_KEYS, identify_config_from_dict, load_identify
+from enkf.app.config import FILTER_KEYS, identify_config_from_dict, load_identify
 from enkf.app.readers import read_sensor_csv
 from mcmatlab_py.config import _HS_KEYS, _MC_KEYS, ConfigError, load_model, model_from_config
 
@@ -131,7 +131,7 @@ def test_a_misspelt_key_names_the_closest_and_whole_allowed_keys(path, typo, clo
     assert len(msg) < 400 and msg.endswith(")") and "..." not in msg
     listed = msg.split("(allowed: ")[1][:-1].split(", ")
     more = int(listed.pop().split()[1]) if listed[-1].endswith(" more") else 0
-    keys = {"filter": _FILTER_KEYS, "MC": _MC_KEYS, "HS": _HS_KEYS}[path.split(".")[0]]
+    keys = {"filter": FILTER_KEYS, "MC": _MC_KEYS, "HS": _HS_KEYS}[path.split(".")[0]]
     assert listed == sorted(keys)[:len(listed)] and len(listed) + more == len(keys)
 
 

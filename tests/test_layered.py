@@ -38,7 +38,7 @@ def tiny_two_layer():
 def test_the_example_estimates_the_dermis_under_the_known_epidermis():
     cfg = load_identify(EX / "two_layer.toml")
     assert cfg.medium == 0 and cfg.emulator_method == "white"
-    assert cfg.setup(lambda mua, mus: None).nominal == {"mua": 1.0, "mus": 100.0, "VHC": 3.76,
+    assert cfg.setup(lambda mua, mus: None).parameters.nominal == {"mua": 1.0, "mus": 100.0, "VHC": 3.76,
                                                          "TC": 0.0037}
     spec = EmulatorSpec.from_model(cfg.model, medium=cfg.medium, mesh_divisions=(20, 20, 10),
                                    **cfg.emulator_kw)
@@ -59,7 +59,7 @@ def test_the_estimated_medium_by_name_or_index(value, index):
     out = identify_config_from_dict(cfg)
     assert out.medium == index
     m = out.model.G.media[index]
-    assert out.setup(lambda mua, mus: None).nominal["mua"] == m.mua
+    assert out.setup(lambda mua, mus: None).parameters.nominal["mua"] == m.mua
 
 
 @pytest.mark.parametrize("change, message", [

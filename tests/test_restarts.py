@@ -8,9 +8,9 @@ import numpy as np
 import pytest
 
 from enkf.tissue import TissueForwardModel, identify
+from enkf.tissue.online import OnlineIdentifier
 from enkf.tissue.pieces import assemble
 from enkf.tissue.restart import restart_ensemble, restart_points
-from enkf.tissue.online import OnlineIdentifier
 from enkf.tissue.smooth import smooth_constant, smooth_drifting
 
 

@@ -201,7 +201,7 @@ class CoagulationForwardModel:
         names = tuple(names)
         self.i_native = [names.index("mua"), names.index("mus")]
         self.i_coag = [names.index("mua_coag"), names.index("mus_coag")]
-        self.i_base = [names.index(n) for n in base.setup.estimate]  # the base model's order
+        self.i_base = [names.index(n) for n in base.setup.parameters.estimate]  # the base model's order
         self.reset()
 
     # ------------------------------------------------------------------ damage bookkeeping
