@@ -114,7 +114,7 @@ class ModelError:
         A fixed multiplicative inflation of the anomalies (:class:`enkf.problem.FilterConfig`).
     rtps : float
         Relaxation of the temperatures' analysis spread back towards the forecast's, alpha
-        in [0, 1] (Whitaker & Hamill 2012; :func:`enkf.analysis.relax_to_prior_spread`):
+        in [0, 1] (Whitaker & Hamill 2012; :func:`enkf.spread.relax_to_prior_spread`):
         0 = none.
     """
 
