@@ -307,7 +307,7 @@ def test_identify_both_layers_end_to_end(tmp_path):
                        "use mcmatlab_py.emulator_media.TwoMediaEmulator"):
         setup.absorption = emu.tables[0]
         TissueForwardModel(setup)
-    setup.estimate = ("mua", "mus")  # and the other way round: a one-medium estimate
+    setup.parameters.estimate = ("mua", "mus")  # and the other way round: a one-medium estimate
     setup.absorption = emu
     with pytest.raises(ValueError, match=r"takes \('mua', 'mus', 'mua2', 'mus2'\): use a "
                        "one-medium absorption model"):

@@ -226,7 +226,7 @@ def test_restart_settings_that_cannot_run_are_refused(tissue):
     assert s.parameters.walking == ("mua",)
     with pytest.raises(ValueError, match="SmootherRestarts.gaussian must be True or False"):
         _setup(tissue, smoother_restarts="laser_off", smoother_restart_gaussian="false")
-    with pytest.raises(ValueError, match="smoother_restart_iterations must be an integer"):
+    with pytest.raises(ValueError, match="SmootherRestarts.iterations must be an integer"):
         _setup(tissue, smoother_restarts="laser_off", smoother_restart_iterations=True)
 
 
