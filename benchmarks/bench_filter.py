@@ -97,8 +97,7 @@ def main(argv=None):
         if args.bank:  # the still filter: the paper's walk of the constant scenario
             from enkf.tissue.drift import DriftBank
 
-            setup.random_walk_std, setup.rtps, setup.drift = 0.002, 0.0, DriftBank()
-            setup.__post_init__()
+            setup = setup.with_(random_walk_std=0.002, rtps=0.0, drift=DriftBank())
         identify(setup, truth.times[1:4], data[:3])  # warm up the JIT and the solvers
         walls, med, mx, ratios, rest = [], [], [], [], []
         for _ in range(args.repeat):

@@ -5,7 +5,9 @@ no knowledge of tissue, photons or meshes (it imports nothing from ``mcmatlab_py
 ``fem``):
 
 - :mod:`enkf.analysis`: analysis updates (perturbed-observation EnKF, ETKF, localized
-  EnKF, inflation, rotation).
+  EnKF).
+- :mod:`enkf.spread`: the ensemble's spread around an analysis (inflation, relaxation to
+  prior spread, rotation).
 - :mod:`enkf.transforms`: parameter transforms (identity, log, logit).
 - :mod:`enkf.problem`: what is filtered and how (:class:`FilterConfig`,
   :class:`FilterProblem`, the prior, :class:`FilterResult`).
@@ -49,7 +51,7 @@ from .adaptive import (
     innovation_persistence,
     normalized_innovation,
 )
-from .analysis import enkf_perturbed_obs, etkf, inflate, random_rotation, relax_to_prior_spread
+from .analysis import enkf_perturbed_obs, etkf
 from .health import HealthCheck
 from .importance import ImportanceSample, amis
 from .loop import run_filter
@@ -64,6 +66,7 @@ from .problem import (
     uniform_prior,
 )
 from .smoother import es_mda
+from .spread import inflate, random_rotation, relax_to_prior_spread
 from .transforms import IdentityTransform, LogitTransform, LogTransform
 
 try:

@@ -44,11 +44,12 @@ from collections.abc import Callable
 import numpy as np
 
 from .adaptive import InflationEstimator, innovation_loglik, normalized_innovation
-from .analysis import analysis, enkf_localized, inflate, random_rotation, relax_to_prior_spread
+from .analysis import analysis, enkf_localized
 from .checks import as_generator, cov_sqrt, covariance, float_array, rows_times, variances
 from .health import HealthCheck
 from .problem import FilterConfig, FilterDivergence, FilterProblem, FilterResult, StepReport
 from .random import PendingNormals, standard_normal, standard_normal_later
+from .spread import inflate, random_rotation, relax_to_prior_spread
 from .transforms import as_transforms, to_filter_space, to_physical
 
 __all__ = ["run_filter"]

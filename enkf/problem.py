@@ -62,7 +62,7 @@ class FilterConfig:
         walk and observation perturbations (and rotations), in that order each step.
     rotate : bool
         After each analysis, rotate the anomalies by a random mean-preserving
-        orthogonal matrix (:func:`enkf.analysis.random_rotation`; DAPPER's
+        orthogonal matrix (:func:`enkf.spread.random_rotation`; DAPPER's
         ``rot=True``). Recommended for long ETKF runs with little inflation.
     mda : int
         Analysis iterations per observed step (1: the usual filter). With ``mda > 1``
@@ -79,7 +79,7 @@ class FilterConfig:
         ``mda > 1``), on top of ``inflation``. Default: none.
     rtps : float
         Relaxation to prior spread of the state part after each analysis,
-        :math:`\\alpha \\in [0, 1]` (:func:`enkf.analysis.relax_to_prior_spread`;
+        :math:`\\alpha \\in [0, 1]` (:func:`enkf.spread.relax_to_prior_spread`;
         0 = none, the default). The parameters keep their random walk.
     """
 

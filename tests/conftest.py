@@ -41,7 +41,7 @@ def make_setup(**kw):
                 nominal=NOMINAL, n_members=20, seed=1, method="etkf",
                 tracked_positions=[(0, 0, 0), (0, 0, 0.125)])
     args.update(kw)
-    return TissueFilterSetup(**args)
+    return TissueFilterSetup.build(**args)
 
 
 def twin_data(s, mua, mus, seed=0, times=None):

@@ -84,15 +84,15 @@ def test_config_carries_the_beam_radius(tiny):
     assert out.beam_nodes["n_nodes"] == 4
     np.testing.assert_allclose(out.beam_nodes["radius_range"], (0.09 / 1.1, 0.11 * 1.1))
     setup = out.setup(lambda *a: None)
-    assert setup.nominal["beam_radius"] == 0.1
-    lo, hi = setup.prior_bounds()
+    assert setup.parameters.nominal["beam_radius"] == 0.1
+    lo, hi = setup.parameters.prior_bounds()
     np.testing.assert_allclose(lo, [0.5, 50.0, 0.09])
     np.testing.assert_allclose(hi, [2.0, 200.0, 0.11])
     cfg = _cfg(tiny, radius_nodes=3, radius_range=[0.07, 0.13])
     cfg["filter"]["prior"] = {"beam_radius": [0.08, 0.12]}
     out = identify_config_from_dict(cfg)
     assert out.beam_nodes == {"n_nodes": 3, "radius_range": (0.07, 0.13)}
-    np.testing.assert_allclose(out.setup(lambda *a: None).prior_bounds()[0][2], 0.08)
+    np.testing.assert_allclose(out.setup(lambda *a: None).parameters.prior_bounds()[0][2], 0.08)
 
 
 @pytest.mark.parametrize("change, message", [

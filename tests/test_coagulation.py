@@ -19,7 +19,7 @@ from enkf.tissue.coagulation import (
     coagulated_fraction,
     effective_optics,
 )
-from enkf.tissue.identify import assemble
+from enkf.tissue.pieces import assemble
 from mcmatlab_py.config import ConfigError
 from mcmatlab_py.heat import HeatSimulation
 
@@ -83,7 +83,7 @@ def test_coagulation_settings_are_checked(kw, message):
 # ------------------------------------------------------------------ the members' damage
 def _model(tissue, **kw):
     s = tissue.setup(T_initial=37.0, power=LASER, parameter_model="coagulation", **kw)
-    return s, CoagulationForwardModel(TissueForwardModel(s), s.coagulation, s.parameter_names)
+    return s, CoagulationForwardModel(TissueForwardModel(s), s.parameters.coagulation, s.parameters.names)
 
 
 def test_damage_follows_the_members_and_is_never_added_twice(tissue):
@@ -140,7 +140,7 @@ def test_mean_field_model_error_grows_with_each_members_coagulated_fraction(tiss
         p.model._t, p.model._omega = TIMES[24], pieces.model._latest(TIMES[24])
     v0 = plain.model_noise()(np.random.default_rng(5), T, X1, theta, TIMES[24], TIMES[25])
     v1 = with_mf.model_noise()(np.random.default_rng(5), T, X1, theta, TIMES[24], TIMES[25])
-    rel = s.model_error_rel_std
+    rel = s.model_error.rel_std
     np.testing.assert_allclose(v1, v0 * ((rel + 0.25 * np.sqrt(F)) / rel)[:, None], rtol=1e-10,
                                atol=1e-15)
     rw = assemble(tissue.setup(T_initial=37.0, power=LASER, model_error="structured"))
@@ -228,10 +228,10 @@ def test_config_builds_the_damage_driven_filter(tiny):
                      "mean_field_rel_std": 0.1},
         prior={"mus_coag": [150.0, 800.0]}, bounds={"mua_coag": [0.1, 50.0]}))
     s = c.setup(absorption=lambda mua, mus: None)
-    assert s.parameter_names == ("mua", "mus", "mua_coag", "mus_coag")
-    assert (s.coagulation.E, s.coagulation.A) == (4.0e5, 1e60)
-    assert s.coagulation.mean_field_rel_std == 0.1
-    lo, hi = s.prior_bounds()
+    assert s.parameters.names == ("mua", "mus", "mua_coag", "mus_coag")
+    assert (s.parameters.coagulation.E, s.parameters.coagulation.A) == (4.0e5, 1e60)
+    assert s.parameters.coagulation.mean_field_rel_std == 0.1
+    lo, hi = s.parameters.prior_bounds()
     np.testing.assert_allclose(lo, [0.5, 50.0, 1.0, 150.0])  # mua_coag: 0.5 x 2 x 1
     np.testing.assert_allclose(hi, [2.0, 200.0, 4.0, 800.0])
     assert c.param_bounds.shape == (4, 2) and tuple(c.param_bounds[2]) == (0.1, 50.0)

@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from enkf.app.cli import main
-from enkf.app.config import _FILTER_KEYS, identify_config_from_dict, load_identify
+from enkf.app.config import FILTER_KEYS, identify_config_from_dict, load_identify
 from enkf.app.readers import read_sensor_csv
 from mcmatlab_py.config import _HS_KEYS, _MC_KEYS, ConfigError, load_model, model_from_config
 
@@ -131,7 +131,7 @@ def test_a_misspelt_key_names_the_closest_and_whole_allowed_keys(path, typo, clo
     assert len(msg) < 400 and msg.endswith(")") and "..." not in msg
     listed = msg.split("(allowed: ")[1][:-1].split(", ")
     more = int(listed.pop().split()[1]) if listed[-1].endswith(" more") else 0
-    keys = {"filter": _FILTER_KEYS, "MC": _MC_KEYS, "HS": _HS_KEYS}[path.split(".")[0]]
+    keys = {"filter": FILTER_KEYS, "MC": _MC_KEYS, "HS": _HS_KEYS}[path.split(".")[0]]
     assert listed == sorted(keys)[:len(listed)] and len(listed) + more == len(keys)
 
 
@@ -180,10 +180,10 @@ def test_prior_table_sets_each_parameters_own_range():
     cfg = identify_config_from_dict(with_("filter.prior.mus", [80.0, 400.0]))
     assert cfg.setup_kw["prior"] == {"mus": (80.0, 400.0)}
     setup = cfg.setup(absorption=lambda mua, mus: None)
-    lo, hi = setup.prior_bounds()  # mua keeps prior_range times the medium's value
+    lo, hi = setup.parameters.prior_bounds()  # mua keeps prior_range times the medium's value
     assert lo.tolist() == [0.5, 80.0] and hi.tolist() == [2.0, 400.0]
     # the default health range reaches ten times beyond the prior
-    assert setup.default_param_bounds()[1].tolist() == [5.0, 4000.0]
+    assert setup.parameters.default_bounds()[1].tolist() == [5.0, 4000.0]
     # explicit bounds must contain the new prior, not the old one
     with pytest.raises(ConfigError, match=r"filter.bounds.mus = \[100.0, 1000.0\] must contain "
                                           r"the prior \[80, 400\] \(filter.prior.mus\)"):
@@ -197,18 +197,18 @@ def test_hs_theta_is_the_filters_time_scheme():
     assert "theta" not in identify_config_from_dict(with_("HS.dt", 0.1)).setup_kw
     setup = identify_config_from_dict(with_("HS.theta", 1.0)).setup(
         absorption=lambda mua, mus: None)
-    assert setup.theta == 1.0
+    assert setup.heat.theta == 1.0
     setup = identify_config_from_dict(with_("HS.dt", 0.1)).setup(absorption=lambda mua, mus: None)
-    assert setup.theta == 0.5
+    assert setup.heat.theta == 0.5
 
 
 def test_filter_rtps_reaches_the_setup_and_the_filter():
     """[filter] rtps reaches TissueFilterSetup (and so FilterConfig); default 0 (none)."""
     setup = identify_config_from_dict(with_("filter.rtps", 0.3)).setup(
         absorption=lambda mua, mus: None)
-    assert setup.rtps == 0.3
+    assert setup.model_error.rtps == 0.3
     setup = identify_config_from_dict(with_("HS.dt", 0.1)).setup(absorption=lambda mua, mus: None)
-    assert setup.rtps == 0.0
+    assert setup.model_error.rtps == 0.0
 
 
 def test_bounds_become_the_health_check_range():

@@ -12,7 +12,7 @@ import pytest
 
 import fem
 from enkf.tissue import OnlineIdentifier, TissueForwardModel, identify
-from enkf.tissue.drift import DriftBank, _mix_moments, bank_weights, weighted_quantiles
+from enkf.tissue.drift import DriftBank, bank_weights, mix_moments, weighted_quantiles
 
 
 def test_bank_weights_are_bayes_without_switching():
@@ -59,7 +59,7 @@ def test_weighted_quantiles_and_moments_of_a_mixture():
     pooled = np.vstack([a, b])
     np.testing.assert_allclose(weighted_quantiles([a, b], [0.5, 0.5], q),
                                np.quantile(pooled, q, axis=0, method="hazen"), rtol=1e-12)
-    m, s = _mix_moments(np.array([a.mean(0), b.mean(0)]), np.array([a.std(0), b.std(0)]),
+    m, s = mix_moments(np.array([a.mean(0), b.mean(0)]), np.array([a.std(0), b.std(0)]),
                         np.array([0.5, 0.5]))
     np.testing.assert_allclose(m, pooled.mean(0), rtol=1e-12)
     np.testing.assert_allclose(s, pooled.std(0), rtol=1e-12)
@@ -129,9 +129,9 @@ def test_the_bank_tells_still_from_drifting_optics(runs):
     # above the setting
     drifting = [n for n in est.components if n != "still"]
     assert drifting == ["drifting-2", "drifting-3", "drifting-6"]
-    always = identify(replace(s, drift=replace(BANK, restart_weight=0.0)), times, r["still"][0])
+    always = identify(s.with_(drift=replace(BANK, restart_weight=0.0)), times, r["still"][0])
     assert sorted(x["component"] for x in always.restarts) == drifting
-    never = identify(replace(s, drift=replace(BANK, restart_weight=1.0)), times, r["still"][0])
+    never = identify(s.with_(drift=replace(BANK, restart_weight=1.0)), times, r["still"][0])
     assert not never.restarts
     assert all(not never.components[n].restarts for n in drifting)
     # without a restart the drifting filters are one filter, run once
@@ -157,7 +157,7 @@ def test_the_banks_still_filter_is_the_plain_filter(runs):
     mean is the filters' means weighed by their final weights."""
     s, times, r = runs
     data, est = r["still"]
-    plain = identify(replace(s, drift=None), times, data)
+    plain = identify(s.with_(drift=None), times, data)
     np.testing.assert_array_equal(est.components["still"].param_mean, plain.param_mean)
     np.testing.assert_array_equal(est.components["still"].tracked_std, plain.tracked_std)
     mixed = sum(est.component_weights[n][-1] * e.param_mean[-1]
@@ -180,7 +180,7 @@ def test_online_bank(runs):
 
 
 def test_setup_refuses_a_bank_it_cannot_run(tissue):
-    with pytest.raises(ValueError, match="parameter_model"):
+    with pytest.raises(ValueError, match="needs kind = .random_walk."):
         tissue.setup(drift=DriftBank(), parameter_model="trend")
     with pytest.raises(ValueError, match="DriftBank"):
         tissue.setup(drift="auto")
@@ -221,7 +221,7 @@ def test_config_drift_table(tmp_path):
 def _fake(z, laser_on, drift=None):
     from types import SimpleNamespace
 
-    from enkf.tissue.identify import laser_persistence
+    from enkf.tissue.estimates import laser_persistence
 
     est = SimpleNamespace(innovation_normalized=z, laser_on=laser_on, sensor_offset_mean=None,
                           drift_weight=None if drift is None else np.array([0.5, drift]))
@@ -235,7 +235,7 @@ def test_the_likely_cause_from_the_innovations():
     heated only, with no bank: drifting optics. A bank that supports a drift: drifting
     optics, and no advice; if the innovations persist while cooling too, the model's
     physics (the optics act on nothing then)."""
-    from enkf.tissue.identify import persistence_summary
+    from enkf.tissue.estimates import persistence_summary
 
     rng = np.random.default_rng(3)
     on = np.arange(150) < 50
@@ -302,7 +302,8 @@ def test_paper_filter_with_the_bank(tissue):
     from enkf.paper import filter_setup
 
     s = filter_setup("time-varying", tissue.absorption, drift="auto")
-    assert isinstance(s.drift, DriftBank) and s.random_walk_std == 0.002 and s.rtps == 0.0
-    assert filter_setup("time-varying", tissue.absorption).drift is None
+    assert isinstance(s.parameters.drift, DriftBank) and s.parameters.random_walk_std == 0.002
+    assert s.model_error.rtps == 0.0
+    assert filter_setup("time-varying", tissue.absorption).parameters.drift is None
     with pytest.raises(ValueError, match="drift"):
         filter_setup("constant", tissue.absorption, drift="maybe")

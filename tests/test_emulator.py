@@ -179,7 +179,7 @@ def test_the_prior_points_are_filled_before_the_filter(tmp_path, tissue):
     emu = AbsorptionEmulator.build(spec, cache_dir=tmp_path, progress=False, on_demand=True)
     setup = tissue.setup(absorption=emu)
     fill_prior_points(setup)
-    lo, hi = setup.prior_bounds()
+    lo, hi = setup.parameters.prior_bounds()
     rng = np.random.default_rng(0)
     members = emu.needed(rng.uniform(lo[0], hi[0], 300), rng.uniform(lo[1], hi[1], 300))
     assert np.array_equal(emu.have | members, emu.have)

@@ -250,7 +250,7 @@ def test_a_surface_point_under_a_camera_carries_the_camera_model_error(tissue):
     import dataclasses
 
     from enkf.tissue import OnlineIdentifier
-    from enkf.tissue.identify import assemble
+    from enkf.tissue.pieces import assemble
 
     cam = dataclasses.replace(CAMERA, model_error_rel_std=0.05)
     s = tissue.setup(sensor_positions=np.zeros((0, 3)), image=cam,

@@ -138,7 +138,7 @@ def test_smoother_importance_gives_the_grid_posterior_of_the_tissue_model(tissue
     times = 0.1 * np.arange(1, 16)
     model = TissueForwardModel(s)
     P = fem.probe_matrix(model.mesh, np.zeros((3, 1)))
-    lo, hi = np.log(s.prior_bounds()[0]), np.log(s.prior_bounds()[1])
+    lo, hi = np.log(s.parameters.prior_bounds()[0]), np.log(s.parameters.prior_bounds()[1])
     a, b = np.linspace(lo[0], hi[0], 100), np.linspace(lo[1], hi[1], 100)
     A, B = np.meshgrid(a, b, indexing="ij")
     theta = np.exp(np.column_stack([A.ravel(), B.ravel()]))

@@ -38,7 +38,7 @@ def tiny_two_layer():
 def test_the_example_estimates_the_dermis_under_the_known_epidermis():
     cfg = load_identify(EX / "two_layer.toml")
     assert cfg.medium == 0 and cfg.emulator_method == "white"
-    assert cfg.setup(lambda mua, mus: None).nominal == {"mua": 1.0, "mus": 100.0, "VHC": 3.76,
+    assert cfg.setup(lambda mua, mus: None).parameters.nominal == {"mua": 1.0, "mus": 100.0, "VHC": 3.76,
                                                          "TC": 0.0037}
     spec = EmulatorSpec.from_model(cfg.model, medium=cfg.medium, mesh_divisions=(20, 20, 10),
                                    **cfg.emulator_kw)
@@ -59,7 +59,7 @@ def test_the_estimated_medium_by_name_or_index(value, index):
     out = identify_config_from_dict(cfg)
     assert out.medium == index
     m = out.model.G.media[index]
-    assert out.setup(lambda mua, mus: None).nominal["mua"] == m.mua
+    assert out.setup(lambda mua, mus: None).parameters.nominal["mua"] == m.mua
 
 
 @pytest.mark.parametrize("change, message", [
@@ -162,7 +162,7 @@ def test_identify_two_layers_end_to_end(tmp_path):
     est = identify(setup, times, data)
     assert est.diverged is None
     assert (tmp_path / f"emulator-{cfg_key(cfg)}.npz").exists() and emu.have.any()
-    lo, hi = setup.prior_bounds()
+    lo, hi = setup.parameters.prior_bounds()
     assert np.all((lo <= est.param_mean[-1]) & (est.param_mean[-1] <= hi))
     assert est.param_std[-1, 0] < est.param_std[0, 0]  # the data told something about mua
 
@@ -231,8 +231,8 @@ def test_config_estimates_both_layers():
     np.testing.assert_allclose(out.media_nodes["mua2_range"], (2.5 / 1.5, 15.0))
     np.testing.assert_allclose(out.media_nodes["mus2_range"], (50.0, 450.0))
     setup = out.setup(lambda *a: None)
-    assert setup.nominal["mua2"] == 5.0 and setup.nominal["mus2"] == 150.0
-    lo, hi = setup.prior_bounds()
+    assert setup.parameters.nominal["mua2"] == 5.0 and setup.parameters.nominal["mus2"] == 150.0
+    lo, hi = setup.parameters.prior_bounds()
     np.testing.assert_allclose(lo, [0.5, 50.0, 2.5, 75.0])
     cfg = both_layers()
     cfg["filter"]["prior"] = {"mua2": [3.0, 8.0]}
@@ -307,7 +307,7 @@ def test_identify_both_layers_end_to_end(tmp_path):
                        "use mcmatlab_py.emulator_media.TwoMediaEmulator"):
         setup.absorption = emu.tables[0]
         TissueForwardModel(setup)
-    setup.estimate = ("mua", "mus")  # and the other way round: a one-medium estimate
+    setup.parameters.estimate = ("mua", "mus")  # and the other way round: a one-medium estimate
     setup.absorption = emu
     with pytest.raises(ValueError, match=r"takes \('mua', 'mus', 'mua2', 'mus2'\): use a "
                        "one-medium absorption model"):

@@ -14,7 +14,6 @@ from __future__ import annotations
 
 import json
 import warnings
-from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -115,7 +114,7 @@ def test_the_filter_s_innovations_persist_only_when_its_model_is_wrong():
 
 
 def test_identify_flags_a_truth_whose_conduction_the_model_misses(tissue, tmp_path):
-    from enkf.tissue.identify import persistence_summary
+    from enkf.tissue.estimates import persistence_summary
 
     power = HeatSimulation(P=0.5, duration_on=1.0, duration_off=15.0).laser_power
     s = tissue.setup(power=power, random_walk_std=0.0)
@@ -123,7 +122,7 @@ def test_identify_flags_a_truth_whose_conduction_the_model_misses(tissue, tmp_pa
     # its conduction times `factor`; measured lag-1 (seed 2): -0.08 with the model's
     # conduction, 0.58 with three times it
     for factor, flagged in ((1.0, False), (3.0, True)):
-        truth = replace(s, nominal=dict(s.nominal, TC=s.nominal["TC"] * factor))
+        truth = s.with_(nominal=dict(s.parameters.nominal, TC=s.parameters.nominal["TC"] * factor))
         times, data = tissue.twin_data(truth, 1.0, 100.0, seed=2,
                                        times=np.round(0.1 * np.arange(1, 161), 10))
         with warnings.catch_warnings(record=True) as caught:

@@ -8,8 +8,9 @@ import numpy as np
 import pytest
 
 from enkf.tissue import TissueForwardModel, identify
-from enkf.tissue.identify import assemble, restart_ensemble, restart_points
 from enkf.tissue.online import OnlineIdentifier
+from enkf.tissue.pieces import assemble
+from enkf.tissue.restart import restart_ensemble, restart_points
 from enkf.tissue.smooth import smooth_constant, smooth_drifting
 
 
@@ -110,20 +111,20 @@ def test_the_online_identifier_restarts_too(tissue):
 
 
 @pytest.mark.parametrize("kw, match", [
-    (dict(smoother_restarts="sometimes"), "smoother_restarts must be times .s. or 'laser_off'"),
-    (dict(smoother_restarts=(1.0, 0.5)), "smoother_restarts must be increasing times > 0"),
-    (dict(smoother_restarts=(-1.0,)), "smoother_restarts must be increasing times > 0"),
-    (dict(smoother_restarts=(np.nan,)), "smoother_restarts must be increasing times > 0"),
+    (dict(smoother_restarts="sometimes"), "SmootherRestarts.times must be times .s. or 'laser_off'"),
+    (dict(smoother_restarts=(1.0, 0.5)), "SmootherRestarts.times must be increasing times > 0"),
+    (dict(smoother_restarts=(-1.0,)), "SmootherRestarts.times must be increasing times > 0"),
+    (dict(smoother_restarts=(np.nan,)), "SmootherRestarts.times must be increasing times > 0"),
     (dict(smoother_restarts="laser_off", smoother_restart_iterations=0),
-     "smoother_restart_iterations must be an integer >= 1"),
+     "SmootherRestarts.iterations must be an integer >= 1"),
     (dict(smoother_restarts="laser_off", smoother_restart_discrepancy=-0.1),
-     "smoother_restart_discrepancy must be >= 0"),
+     "SmootherRestarts.discrepancy must be >= 0"),
     (dict(smoother_restarts="laser_off", smoother_restart_discrepancy_time=0.0),
-     "smoother_restart_discrepancy_time must be > 0"),
+     "SmootherRestarts.discrepancy_time must be > 0"),
     (dict(smoother_restarts=(1.0,), smoother_restart_delay=1.0),
-     "smoother_restart_delay = 1.0 is for smoother_restarts = 'laser_off'"),
+     "SmootherRestarts.delay = 1.0 is for times = 'laser_off'"),
     (dict(smoother_restarts="laser_off", smoother_restart_delay=-1.0),
-     "smoother_restart_delay must be >= 0"),
+     "SmootherRestarts.delay must be >= 0"),
     (dict(smoother_restarts="laser_off", random_walk_std=0.002),
      "smoother_restarts needs constant optics"),
     (dict(smoother_restarts="laser_off", parameter_model="trend"),
@@ -167,7 +168,7 @@ def test_drifting_restarts_take_the_smoothers_optics_at_the_reading(tissue):
     np.testing.assert_allclose(np.log(theta_g).mean(axis=0), np.log(sm.theta).mean(axis=0),
                                rtol=1e-10)
     assert len(est.restarts) == 1 and np.all(np.isfinite(est.param_mean))
-    with pytest.raises(ValueError, match="smoother_restart_knots must be an integer >= 1"):
+    with pytest.raises(ValueError, match="SmootherRestarts.knots must be an integer >= 1"):
         tissue.setup(smoother_restarts="laser_off", smoother_restart_knots=0)
 
 
@@ -178,7 +179,7 @@ def test_a_mixture_of_drift_forms_gives_a_block_of_members_each(tissue):
     kw = dict(random_walk_std=0.03, smoother_restarts="laser_off", smoother_restart_iterations=2,
               smoother_restart_gaussian=False)
     s = tissue.setup(smoother_restart_knots=(2, 3), **kw)
-    assert s.restart_knot_forms == (2, 3) and s.restart_drifts
+    assert s.restarts.knot_forms == (2, 3) and s.restarts.drifts
     times, data = tissue.twin_data(s, 1.3, 80.0)
     X, theta, _ = restart_ensemble(s, assemble(s, warm_dt=0.1), times[:10], data[:10])
     h = theta.shape[0] // 2
@@ -189,7 +190,7 @@ def test_a_mixture_of_drift_forms_gives_a_block_of_members_each(tissue):
         np.testing.assert_allclose(X[block], X1[block], rtol=1e-9, atol=1e-12)
     assert len(identify(s, times, data).restarts) == 1
     for bad in ((1, 3), (3, 3), ()):
-        with pytest.raises(ValueError, match="smoother_restart_knots"):
+        with pytest.raises(ValueError, match="SmootherRestarts.knots"):
             tissue.setup(**{**kw, "smoother_restart_knots": bad})
 
 
@@ -222,10 +223,10 @@ def test_restart_settings_that_cannot_run_are_refused(tissue):
                      smoother_restart_knots=3, n_members=6)
     s = tissue.setup(random_walk_std=[0.03, 0.0], smoother_restarts="laser_off",
                      smoother_restart_knots=3, n_members=6)  # 2 + 2 free values
-    assert s.restart_drifting == ("mua",)
-    with pytest.raises(ValueError, match="smoother_restart_gaussian must be True or False"):
+    assert s.parameters.walking == ("mua",)
+    with pytest.raises(ValueError, match="SmootherRestarts.gaussian must be True or False"):
         _setup(tissue, smoother_restarts="laser_off", smoother_restart_gaussian="false")
-    with pytest.raises(ValueError, match="smoother_restart_iterations must be an integer"):
+    with pytest.raises(ValueError, match="SmootherRestarts.iterations must be an integer"):
         _setup(tissue, smoother_restarts="laser_off", smoother_restart_iterations=True)
 
 

@@ -8,7 +8,7 @@ import pytest
 from scipy.integrate import quad
 
 import fem
-from enkf.tissue import TissueFilterSetup, TissueForwardModel, identify
+from enkf.tissue import ParameterModel, TissueFilterSetup, TissueForwardModel, identify
 from enkf.tissue.risk import MCMATLAB_A, MCMATLAB_E, RiskSnapshot, RiskTracker, plot_depth_maps, xz_slice
 from mcmatlab_py import Medium
 from mcmatlab_py.heat import HeatSimulation
@@ -217,7 +217,7 @@ def test_end_to_end_with_identify(tissue):
     setup = TissueFilterSetup(
         grid=tissue.grid, absorption=tissue.absorption, T_initial=45.0,
         power=HeatSimulation(P=2.0, duration_on=1.0, duration_off=1.0).laser_power,
-        nominal=tissue.nominal, n_members=20, seed=1, method="etkf")
+        parameters=ParameterModel(nominal=tissue.nominal), n_members=20, seed=1, method="etkf")
     times = 0.1 * np.arange(1, 21)
     model = TissueForwardModel(setup)  # identical-twin data at the nominal optics
     T, t0, data = np.full((1, tissue.grid.npoints), 45.0), 0.0, []

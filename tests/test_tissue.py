@@ -58,8 +58,8 @@ def test_divergence_is_reported_with_the_estimates_so_far(tissue):
     (dict(estimate=("mua",)), "estimate must be"),
     (dict(nominal={"mua": -1.0, "mus": 100.0, "VHC": 3.76, "TC": 0.0037}), r"nominal\['mua'\] must be > 0"),
     (dict(prior_range=(2.0, 0.5)), "prior_range"),
-    (dict(model_noise_std=float("nan")), "model_noise_std"),
-    (dict(parameter_model="spline"), "parameter_model must be"),
+    (dict(model_noise_std=float("nan")), "ModelError.noise_std"),
+    (dict(parameter_model="spline"), "ParameterModel.kind must be"),
     (dict(theta=0.3), r"theta must be in \[0.5, 1\]"),
     (dict(theta=True), r"theta must be in \[0.5, 1\]"),
 ])
@@ -86,8 +86,8 @@ def test_sensor_offset_is_estimated_with_the_optics(tissue):
 
 
 @pytest.mark.parametrize("kw, pattern", [
-    (dict(sensor_offset_std=-0.1), "sensor_offset_std must be >= 0"),
-    (dict(sensor_offset_std=float("nan")), "sensor_offset_std must be >= 0"),
+    (dict(sensor_offset_std=-0.1), "Sensors.offset_std must be >= 0"),
+    (dict(sensor_offset_std=float("nan")), "Sensors.offset_std must be >= 0"),
     (dict(sensor_offset_std=0.5, sensor_positions=np.zeros((0, 3)), image="camera"),
      "needs point sensors"),
 ])
@@ -141,7 +141,7 @@ def test_a_temperature_no_tissue_reaches_stops_the_run(tissue):
     """The tissue filter's health check holds the mean temperatures to STATE_BOUNDS: a run
     that starts (or runs away to) beyond them stops, diverged, where one at 40 deg C runs
     to the end."""
-    from enkf.tissue.identify import STATE_BOUNDS
+    from enkf.tissue.pieces import STATE_BOUNDS
 
     times, data = tissue.twin_data(tissue.setup(), 1.0, 100.0)
     assert identify(tissue.setup(T_initial=40.0), times, data + 40.0).diverged is None

@@ -33,7 +33,7 @@ from enkf.tissue import TissueForwardModel
 def predicted_sensor(setup, thetas: np.ndarray, times: np.ndarray, batch: int = 400):
     """Noise-free sensor series (n_theta, M) of the filter's model for constant parameters."""
     model = TissueForwardModel(setup)
-    P = fem.probe_matrix(model.mesh, setup.sensor_positions.T)
+    P = fem.probe_matrix(model.mesh, setup.sensors.positions.T)
     out = np.empty((len(thetas), len(times)))
     npts = model.mesh.p.shape[1]
     for b in range(0, len(thetas), batch):

@@ -97,7 +97,7 @@ class ConfigSensor:
         self.factors = None
 
     def with_error(self, truth: dict) -> ConfigSensor:
-        """This sensor with its camera's model error (``setup.image.error_covariance`` at
+        """This sensor with its camera's model error (``setup.sensors.image.error_covariance`` at
         the readings of ``truth``, added to the pixels' noise) in :meth:`series`: the bound
         that the filter's own error model allows, frames independent as the filter reads
         them."""
@@ -105,11 +105,11 @@ class ConfigSensor:
 
         from enkf.tissue.smooth import frame_factors
 
-        image = self.setup.image
+        image = self.setup.sensors.image
         if image is None:
-            raise ValueError("with_error needs a camera (setup.image), the setup has none")
-        theta = np.array([[truth[n] if n in truth else self.setup.nominal[n]
-                           for n in self.setup.parameter_names]])
+            raise ValueError("with_error needs a camera (setup.sensors.image), the setup has none")
+        theta = np.array([[truth[n] if n in truth else self.setup.parameters.nominal[n]
+                           for n in self.setup.parameters.names]])
         Y = self.readings(theta)[:, :, 0]
         if Y.shape[1] != image.n_pixels:
             raise ValueError("with_error is built for a camera without point sensors, got "
@@ -134,7 +134,7 @@ class ConfigSensor:
 
     def readings(self, theta: np.ndarray) -> np.ndarray:
         """(n_steps, p, M) observed temperatures for ``theta`` (M, n_par) in the order of
-        ``setup.parameter_names``."""
+        ``setup.parameters.names``."""
         T = np.full((len(theta), self.model.mesh.p.shape[1]), float(self.setup.T_initial))
         out = []
         for t0, t1 in zip(self.times[:-1], self.times[1:], strict=True):
@@ -145,7 +145,7 @@ class ConfigSensor:
     def series(self, mua, mus, vhc, tc) -> np.ndarray:
         """:meth:`SensorModel.series` for :func:`fisher`: (n_steps * p, M), constant optics."""
         values = {"mua": mua(0.0), "mus": mus(0.0), "VHC": vhc, "TC": tc}
-        theta = np.column_stack([values[n] for n in self.setup.parameter_names])
+        theta = np.column_stack([values[n] for n in self.setup.parameters.names])
         Y = self.readings(theta)
         Y = self.whiten(Y)  # fisher uses unit noise
         return Y.reshape(-1, Y.shape[-1])
@@ -156,11 +156,11 @@ def config_bound(sensor: ConfigSensor, truth: dict, prior_sd: float = PRIOR_LOG_
     """The Cramér-Rao bound (covariance of log mua, log mus) of a constant-optics setup at
     ``truth`` ({"mua", "mus"} cm^-1), with the uniform prior as a Gaussian of log-sd
     ``prior_sd``."""
-    estimate = tuple(sensor.setup.parameter_names)
+    estimate = tuple(sensor.setup.parameters.names)
     if estimate != ("mua", "mus"):
         raise ValueError(f"config_bound is built for the estimate (mua, mus), got {estimate}")
     logphi = np.log([truth["mua"], truth["mus"]])
-    nominal = sensor.setup.nominal
+    nominal = sensor.setup.parameters.nominal
     F = fisher(_Constant(sensor, nominal), logphi, np.array([0.0]), ("mua", "mus"),
                noise_var=1.0)
     return bound(F, np.full(2, prior_sd))

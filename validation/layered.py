@@ -151,7 +151,7 @@ def emulator_study(cfg, photons: int, ref_photons: int) -> list[str]:
 
 def twin_data(sensor, truth: dict) -> np.ndarray:
     """(N_STEPS, p) the noise-free readings of the filter's own model at ``truth``."""
-    theta = np.array([[truth[n] for n in sensor.setup.parameter_names]])
+    theta = np.array([[truth[n] for n in sensor.setup.parameters.names]])
     return sensor.readings(theta)[:, :, 0]
 
 
@@ -239,10 +239,10 @@ def run_seeds(cfg, emulator, kind: str, truth: dict, clean: np.ndarray, seeds,
         t0 = time.perf_counter()
         est = identify(setup, times, data)
         seconds = time.perf_counter() - t0
-        n = len(setup.parameter_names)
+        n = len(setup.parameters.names)
         lo = np.array([est.param_band(i)[0][-1] for i in range(n)])
         hi = np.array([est.param_band(i)[1][-1] for i in range(n)])
-        return (setup.parameter_names, est.param_mean[-1], est.param_std[-1], lo, hi, seconds,
+        return (setup.parameters.names, est.param_mean[-1], est.param_std[-1], lo, hi, seconds,
                 est.diverged)
 
     return _over_seeds(cfg, emulator, kind, truth, clean, seeds, overrides, estimate)
@@ -260,11 +260,11 @@ def least_squares_seeds(cfg, emulator, kind: str, truth: dict, clean: np.ndarray
         sensor = ident.ConfigSensor(setup, DT, N_STEPS)
         sd_noise = np.sqrt(np.broadcast_to(np.asarray(sensor.noise_var, float),
                                            (data.shape[1],)))
-        fit = _fit(sensor, data, np.log([truth[n] for n in setup.parameter_names]),
+        fit = _fit(sensor, data, np.log([truth[n] for n in setup.parameters.names]),
                    sd_noise, diff_step=1e-4, xtol=1e-12, ftol=1e-12, x_scale=1e-3)
         sd = np.sqrt(np.diag(np.linalg.inv(fit.jac.T @ fit.jac)))
         mean = np.exp(fit.x)
-        return (setup.parameter_names, mean, sd * mean, np.exp(fit.x - 2 * sd),
+        return (setup.parameters.names, mean, sd * mean, np.exp(fit.x - 2 * sd),
                 np.exp(fit.x + 2 * sd), time.perf_counter() - t0, None)
 
     return _over_seeds(cfg, emulator, kind, truth, clean, seeds, overrides, estimate,
@@ -594,7 +594,7 @@ def pseudo_true(sensor, clean: np.ndarray, truth: dict) -> dict:
     ``clean`` (N_STEPS, p), from the truth: {"mua", "mus", "rms"} (cm^-1, deg C; rms: of
     the readings' residual). The readings weigh as their noise alone, or as the camera's
     model error says where ``sensor`` has it (:meth:`ConfigSensor.with_error`)."""
-    names = tuple(sensor.setup.parameter_names)
+    names = tuple(sensor.setup.parameters.names)
     fit = _fit(sensor, clean, np.log([truth[n] for n in names]), 0.1, diff_step=1e-3,
                xtol=1e-8, ftol=1e-10)
     out = dict(zip(names, np.exp(fit.x), strict=True))

@@ -111,10 +111,10 @@ def emulator_study(cfg, ref_photons: int) -> list[str]:
 
 
 def log_fisher(sensor, truth: dict, h: float = 0.01) -> np.ndarray:
-    """(n, n) Fisher information of the log parameters (``sensor.setup.parameter_names``)
+    """(n, n) Fisher information of the log parameters (``sensor.setup.parameters.names``)
     from 150 whitened readings: central differences of step ``h`` in log units, all members
     in one batch of the coarse model."""
-    names = tuple(sensor.setup.parameter_names)
+    names = tuple(sensor.setup.parameters.names)
     x0 = np.log([truth[n] for n in names])
     X = [x0]
     for i in range(len(names)):
@@ -137,8 +137,8 @@ def bounds(F: np.ndarray, prior_sd: float) -> np.ndarray:
 def prior_draws(setup, seeds) -> list[dict]:
     """One truth per seed drawn from the filter's own prior (uniform in each parameter's
     [lo, hi]): what a calibrated posterior covers on 95% of draws on average."""
-    lo, hi = setup.prior_bounds()
-    names = setup.parameter_names
+    lo, hi = setup.parameters.prior_bounds()
+    names = setup.parameters.names
     return [dict(zip(names, lo + (hi - lo) * np.random.default_rng(50_000 + s).uniform(
         size=len(names)), strict=True)) for s in seeds]
 

@@ -86,17 +86,15 @@ def run_one(cfg, emulator, model: str, case: str, seed: int, variant: str,
     if camera:
         from independent_models import independent_surface
 
-        image = setup.image
+        image = setup.sensors.image
         clean = image.average(independent_surface(model, case, image.sample_points()[:, :2]))
         data = clean[1:] + 0.1 * rng.standard_normal(clean[1:].shape)
     else:
         data = truth[1:, :1] + 0.1 * rng.standard_normal((len(TIMES) - 1, 1))
-    for k, v in {**(DRIFT if case != "constant" else {}), **VARIANTS[variant],
-                 **(RESTART_CASE[case] if variant.startswith("restarts") else {}),
-                 **({"smoother_restart_knots": RESTART_KNOTS[variant]}
-                    if variant in RESTART_KNOTS and case != "constant" else {})}.items():
-        setattr(setup, k, v)
-    setup.__post_init__()
+    setup = setup.with_(**{**(DRIFT if case != "constant" else {}), **VARIANTS[variant],
+                           **(RESTART_CASE[case] if variant.startswith("restarts") else {}),
+                           **({"smoother_restart_knots": RESTART_KNOTS[variant]}
+                              if variant in RESTART_KNOTS and case != "constant" else {})})
     est = identify(setup, TIMES[1:], data, param_bounds=cfg.param_bounds)
     k = len(est.times)
     heat = (est.times[1:] <= 5.0 + 1e-9)

@@ -37,9 +37,7 @@ SETTINGS = (0.0, 0.5)  # sensor_offset_std, deg C
 def run_one(cfg, emulator, truth, offset: float, seed: int, sd: float) -> dict:
     rng = np.random.default_rng([seed, 18])
     data = truth[1:, :1] + offset + 0.1 * rng.standard_normal((len(TIMES) - 1, 1))
-    setup = cfg.setup(emulator, seed=seed)
-    setup.sensor_offset_std = sd
-    setup.__post_init__()
+    setup = cfg.setup(emulator, seed=seed).with_(sensor_offset_std=sd)
     est = identify(setup, TIMES[1:], data, param_bounds=cfg.param_bounds)
     k = len(est.times)
     err = np.abs(est.tracked_mean[1:] - truth[1:k])

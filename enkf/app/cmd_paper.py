@@ -7,7 +7,7 @@ import sys
 from fem.checks import check_number
 
 from .common import apply_threads, close_client, dask_client
-from .config import _LIMITS
+from .config.numbers import LIMITS
 
 __all__ = ["cmd_paper"]
 
@@ -21,9 +21,9 @@ def cmd_paper(args) -> int:
         raise ValueError(f"--members must be >= 2, got {args.members}")
     # the limits of the config's keys for the same things (filter.emulator.*)
     check_number("--emulator-photons", args.emulator_photons, integer=True, lo=1,
-                 hi=_LIMITS["filter.emulator.n_photons"])
+                 hi=LIMITS["filter.emulator.n_photons"])
     check_number("--emulator-table", args.emulator_table, integer=True, lo=4,
-                 hi=_LIMITS["filter.emulator.n_mua"])
+                 hi=LIMITS["filter.emulator.n_mua"])
     verbose = not args.quiet
     client = dask_client(args)
     try:

@@ -65,17 +65,17 @@ class LiveRecorder:
 
     def write_meta(self, setup) -> None:
         grid = setup.grid
-        meta = {"names": list(setup.parameter_names),
-                "tracked_z_cm": [float(p[2]) for p in setup.tracked_positions],
+        meta = {"names": list(setup.parameters.names),
+                "tracked_z_cm": [float(p[2]) for p in setup.sensors.tracked],
                 "risk_extent_cm": [-grid.Lx / 2, grid.Lx / 2, 0.0, grid.Lz],
                 "risk": "P(damage integral > 1)" if self.tracker else
                 f"P(T > {T_INJURY:g} deg C so far)",
-                "drift": setup.drift is not None, "started": time.time()}
-        if setup.image is not None:
+                "drift": setup.parameters.drift is not None, "started": time.time()}
+        if setup.sensors.image is not None:
             # in the image's own axes, from the beam's axis (turned by its rotation)
-            (x0, x1), (y0, y1) = setup.image.x_range, setup.image.y_range
-            meta.update(frame_shape=[int(v) for v in setup.image.shape],
-                        frame_extent_cm=[x0, x1, y0, y1], rotation=setup.image.rotation)
+            (x0, x1), (y0, y1) = setup.sensors.image.x_range, setup.sensors.image.y_range
+            meta.update(frame_shape=[int(v) for v in setup.sensors.image.shape],
+                        frame_extent_cm=[x0, x1, y0, y1], rotation=setup.sensors.image.rotation)
         write_json_atomic(self.dir / "meta.json", meta)
 
     def frame(self, t: float, frame: np.ndarray) -> None:

@@ -9,7 +9,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..tissue.identify import persistence_summary
+from ..tissue.estimates import persistence_summary
 from ..tissue.outputs import readable_stop
 from ..tissue.parameters import ABSORPTION_INPUTS, PARAMETER_LABELS
 from .rundir import write_json
@@ -48,7 +48,7 @@ def plot_identification(path, est, times, data, power, data_column: int = 0,
                         persistence: dict | None = None, advice: list | None = None) -> None:
     """Temperature tracks (top, with ``data[:, data_column]`` beside the first tracked
     point, labelled ``data_label``) and parameters (bottom); a caution above them when
-    ``persistence`` (:func:`~enkf.tissue.identify.persistence_summary`) is flagged; with
+    ``persistence`` (:func:`~enkf.tissue.estimates.persistence_summary`) is flagged; with
     ``advice`` (:class:`~enkf.tissue.advice.AdviceRow` per reading) a panel of when the
     target is coagulated and the risks (:func:`~enkf.tissue.advice.plot_advice`).
 
@@ -161,11 +161,11 @@ def _runs(t, on):
 def _data_beside_first_point(setup) -> tuple[int, str]:
     """The data column drawn beside the first tracked point, and its label: the first
     sensor; with a camera alone, the pixel whose centre is nearest the point."""
-    n_sensors = setup.sensor_positions.shape[0]
-    if n_sensors or setup.image is None or not len(setup.tracked_positions):
+    n_sensors = setup.sensors.positions.shape[0]
+    if n_sensors or setup.sensors.image is None or not len(setup.sensors.tracked):
         return 0, "data (first sensor)" if n_sensors else "data (first column)"
-    centres = setup.image.pixel_centers()[:, :2]
-    k = int(np.argmin(np.hypot(*(centres - setup.tracked_positions[0][:2]).T)))
+    centres = setup.sensors.image.pixel_centers()[:, :2]
+    k = int(np.argmin(np.hypot(*(centres - setup.sensors.tracked[0][:2]).T)))
     x, y = centres[k]
     return n_sensors + k, f"data (pixel at {x:.3g}, {y:.3g} cm)"
 
@@ -250,7 +250,7 @@ def write_identify_outputs(out: Path, setup, est, times, data, *, absorption=Non
             est.coagulated_fraction[k])
     if getattr(est, "sensor_offset_mean", None) is not None:
         summary["sensor_offsets"] = [
-            {"position_cm": setup.sensor_positions[j].tolist(), "unit": "deg C",
+            {"position_cm": setup.sensors.positions[j].tolist(), "unit": "deg C",
              "estimate_final": float(est.sensor_offset_mean[k, j]),
              "std_final": float(est.sensor_offset_std[k, j])}
             for j in range(est.sensor_offset_mean.shape[1])]

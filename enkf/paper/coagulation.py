@@ -209,7 +209,7 @@ def _march_twin(setup, model, theta_of, times) -> tuple[np.ndarray, np.ndarray]:
         T = model(T, theta_of(0.5 * (t0 + t1)), float(t0), float(t1))
         out.append(T[0].copy())
     nodes = np.array(out)
-    P_track = fem.probe_matrix(model.mesh, setup.tracked_positions.T)
+    P_track = fem.probe_matrix(model.mesh, setup.sensors.tracked.T)
     return (P_track @ nodes.T).T, nodes
 
 
@@ -220,8 +220,8 @@ def twin_damage_truth(scenario: str, emulator, times=None) -> CoagulationTruth:
 
     times = np.round(np.arange(0, 15.0 + 1e-9, 0.1), 10) if times is None else times
     setup = coagulation_setup(scenario, emulator, "coagulation", n_members=2)
-    model = CoagulationForwardModel(TissueForwardModel(setup), setup.coagulation,
-                                    setup.parameter_names)
+    model = CoagulationForwardModel(TissueForwardModel(setup), setup.parameters.coagulation,
+                                    setup.parameters.names)
     th = np.array([[TABLE["mua"], TABLE["mus"], COAGULATED["mua_coag"],
                     COAGULATED["mus_coag"]]])
     temps, nodes = _march_twin(setup, model, lambda t: th, times)
@@ -262,7 +262,7 @@ def coagulation_setup(scenario: str, absorption, model: str = "coagulation", *,
     overrides.setdefault("sensor_positions", np.zeros((1, 3)))
     if model == "coagulation":
         overrides.setdefault("coagulation", Coagulation(E=E_TRUE, A=A_TRUE))
-    return TissueFilterSetup(
+    return TissueFilterSetup.build(
         grid=fem.BoxGrid(*coarse, 0.5, 0.5, 0.25), absorption=absorption,
         power=laser(scenario).laser_power, nominal=dict(TABLE), estimate=ESTIMATES[0],
         sensor_noise_var=0.01, tracked_positions=tracked_points(),

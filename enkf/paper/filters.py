@@ -71,7 +71,7 @@ def filter_setup(scenario: str, absorption, *, seed: int = 0, n_members: int = 5
     # laser is off (they no longer act on the forecast then, and a walk only lets them wander)
     overrides.setdefault("random_walk_when_off", 1.0 if scenario == "constant" else 0.0)
     overrides.setdefault("sensor_positions", np.zeros((1, 3)))
-    return TissueFilterSetup(
+    return TissueFilterSetup.build(
         grid=fem.BoxGrid(*coarse, 0.5, 0.5, 0.25), absorption=absorption,
         power=HS.laser_power, nominal=dict(TABLE), estimate=estimate, sensor_noise_var=0.01,
         tracked_positions=tracked_points(),

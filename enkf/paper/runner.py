@@ -13,7 +13,8 @@ from mcmatlab_py.progress import Progress
 
 from ..problem import DEFAULT_METHOD
 from ..tissue.absorption import fill_prior_points
-from ..tissue.identify import identify, persistence_summary
+from ..tissue.estimates import persistence_summary
+from ..tissue.identify import identify
 from ..tissue.outputs import readable_stop, write_estimates_csv, write_json
 from ..tissue.parameters import PARAMETER_NAMES, PARAMETER_UNITS, TRACKED_DEPTHS
 from .figures import plot_data, plot_results

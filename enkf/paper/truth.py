@@ -119,7 +119,7 @@ def twin_truth(scenario: str, emulator, like: Truth, coarse=(20, 20, 10),
     kw = {} if theta is None else {"theta": theta}
     setup = filter_setup(scenario, emulator, n_members=1, coarse=coarse, **kw)  # its laser
     model = TissueForwardModel(setup)
-    probes = fem.probe_matrix(model.mesh, setup.tracked_positions.T)
+    probes = fem.probe_matrix(model.mesh, setup.sensors.tracked.T)
     times = like.times
 
     def step(T, t0, t1):

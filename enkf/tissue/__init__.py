@@ -24,19 +24,25 @@ Defaults and their reasons (see also docs/enkf.md):
 
 Modules: :mod:`~enkf.tissue.parameters` (names, units, ranges, tracked depths: one table
 each), :mod:`~enkf.tissue.absorption` (the :class:`Absorption` protocol of the emulator
-and the exact mode), :mod:`~enkf.tissue.setup` (:class:`TissueFilterSetup`),
+and the exact mode), :mod:`~enkf.tissue.setup` (:class:`TissueFilterSetup` and its parts:
+:class:`ParameterModel`, :class:`Sensors`, :class:`ModelError`, :class:`HeatModel`,
+:class:`SmootherRestarts`, and the drift bank's settings :class:`DriftBank`),
 :mod:`~enkf.tissue.forward` (the forecast and the observation operator),
 :mod:`~enkf.tissue.coagulation` (optics that follow each member's own damage),
-:mod:`~enkf.tissue.identify` (:func:`identify`), :mod:`~enkf.tissue.smooth` (constant
-optics from a whole window: :func:`smooth_constant`), :mod:`~enkf.tissue.online` (one reading
+:mod:`~enkf.tissue.pieces` (the filter's pieces built from a setup: :func:`assemble`),
+:mod:`~enkf.tissue.estimates` (:class:`TissueEstimates`),
+:mod:`~enkf.tissue.identify` (:func:`identify`), :mod:`~enkf.tissue.restart` (restarts from
+the smoother), :mod:`~enkf.tissue.drift` (the drift bank's run), :mod:`~enkf.tissue.smooth`
+(constant optics from a whole window: :func:`smooth_constant`), :mod:`~enkf.tissue.online` (one reading
 at a time), :mod:`~enkf.tissue.image` (a thermal camera), :mod:`~enkf.tissue.risk`
 (damage-risk maps) and :mod:`~enkf.tissue.outputs` (files every run writes).
 """
 
 from .absorption import Absorption, FunctionAbsorption, as_absorption
 from .coagulation import Coagulation, CoagulationForwardModel, coagulated_fraction, effective_optics
+from .estimates import TissueEstimates
 from .forward import TissueForwardModel, observation_operator
-from .identify import FilterPieces, TissueEstimates, assemble, identify
+from .identify import identify
 from .image import ThermalImage
 from .model_error import StructuredModelError
 from .online import OnlineEstimate, OnlineIdentifier
@@ -54,8 +60,17 @@ from .parameters import (
     parameter_names,
     tracked_points,
 )
+from .pieces import FilterPieces, assemble
 from .risk import RiskTracker
-from .setup import TissueFilterSetup
+from .setup import (
+    DriftBank,
+    HeatModel,
+    ModelError,
+    ParameterModel,
+    Sensors,
+    SmootherRestarts,
+    TissueFilterSetup,
+)
 from .smooth import SmootherEstimates, heated_time, smooth_constant, smooth_drifting
 
 __all__ = [
@@ -65,16 +80,22 @@ __all__ = [
     "COAGULATION_NAMES",
     "Coagulation",
     "CoagulationForwardModel",
+    "DriftBank",
     "ESTIMATES",
     "FilterPieces",
     "FunctionAbsorption",
+    "HeatModel",
+    "ModelError",
     "OnlineEstimate",
     "OnlineIdentifier",
     "PARAMETER_LABELS",
     "PARAMETER_NAMES",
+    "ParameterModel",
     "PARAMETER_UNITS",
     "RiskTracker",
     "SECOND_MEDIUM_NAMES",
+    "Sensors",
+    "SmootherRestarts",
     "StructuredModelError",
     "TRACKED_DEPTHS",
     "ThermalImage",

@@ -87,14 +87,14 @@ def fill_prior_points(setup) -> None:
     emu = setup.absorption
     if getattr(emu, "complete", True) or not hasattr(emu, "needed_box"):
         return
-    lo, hi = setup.prior_bounds()
-    names = setup.parameter_names
+    lo, hi = setup.parameters.prior_bounds()
+    names = setup.parameters.names
     box = []
     for name, (t_lo, t_hi) in (("mua", emu.spec.mua_range), ("mus", emu.spec.mus_range)):
         idx = [i for i, n in enumerate(names) if n in (name, f"{name}_coag")]
         if idx:  # damage-driven optics lie between the native and coagulated values
             b_lo, b_hi = min(lo[i] for i in idx), max(hi[i] for i in idx)
         else:
-            b_lo = b_hi = float(setup.nominal[name])
+            b_lo = b_hi = float(setup.parameters.nominal[name])
         box.append((float(np.clip(b_lo, t_lo, t_hi)), float(np.clip(b_hi, t_lo, t_hi))))
     emu.fill(emu.needed_box(*box))

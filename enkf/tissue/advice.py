@@ -27,11 +27,11 @@ computed once by the adjoint of the heat step (and stored as a low-rank product)
 any member's state and optics into its temperatures at the points after every step of
 the horizon: two small matrix products a reading. Members with their own heat capacity
 and conductivity are stepped forward one by one instead. The forecast steps as the
-filter does (``setup.max_dt``, the readings' 0.1 s by default), with the plan's power
+filter does (``setup.heat.max_dt``, the readings' 0.1 s by default), with the plan's power
 averaged over each step (:meth:`Plan.mean_power`), and the damage is the trapezoid in
 the Arrhenius rate over those steps, as :class:`~enkf.tissue.risk.RiskTracker`'s.
 
-The drift bank (``setup.drift``) runs several filters: the advice mixes their members,
+The drift bank (``setup.parameters.drift``) runs several filters: the advice mixes their members,
 each filter's weight (its probability after the reading) shared evenly by its members,
 as the bank's own estimates do; online, a filter below ``min_weight`` is not forecast.
 
@@ -180,7 +180,7 @@ class Advisor:
         limit ``protected_omega`` and/or a temperature limit ``protected_T`` (deg C).
     surface_T : float, optional
         deg C, the surface's limit (at its :data:`SURFACE_POINTS` hottest nodes).
-    step : s, the forecast's heat step (default ``setup.max_dt``, else 0.1 s); tail : s
+    step : s, the forecast's heat step (default ``setup.heat.max_dt``, else 0.1 s); tail : s
         forecast after the plan's last pulse; max_horizon : s, the farthest a forecast
         reaches.
     quantiles : (lower, upper) of the reported interval (default 5% and 95%).
@@ -195,11 +195,11 @@ class Advisor:
                  quantiles=(0.05, 0.95), min_weight: float = 0.01, engine: str = "auto"):
         from .forward import TissueForwardModel
 
-        if setup.parameter_model == "coagulation":
+        if setup.parameters.kind == "coagulation":
             raise ValueError("advice is not built for parameter_model = 'coagulation' (its "
                              "optics follow the damage the forecast makes)")
         if step is None:
-            step = setup.max_dt if setup.max_dt is not None else 0.1
+            step = setup.heat.max_dt if setup.heat.max_dt is not None else 0.1
         for name, v in (("E", E), ("A", A), ("step", step), ("max_horizon", max_horizon),
                         ("tail", tail)):
             if isinstance(v, bool) or not (isinstance(v, int | float | np.number)
@@ -251,7 +251,7 @@ class Advisor:
                        zip(self.points, sizes[:-1], sizes[1:], strict=True)}
         P = fem.probe_matrix(mesh, np.vstack(list(self.points.values())).T)
         stepper = self.model.stepper(self.step)
-        shared = not ({"VHC", "TC"} & set(setup.estimate)) and not np.any(
+        shared = not ({"VHC", "TC"} & set(setup.parameters.estimate)) and not np.any(
             np.isnan(stepper.fixed_values))
         if engine == "adjoint" and not shared:
             raise ValueError("engine='adjoint' needs a heat step the members share (no VHC, "

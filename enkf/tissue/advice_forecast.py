@@ -45,7 +45,7 @@ class PointForecast:
     def __init__(self, model, P, dt: float, K: int, engine: str, rtol: float = 1e-10):
         self.model, self.P = model, P.tocsr()
         self.dt, self.K, self.engine = float(dt), int(K), engine
-        self.n_est = len(model.setup.estimate)
+        self.n_est = len(model.setup.parameters.estimate)
         if engine == "adjoint":
             R, W = self._adjoint_rows(model.stepper(self.dt))
             p, n = self.P.shape
@@ -96,7 +96,7 @@ class PointForecast:
         ``H_k + sum_(j<k) P_j G_(k-1-j)`` (:func:`heat`).
 
         ``X`` (N, n_nodes) deg C; ``theta`` (N, >= n_estimate): the members' parameters,
-        ``setup.estimate`` first."""
+        ``setup.parameters.estimate`` first."""
         K = self.K if K is None else K
         X = np.asarray(X, float)
         theta = np.asarray(theta, float)[:, :self.n_est]
@@ -180,7 +180,7 @@ def nominal_peak(model, plan, dt: float, n_steps: int) -> np.ndarray:
     """(n_nodes,) deg C: each node's hottest over ``n_steps`` heat steps of ``dt`` s of the
     ``plan`` (its ``mean_power``) from ``T_initial``, at the setup's nominal optics."""
     s = model.setup
-    theta = np.array([[s.nominal[n] for n in s.estimate]])
+    theta = np.array([[s.parameters.nominal[n] for n in s.parameters.estimate]])
     T = np.full((1, model.mesh.p.shape[1]), float(s.T_initial))
     peak = T[0].copy()
     for k in range(n_steps):

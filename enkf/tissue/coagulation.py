@@ -136,11 +136,11 @@ class Coagulation:
     nominal_factor : (float, float)
         The nominal coagulated ``(mua, mus)`` as multiples of the nominal native ones:
         the centre of their default prior (``prior_range`` times it, unless
-        ``TissueFilterSetup.prior`` names ``mua_coag`` or ``mus_coag``). Coagulation
+        ``ParameterModel.prior`` names ``mua_coag`` or ``mus_coag``). Coagulation
         raises scattering severalfold and absorption less (measured on liver, e.g.
         Ritz et al. 2001, Lasers Surg. Med. 29, 205-212); default (1.5, 3).
     mean_field_rel_std : float
-        With the structured model error (``TissueFilterSetup.model_error = "structured"``):
+        With the structured model error (``ModelError.kind = "structured"``):
         each member's relative error of a step's tendency grows by this times the square
         root of its coagulated fraction ``F`` (``model_error_rel_std +
         mean_field_rel_std * sqrt(F)``): the error of the mean field where real tissue
@@ -201,7 +201,7 @@ class CoagulationForwardModel:
         names = tuple(names)
         self.i_native = [names.index("mua"), names.index("mus")]
         self.i_coag = [names.index("mua_coag"), names.index("mus_coag")]
-        self.i_base = [names.index(n) for n in base.setup.estimate]  # the base model's order
+        self.i_base = [names.index(n) for n in base.setup.parameters.estimate]  # the base model's order
         self.reset()
 
     # ------------------------------------------------------------------ damage bookkeeping

@@ -39,7 +39,7 @@ class TissueForwardModel:
             L = fem.voxel_load_matrix(self.mesh, g).tocsr()  # (npoints, nvox)
             self.L = (L @ expand).tocsr()  # (npoints, n_unique)
         self.steppers: dict[float, fem.HeatStepper] = {}
-        self.col = {name: column(setup.estimate, name) for name in setup.estimate}
+        self.col = {name: column(setup.parameters.estimate, name) for name in setup.parameters.estimate}
         #: the inputs passed to the absorption model after mua, mus: a second estimated
         #: medium's optics, the beam's radius
         self._extra = tuple(n for n in ABSORPTION_INPUTS[2:] if n in self.col)
@@ -51,7 +51,7 @@ class TissueForwardModel:
             else:
                 use = ("mcmatlab_py.emulator_media.BeamRadiusEmulator" if self._extra
                        else "an absorption model of a known beam")
-            raise ValueError(f"estimate = {setup.estimate} passes {('mua', 'mus') + self._extra} "
+            raise ValueError(f"estimate = {setup.parameters.estimate} passes {('mua', 'mus') + self._extra} "
                              f"to the absorption model, but it ({type(absorption).__name__}) "
                              f"takes {('mua', 'mus') + takes}: use {use}")
         self._clamp = {"calls": 0, "member_calls": 0, "lo": {}, "hi": {}}
@@ -62,10 +62,11 @@ class TissueForwardModel:
         key = round(dt, 9)
         if key not in self.steppers:
             s = self.setup
-            self.steppers[key] = fem.HeatStepper(self.mesh, s.nominal["VHC"], s.nominal["TC"], dt,
-                                                 theta=s.theta, boundary=s.heat_boundary,
-                                                 operator=s.heat_operator,
-                                                 mass=s.heat_mass if s.heat_operator == "kronecker"
+            nominal = s.parameters.nominal
+            self.steppers[key] = fem.HeatStepper(self.mesh, nominal["VHC"], nominal["TC"], dt,
+                                                 theta=s.heat.theta, boundary=s.heat.boundary,
+                                                 operator=s.heat.operator,
+                                                 mass=s.heat.mass if s.heat.operator == "kronecker"
                                                  else "lumped")
         return self.steppers[key]
 
@@ -75,7 +76,7 @@ class TissueForwardModel:
         The exact mode runs no Monte Carlo for a warm-up (zero power)."""
         s = self.setup
         N = s.n_members
-        theta = np.tile([s.nominal[n] for n in s.estimate], (N, 1))
+        theta = np.tile([s.parameters.nominal[n] for n in s.parameters.estimate], (N, 1))
         npts = self.mesh.p.shape[1]
         # the members as the filter holds them: a plain array from the prior, then the state
         # part of the augmented ensemble, a strided view (the heat step's kernels are
@@ -176,23 +177,23 @@ class TissueForwardModel:
         load = self.loads(theta, power) if power != 0.0 else None
         kw = {}
         if "VHC" in self.col:
-            kw["vhc_scale"] = theta[:, self.col["VHC"]] / s.nominal["VHC"]
+            kw["vhc_scale"] = theta[:, self.col["VHC"]] / s.parameters.nominal["VHC"]
         if "TC" in self.col:
-            kw["tc_scale"] = theta[:, self.col["TC"]] / s.nominal["TC"]
+            kw["tc_scale"] = theta[:, self.col["TC"]] / s.parameters.nominal["TC"]
         return self.stepper(t1 - t0).step(E_state, load, **kw)
 
     def __call__(self, E_state: np.ndarray, theta: np.ndarray, t0: float, t1: float):
         """The filter's forecast from ``t0`` to ``t1``: :meth:`step` at each sub-step's laser
         power (:meth:`TissueFilterSetup.mean_power`), in equal sub-steps no longer than
-        ``setup.max_dt``."""
+        ``setup.heat.max_dt``."""
         for a, b in self.substeps(t0, t1):
             E_state = self.step(E_state, theta, a, b, self.setup.mean_power(a, b))
         return E_state
 
     def substeps(self, t0: float, t1: float) -> list[tuple[float, float]]:
         """The heat steps ``(a, b)`` s of the interval ``t0 -> t1``: equal, no longer than
-        ``setup.max_dt`` (one step when it is None)."""
-        max_dt = self.setup.max_dt
+        ``setup.heat.max_dt`` (one step when it is None)."""
+        max_dt = self.setup.heat.max_dt
         n = 1 if max_dt is None else max(1, math.ceil((t1 - t0) / max_dt - 1e-9))
         if n == 1:
             return [(float(t0), float(t1))]
@@ -204,13 +205,13 @@ def observation_operator(setup: TissueFilterSetup, mesh):
     """``(P (p, n_nodes) csr, noise variances (p,), positions (p, 3) cm)`` of the point
     sensors followed by the image's pixels (pixel centres on z = 0)."""
     blocks, var, xyz = [], [], []
-    n_pts = setup.sensor_positions.shape[0]
+    n_pts = setup.sensors.positions.shape[0]
     if n_pts:
-        blocks.append(fem.probe_matrix(mesh, setup.sensor_positions.T))  # points are (3, n)
-        var.append(np.broadcast_to(np.asarray(setup.sensor_noise_var, float), (n_pts,)))
-        xyz.append(setup.sensor_positions)
-    if setup.image is not None:
-        blocks.append(setup.image.matrix(mesh))
-        var.append(np.full(setup.image.n_pixels, float(setup.image.noise_var)))
-        xyz.append(setup.image.pixel_centers())
+        blocks.append(fem.probe_matrix(mesh, setup.sensors.positions.T))  # points are (3, n)
+        var.append(np.broadcast_to(np.asarray(setup.sensors.noise_var, float), (n_pts,)))
+        xyz.append(setup.sensors.positions)
+    if setup.sensors.image is not None:
+        blocks.append(setup.sensors.image.matrix(mesh))
+        var.append(np.full(setup.sensors.image.n_pixels, float(setup.sensors.image.noise_var)))
+        xyz.append(setup.sensors.image.pixel_centers())
     return (sp.vstack(blocks).tocsr(), np.concatenate(var), np.vstack(xyz))

@@ -12,8 +12,12 @@ from fem.threads import blas_threads, keep_freed_memory
 
 from ..adaptive import InflationEstimator
 from ..loop import run_filter
-from .identify import assemble, laser_persistence, restart_ensemble, restart_points
+from .drift import mix_moments
+from .estimates import laser_persistence
+from .pieces import assemble
+from .restart import restart_ensemble, restart_points
 from .setup import TissueFilterSetup
+from .setup.drift_bank import bank_weights, prior_weights
 
 __all__ = ["OnlineEstimate", "OnlineIdentifier"]
 
@@ -39,7 +43,7 @@ class OnlineEstimate:
     laser_on: bool | None = None
     #: log-density of the reading under the forecast (NaN where not analysed)
     innovation_loglik: float | None = None
-    #: with a drift bank (``setup.drift``): the probability, after this reading, that the
+    #: with a drift bank (``setup.parameters.drift``): the probability, after this reading, that the
     #: optics drift while heated
     drift_weight: float | None = None
 
@@ -53,7 +57,7 @@ class OnlineIdentifier:
     from ``(setup.seed, k)``: a replay of the same readings gives the same estimates
     (they differ from :func:`identify`'s, which draws from one stream).
 
-    With ``setup.drift`` (a :class:`~enkf.tissue.drift.DriftBank`) it runs the still and
+    With ``setup.parameters.drift`` (a :class:`~enkf.tissue.drift.DriftBank`) it runs the still and
     the drifting filter side by side and reports their mixture under the evidence, with
     ``drift_weight`` in each estimate (:mod:`enkf.tissue.drift`); a filter the health
     check stops drops out of the mixture.
@@ -65,12 +69,10 @@ class OnlineIdentifier:
     def __init__(self, setup: TissueFilterSetup, *, param_bounds=None, dt_hint: float = 0.1):
         self.setup = setup
         self._bank = None
-        if setup.drift is not None:
-            from .drift import prior_weights
-
+        if setup.parameters.drift is not None:
             self._bank = {name: OnlineIdentifier(s, param_bounds=param_bounds, dt_hint=dt_hint)
-                          for name, s in setup.drift.components(setup).items()}
-            self._weights = prior_weights(setup.drift, list(self._bank))
+                          for name, s in setup.parameters.drift.components(setup).items()}
+            self._weights = prior_weights(setup.parameters.drift, list(self._bank))
             self._alive = np.ones(len(self._bank), bool)
             first = self._bank["still"]
             self.time, self.history, self.restart_times = 0.0, [], []
@@ -88,9 +90,9 @@ class OnlineIdentifier:
         self.history: list[OnlineEstimate] = []
         self._readings: list = []  #: (t, y) of every reading, with smoother restarts
         #: s: the readings after which the filter restarted from the smoother
-        #: (``setup.smoother_restarts``; the estimate of that reading is the restart's)
+        #: (``setup.restarts.times``; the estimate of that reading is the restart's)
         self.restart_times: list[float] = []
-        self.names = setup.parameter_names
+        self.names = setup.parameters.names
         self.n_obs = self._pieces.P_obs.shape[0]
         # the time-correlated model error and the inflation estimate run across readings
         self._noise = self._pieces.model_noise()
@@ -98,8 +100,8 @@ class OnlineIdentifier:
         self._inflation = InflationEstimator(ai) if ai is not None else None
 
     def _restart(self, t: float) -> bool:
-        """Restart from the smoother over the readings so far (``setup.smoother_restarts``)
-        where :func:`~enkf.tissue.identify.restart_points` allows it after this reading;
+        """Restart from the smoother over the readings so far (``setup.restarts.times``)
+        where :func:`~enkf.tissue.restart.restart_points` allows it after this reading;
         a restart the smoother refuses (e.g. too many readings for the discrepancy's dense
         covariance) is skipped with a warning, and the filter goes on."""
         times = np.array([r[0] for r in self._readings])
@@ -131,7 +133,7 @@ class OnlineIdentifier:
     def innovation_persistence(self, laser: str = "off") -> tuple[float, int]:
         """Lag-1 correlation of the normalized innovations of the readings so far, while
         the laser is ``"off"`` (default), ``"on"``, or over ``"all"``, and the number of
-        pairs it sums (:func:`~enkf.tissue.identify.laser_persistence`, as
+        pairs it sums (:func:`~enkf.tissue.estimates.laser_persistence`, as
         :meth:`TissueEstimates.innovation_persistence`)."""
         return laser_persistence(np.array([h.innovation_normalized for h in self.history]),
                                  np.array([h.laser_on for h in self.history]), laser)
@@ -162,7 +164,7 @@ class OnlineIdentifier:
                              inflation_state=self._inflation, callback=last.append)
         self._X, self._theta = res.state_ensemble, res.param_ensemble
         p_mean, p_std = res.param_mean[-1], res.param_std[-1]
-        if self.setup.smoother_restarts:  # keep the readings for the smoother's restarts
+        if self.setup.restarts.times:  # keep the readings for the smoother's restarts
             self._readings.append((t, y.copy()))
             if self.setup.restart_after(self.time, t) and (
                     self._restart_gate is None or self._restart_gate(
@@ -171,7 +173,7 @@ class OnlineIdentifier:
                 last[-1] = replace(last[-1], state_ensemble=self._X, forecast=None)
         T_mean, T_std = self._pieces.tracked(last[-1])
         n = self._pieces.n
-        n_off = self.setup.n_sensor_offsets
+        n_off = self.setup.sensors.n_offsets
         est = OnlineEstimate(t, p_mean[:n], p_std[:n], T_mean, T_std, bool(res.analysed[-1]),
                              time.perf_counter() - tic,
                              res.param_mean[-1, -n_off:] if n_off else None,
@@ -188,13 +190,11 @@ class OnlineIdentifier:
         """The bank's weights (or ``weights``, of the filters ``alive``) after the
         reading at ``t`` with the filters' log-densities ``lls`` (K,), and the mixture's
         log-density (:func:`~enkf.tissue.drift.bank_weights`)."""
-        from .drift import bank_weights
-
         weights = self._weights if weights is None else weights
         alive = self._alive if alive is None else alive
         ll = np.where(alive, np.asarray(lls, float), -np.inf)
         heated = bool(self.setup.mean_power(self.time, t) > 0)
-        w, _, mix = bank_weights(ll[None], weights, self.setup.drift.switch_prob,
+        w, _, mix = bank_weights(ll[None], weights, self.setup.parameters.drift.switch_prob,
                                  np.array([heated]))
         return w[-1], float(mix[0])
 
@@ -208,11 +208,10 @@ class OnlineIdentifier:
         pair = self._weights[[0, j]]
         w, _ = self._step_weights(t, [ll_still, ll_drifting], pair / pair.sum(),
                                   np.ones(2, bool))
-        return bool(w[1] > self.setup.drift.restart_weight)
+        return bool(w[1] > self.setup.parameters.drift.restart_weight)
 
     def _update_bank(self, t: float, y: np.ndarray) -> OnlineEstimate:
         from ..problem import FilterDivergence
-        from .drift import _mix_moments
 
         tic = time.perf_counter()
         ests, lls, errors = [], [], []
@@ -238,7 +237,7 @@ class OnlineIdentifier:
         def mix_of(a, b):
             if getattr(E[0], a) is None:
                 return None, None
-            return _mix_moments(np.array([getattr(e, a) for e in E]),
+            return mix_moments(np.array([getattr(e, a) for e in E]),
                                 np.array([getattr(e, b) for e in E]), w)
 
         p_mean, p_std = mix_of("param_mean", "param_std")

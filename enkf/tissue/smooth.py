@@ -37,7 +37,7 @@ from ..checks import float_array
 from ..importance import amis, weighted_quantile
 from ..modes import find_modes
 from ..smoother import es_mda
-from .identify import assemble
+from .pieces import assemble
 from .setup import TissueFilterSetup
 
 __all__ = ["SmootherEstimates", "heated_time", "smooth_constant", "smooth_drifting"]
@@ -213,7 +213,7 @@ def smooth_drifting(setup: TissueFilterSetup, times, data, *, knots: int = 3,
         raise ValueError(f"knots must be an integer >= 2 (1: smooth_constant), got {knots!r}")
     if not (np.isfinite(drift_log_std) and drift_log_std > 0):
         raise ValueError(f"drift_log_std must be > 0 (log units), got {drift_log_std!r}")
-    names = tuple(setup.parameter_names)
+    names = tuple(setup.parameters.names)
     unknown = [d for d in drifting if d not in names]
     if unknown or not drifting:
         raise ValueError(f"drifting must name estimated parameters {names}, got "
@@ -226,10 +226,10 @@ def smooth_drifting(setup: TissueFilterSetup, times, data, *, knots: int = 3,
 def _smooth(setup, times, data, n_iter, seed, n_knots, drift_log_std, discrepancy,
             discrepancy_time, drifting, importance=0, importance_rounds=6, callback=None,
             mode_search=None) -> SmootherEstimates:
-    if setup.parameter_model != "random_walk":
+    if setup.parameters.kind != "random_walk":
         raise ValueError(f"the smoother needs parameter_model = 'random_walk' (constant or "
-                         f"drifting optics), got {setup.parameter_model!r}")
-    if setup.n_sensor_offsets:
+                         f"drifting optics), got {setup.parameters.kind!r}")
+    if setup.sensors.n_offsets:
         raise ValueError("the smoother does not estimate sensor offsets: set "
                          "sensor_offset_std = 0")
     if not (np.isfinite(discrepancy) and discrepancy >= 0):
@@ -261,7 +261,7 @@ def _smooth(setup, times, data, n_iter, seed, n_knots, drift_log_std, discrepanc
     X0, theta0 = pieces.prior(rng, setup.n_members)
     model, P = pieces.model, pieces.P_obs
     edges = np.r_[0.0, times]
-    drift = np.array([n in drifting for n in setup.parameter_names], dtype=bool)
+    drift = np.array([n in drifting for n in setup.parameters.names], dtype=bool)
     heated = heated_time(setup.power, edges)
     tau = 0.5 * (heated[:-1] + heated[1:])  # each step's optics: at its middle
     tk = np.linspace(0.0, heated[-1], n_knots)
@@ -291,7 +291,7 @@ def _smooth(setup, times, data, n_iter, seed, n_knots, drift_log_std, discrepanc
     if pieces.obs_error is not None:  # the camera's model error, as the filter reads it
         if discrepancy > 0:
             raise ValueError(f"discrepancy = {discrepancy:g} with the camera's model error "
-                             f"(image.model_error_rel_std = {setup.image.model_error_rel_std:g}): "
+                             f"(image.model_error_rel_std = {setup.sensors.image.model_error_rel_std:g}): "
                              "the camera's error stands for the model's; set discrepancy = 0")
         noise_var = np.asarray(pieces.noise_var, float)
 
@@ -338,7 +338,7 @@ def _smooth(setup, times, data, n_iter, seed, n_knots, drift_log_std, discrepanc
         def simulate(U: np.ndarray) -> np.ndarray:
             return w(simulate_raw(U))
     if importance:
-        lo, hi = (np.log(b) for b in setup.prior_bounds())
+        lo, hi = (np.log(b) for b in setup.parameters.prior_bounds())
         lo, hi = np.r_[lo[~drift], lo[drift]], np.r_[hi[~drift], hi[drift]]
         residuals = _residuals(simulate, y, R, lo.size, int(drift.sum()), n_knots, step)
         log_post = _log_posterior(residuals, lo, hi)
@@ -356,7 +356,7 @@ def _smooth(setup, times, data, n_iter, seed, n_knots, drift_log_std, discrepanc
         U, weights, ess = sample.U[live], sample.weights[live], sample.ess
     wall = time.perf_counter() - tic
     V = _knots_of(U, drift, n_knots)
-    names = tuple(setup.parameter_names)
+    names = tuple(setup.parameters.names)
     if n_knots == 1:
         return SmootherEstimates(names, V[:, 0].copy(), int(n_iter), wall, weights=weights,
                                  ess=ess, n_modes=n_modes)

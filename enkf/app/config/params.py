@@ -1,7 +1,7 @@
 """The parameters of an identification config: their names, priors, bounds and the
 damage-driven optics (``[filter.prior]``, ``[filter.bounds]``, ``[filter.coagulation]``).
 
-Split from :mod:`enkf.app.config`, whose number checks (``_num``, ``_pair``) it uses.
+They map onto :class:`~enkf.tissue.ParameterModel`.
 """
 
 from __future__ import annotations
@@ -11,7 +11,7 @@ import numpy as np
 from fem.checks import shorten
 from mcmatlab_py.config import ConfigError, check_keys
 
-from ..tissue.parameters import (
+from ...tissue.parameters import (
     BEAM_NAMES,
     COAGULATION_NAMES,
     ESTIMATES,
@@ -21,7 +21,7 @@ from ..tissue.parameters import (
     default_prior,
     parameter_names,
 )
-from . import config as _cfg
+from .numbers import num, pair
 
 #: keys of [filter.coagulation] (enkf.tissue.coagulation.Coagulation)
 COAGULATION_KEYS = {"E", "A", "nominal_factor", "weight_exponent", "mean_field_rel_std"}
@@ -56,19 +56,19 @@ def coagulation_settings(flt: dict, setup_kw: dict) -> None:
                               f"{setup_kw.get('parameter_model', 'random_walk')!r}: set "
                               "filter.parameter_model = \"coagulation\" or drop the table")
         return
-    from ..tissue.coagulation import Coagulation
+    from ...tissue.coagulation import Coagulation
 
-    kw = {k: _cfg._num(f"filter.coagulation.{k}", table[k], positive=True)
+    kw = {k: num(f"filter.coagulation.{k}", table[k], positive=True)
           for k in ("E", "A", "weight_exponent") if k in table}
     if "mean_field_rel_std" in table:
-        kw["mean_field_rel_std"] = _cfg._num("filter.coagulation.mean_field_rel_std",
+        kw["mean_field_rel_std"] = num("filter.coagulation.mean_field_rel_std",
                                              table["mean_field_rel_std"], lo=0.0)
     if "nominal_factor" in table:
         f = table["nominal_factor"]
         if not (isinstance(f, list) and len(f) == 2):
             raise ConfigError(f"filter.coagulation.nominal_factor must be [mua, mus] (coagulated "
                               f"over native), got {shorten(repr(f))}")
-        kw["nominal_factor"] = tuple(_cfg._num(f"filter.coagulation.nominal_factor[{i}]", v,
+        kw["nominal_factor"] = tuple(num(f"filter.coagulation.nominal_factor[{i}]", v,
                                           positive=True) for i, v in enumerate(f))
     setup_kw["coagulation"] = Coagulation(**kw)
 
@@ -80,7 +80,7 @@ def prior_settings(table, setup_kw: dict) -> dict:
     extra = sorted(set(table) - set(names))
     if extra:
         raise _not_estimated("filter.prior", extra[0], setup_kw)
-    return {name: _cfg._pair(f"filter.prior.{name}", table[name], positive=True) for name in table}
+    return {name: pair(f"filter.prior.{name}", table[name], positive=True) for name in table}
 
 
 def prior_of(name: str, setup_kw: dict, medium, where: str = "G.media[0]"
@@ -113,7 +113,7 @@ def nominal_of(name: str, setup_kw: dict, medium) -> float:
 def bounds_settings(table, setup_kw: dict, medium, where: str = "G.media[0]"
                     ) -> np.ndarray | None:
     """``[filter.bounds]``: the physical range of each estimated parameter's mean."""
-    from ..tissue import default_bounds
+    from ...tissue import default_bounds
 
     names = filtered_names(setup_kw)
     table = check_keys("filter.bounds", table, _KNOWN)
@@ -128,7 +128,7 @@ def bounds_settings(table, setup_kw: dict, medium, where: str = "G.media[0]"
         (p_lo, p_hi), source = prior_of(name, setup_kw, medium, where)
         lo, hi = default_bounds([nominal], [p_lo], [p_hi])[0]
         if name in table:
-            lo, hi = _cfg._pair(f"filter.bounds.{name}", table[name], positive=True)
+            lo, hi = pair(f"filter.bounds.{name}", table[name], positive=True)
             if not (lo <= p_lo and p_hi <= hi):
                 raise ConfigError(f"filter.bounds.{name} = {[lo, hi]} must contain the prior "
                                   f"[{p_lo:g}, {p_hi:g}] ({source})")
@@ -147,7 +147,7 @@ def drift_settings(flt: dict, setup_kw: dict) -> None:
     or the filter runs as configured (``"none"``). ``"auto"`` needs
     ``parameter_model = "random_walk"``; with the trend or coagulation model, left out, the
     mode is ``"none"``."""
-    from ..tissue.drift import DriftBank
+    from ...tissue.drift import DriftBank
 
     table = check_keys("filter.drift", flt.get("drift", {}), DRIFT_KEYS)
     model = setup_kw.get("parameter_model", "random_walk")
@@ -166,19 +166,19 @@ def drift_settings(flt: dict, setup_kw: dict) -> None:
         if not (isinstance(w, list) and len(w) == 2):
             raise ConfigError(f"filter.drift.walk_std must be [mua, mus] (log units per step), "
                               f"got {shorten(repr(w))}")
-        kw["walk_std"] = tuple(_cfg._num(f"filter.drift.walk_std[{i}]", v, positive=True, hi=10.0)
+        kw["walk_std"] = tuple(num(f"filter.drift.walk_std[{i}]", v, positive=True, hi=10.0)
                                for i, v in enumerate(w))
     for k, lim in (("switch_prob", dict(lo=0, hi=0.5)), ("prior_weight", dict(positive=True, hi=1)),
                    ("restart_weight", dict(lo=0, hi=1)), ("restart_delay", dict(lo=0, hi=1e6)),
                    ("restart_discrepancy", dict(lo=0, hi=10.0)), ("rtps", dict(lo=0, hi=1))):
         if k in table:
-            kw[k] = _cfg._num(f"filter.drift.{k}", table[k], **lim)
+            kw[k] = num(f"filter.drift.{k}", table[k], **lim)
     if "restart_knots" in table:
         k = table["restart_knots"]
         if not isinstance(k, list) or not k:
             raise ConfigError(f"filter.drift.restart_knots must be a list of integers >= 2, got "
                               f"{shorten(repr(k))}")
-        kw["restart_knots"] = tuple(int(_cfg._num(f"filter.drift.restart_knots[{i}]", v,
+        kw["restart_knots"] = tuple(int(num(f"filter.drift.restart_knots[{i}]", v,
                                                   integer=True, lo=2, hi=50))
                                     for i, v in enumerate(k))
     if "image" in setup_kw:  # a camera: the restarts' smoother takes no discrepancy (its

@@ -49,7 +49,7 @@ class AdviceSpec:
 
     def advisor(self, setup):
         """The :class:`~enkf.tissue.advice.Advisor` of this table on ``setup``."""
-        from ..tissue.advice import Advisor, Plan
+        from ...tissue.advice import Advisor, Plan
 
         return Advisor(setup, plan=Plan(*self.plan), **self.kw)
 

@@ -27,7 +27,7 @@ import numpy as np
 from fem.checks import shorten
 from mcmatlab_py.config import ConfigError
 
-from ..tissue.image import ThermalImage, estimate_spot_center
+from ...tissue.image import ThermalImage, estimate_spot_center
 
 __all__ = ["CAMERA_KEYS", "CameraRegistration", "camera_settings"]
 
