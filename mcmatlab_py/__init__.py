@@ -63,11 +63,11 @@ ES
 
 from ._strict import NotBuiltError
 from .fluorescence import FluorescenceMonteCarloSimulation
-from .light_source import IntensityDistribution
-from .media import Medium
+from .geometry.media import Medium
+from .geometry.spectra import calc_mua, calc_mus
+from .geometry.stl import find_inside_voxels
+from .light.source import IntensityDistribution
 from .model import Geometry, LightSource, Model, MonteCarloSimulation
-from .spectra import calc_mua, calc_mus
-from .stl import find_inside_voxels
 
 __all__ = ["FluorescenceMonteCarloSimulation", "Geometry", "IntensityDistribution",
            "LightSource", "Medium", "Model", "MonteCarloSimulation", "NotBuiltError", "calc_mua",

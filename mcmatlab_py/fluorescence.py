@@ -38,8 +38,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .broadband import is_broadband
-from .model import MonteCarloSimulation
+from .monte_carlo.broadband import is_broadband
+from .monte_carlo.run import run_simulation
+from .monte_carlo.simulation import MonteCarloSimulation
 
 __all__ = ["FluorescenceMonteCarloSimulation", "fluorescence_emitters",
            "run_fluorescence_monte_carlo"]
@@ -166,8 +167,6 @@ def run_fluorescence_monte_carlo(model, client=None, emitters: np.ndarray | None
     nz) fluorescence emitted at ``FMC.wavelength``, W/cm^3 per W incident, instead of
     :func:`fluorescence_emitters` of ``model.MC`` (e.g. summed over excitation wavelengths).
     """
-    from .monte_carlo import run_simulation
-
     G, MC, FMC = model.G, model.MC, model.FMC
     if not isinstance(FMC, FluorescenceMonteCarloSimulation):
         raise ValueError(f"model.FMC must be a FluorescenceMonteCarloSimulation, got {FMC!r}")

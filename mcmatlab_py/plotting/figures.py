@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..broadband import is_broadband, total
+from ..monte_carlo.broadband import is_broadband, total
 from .slices import orthogonal_slices, slices_through_maximum
 
 __all__ = ["fluorescence_figures", "geometry_figures", "heat_figures", "heat_slices",
@@ -72,7 +72,7 @@ def media_properties_figure(model, M=None):
     a bar to its largest value over the voxels and a tick at its smallest (they differ for
     FR-, T- or FD-dependent media); over the wavelengths when ``MC`` or ``FMC`` is broadband
     (:func:`mcmatlab_py.plotting.spectral.media_properties_vs_wavelength`)."""
-    from ..media_bins import optical_media_properties, thermal_media_properties
+    from ..geometry.media_bins import optical_media_properties, thermal_media_properties
 
     G, MC, HS = model.G, model.MC, model.HS
     if is_broadband(MC.wavelength) or is_broadband(model.FMC.wavelength):

@@ -14,7 +14,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..broadband import is_broadband
+from ..monte_carlo.broadband import is_broadband
 
 __all__ = ["media_properties_vs_wavelength", "spectrum_figure"]
 
@@ -87,7 +87,7 @@ def media_properties_vs_wavelength(model, M=None):
     if thermal:
         T = HS.T_voxels if HS.T_voxels is not None else HS.T_initial
         FD = 0.0 if HS.Omega_voxels is None else -np.expm1(-HS.Omega_voxels)
-        from ..media_bins import thermal_media_properties
+        from ..geometry.media_bins import thermal_media_properties
 
         th = thermal_media_properties(G.media, M, T, FD)
         x = np.arange(len(present))
