@@ -8,16 +8,12 @@ import hashlib
 import os
 import warnings
 from pathlib import Path
-from typing import TYPE_CHECKING
 
 import numpy as np
 
 from ..files import file_kind, npz_headers
 from .spec import EmulatorSpec
 from .white import white_supported
-
-if TYPE_CHECKING:
-    from .absorption import AbsorptionEmulator
 
 __all__ = ["METHODS", "WHITE_VERSION", "cache_key", "default_cache_dir", "entry_problem",
            "load_cached", "load_table", "resolve_method", "store_atomically", "store_table",
@@ -149,8 +145,9 @@ def load_cached(path: Path, what: str = "cache") -> dict | None:
         return None
 
 
-def store_table(path: Path, key: str, emu: AbsorptionEmulator) -> bool:
-    """Write the table (and which points it holds) atomically; points another process
+def store_table(path: Path, key: str, emu) -> bool:
+    """Write the table of ``emu`` (an :class:`~mcmatlab_py.emulator.AbsorptionEmulator`)
+    (and which points it holds) atomically; points another process
     added to the file meanwhile are kept. False (after a warning) when it cannot be
     written."""
     on_disk = load_table(path, emu.spec, key, quiet=True)
