@@ -226,7 +226,7 @@ def breakdown(names: list[str], n: int, rounds: int) -> None:
     thread, this process): the free moves (a safety map of zeros walks every packet face by
     face, as the kernel did before them) and the track-length tally of thin media
     (``MC.calc_normalized_fluence_rate = False``)."""
-    from mcmatlab_py import monte_carlo as mc
+    from mcmatlab_py.monte_carlo import host as mc
 
     real = mc.kernel_safety
 
