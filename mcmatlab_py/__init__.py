@@ -28,7 +28,7 @@ E, A
     Arrhenius activation energy (J/mol) and frequency factor (1/s)
 wavelength
     nm (``MC.wavelength``), selects media given as functions of wavelength; an array
-    of them runs a broadband simulation (:mod:`mcmatlab_py.broadband`)
+    of them runs a broadband simulation (:mod:`mcmatlab_py.monte_carlo.broadband`)
 spectrum
     power share of each wavelength of a broadband run (``MC.spectrum_func``
     normalised)

@@ -1,7 +1,7 @@
 """Media that depend on fluence rate, temperature and damage, coupled by iteration.
 
 MCmatlab evaluates such media on the voxels and splits them into ``n_bins`` sub-media
-(:mod:`mcmatlab_py.media_bins`). Two loops couple them to the simulations:
+(:mod:`mcmatlab_py.geometry.media_bins`). Two loops couple them to the simulations:
 
 * the fluence-rate loop of the Monte Carlo (MCmatlab's ``MC.FRdepIterations``: set
   ``MC.P`` and ``MC.fr_dep_iterations`` and ``model.run_monte_carlo()`` calls

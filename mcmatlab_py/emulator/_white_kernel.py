@@ -22,13 +22,13 @@ unbiased on its own and the strongly absorbing ones stop costing exponentials ea
 the packet lives until its last weight dies or it escapes. The threshold test is on the
 path length (``L > ln(w_k / threshold) / mua_k``), without an exponential.
 
-Weights are fixed-point integers as in :mod:`mcmatlab_py._mc_kernel` (``W_ONE`` is 1):
+Weights are fixed-point integers as in :mod:`mcmatlab_py.monte_carlo._kernel` (``W_ONE`` is 1):
 ``q_k = int(W_ONE w_k e^{-mua_k L})`` at every crossing, and the deposits are the
 differences of successive ``q_k``, so a packet's deposits plus its escape add up to its
 launch weight exactly for every ``k``, and the integer sums make the result for a seed
 bit-identical for any number of threads. Voxel walk, sources, Fresnel reflection at the
 escaping faces (mismatched interfaces), the boundary types and the kill range are those
-of :mod:`mcmatlab_py._mc_kernel`.
+of :mod:`mcmatlab_py.monte_carlo._kernel`.
 
 Several media (issue #19, part 2): the scattering path then depends on every medium's
 ``mus`` and ``g`` but still on no ``mua``, so one run per scattering state of the media
@@ -88,6 +88,10 @@ def _next_check(q, lr):
     return m
 
 
+# Near-copy of monte_carlo._kernel.transport_batch, kept apart on purpose: the white run
+# tallies another quantity (one weight per tabulated mua, decayed along the path, with its
+# own roulette), and folding it into the direct kernel would put that per-mua work in the
+# inner loop of every direct run. The shared steps (_steps, _tally, launch) are imported.
 @numba.njit(cache=True, fastmath=_FASTMATH)
 def white_batch(
     b, mua_tab, rate, kid, Mf, mus, g, nref, nx, ny, nz, dx, dy, dz,
@@ -108,13 +112,13 @@ def white_batch(
     mus, g : (n_media,) scattering coefficient (cm^-1) and anisotropy of each medium.
     nref : the refractive index of every medium (one value).
     boundary_type, n_out, matched, roulette, weight_threshold, chance : as
-        :func:`mcmatlab_py._mc_kernel.transport_batch`.
-    si, sf, stab, svox : the source (:mod:`mcmatlab_py._sources`).
+        :func:`mcmatlab_py.monte_carlo._kernel.transport_batch`.
+    si, sf, stab, svox : the source (:mod:`mcmatlab_py.light._sources`).
     fold : (nx*ny*nz,) int64, the row of ``acc`` of each voxel (C order): the identity,
         or the voxel's orbit under the symmetries of block and beam, which sums the
         mirror images as it runs and keeps ``acc`` small enough for the caches.
     acc : (n_rows, K) int64 absorbed fixed-point weight per row and ``mua_k``.
-    tally : (N_TALLY, K) int64, the ``T_*`` totals of :mod:`mcmatlab_py._mc_kernel` per ``k``.
+    tally : (N_TALLY, K) int64, the ``T_*`` totals of :mod:`mcmatlab_py.monte_carlo._kernel` per ``k``.
     """
     K = rate.size
     multi = mus.size > 1
@@ -352,11 +356,11 @@ def run_white_batches(
     """Run batches ``[batch_start, batch_stop)`` on ``acc.shape[0]`` workers.
 
     ``uniform``: the medium that fills the grid when every face is escaping (then
-    :func:`mcmatlab_py._white_uniform.white_uniform_batch` runs), else -1.
+    :func:`mcmatlab_py.emulator._white_uniform.white_uniform_batch` runs), else -1.
 
     ``acc`` is (n_workers, n_rows, K) and ``tally`` (n_workers, N_TALLY, K), one slice per
     worker; batches are claimed from an atomic counter as in
-    :func:`mcmatlab_py._mc_kernel.run_batches`, so the integer totals depend only on the
+    :func:`mcmatlab_py.monte_carlo._kernel.run_batches`, so the integer totals depend only on the
     seed, never on the number of threads.
     """
     n_workers = acc.shape[0]

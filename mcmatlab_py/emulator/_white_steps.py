@@ -1,5 +1,5 @@
-"""Steps shared by the white Monte Carlo kernels (:mod:`mcmatlab_py._white_kernel`,
-:mod:`mcmatlab_py._white_uniform`): the decay of the weights over a path and its deposit."""
+"""Steps shared by the white Monte Carlo kernels (:mod:`mcmatlab_py.emulator._white_kernel`,
+:mod:`mcmatlab_py.emulator._white_uniform`): the decay of the weights over a path and its deposit."""
 
 import math
 

@@ -1,12 +1,12 @@
 """Numba kernel of the white Monte Carlo for a cuboid of one medium with escaping faces.
 
-The general white kernel (:mod:`mcmatlab_py._white_kernel`) walks every voxel face a
+The general white kernel (:mod:`mcmatlab_py.emulator._white_kernel`) walks every voxel face a
 packet crosses and settles each weight's loss in the voxel it was lost in (the
 track-length estimator). On the emulator's 100 x 100 x 50 voxels that is 20 crossings per
 free path at ``mus = 10`` cm^-1, each costing one exponential per ``mua_k``: the white
 build of a low-``mus`` column then cost three times the direct table's twelve runs. When
 one medium fills the grid and every face is escaping (``boundary_type`` 1, the case of
-:mod:`mcmatlab_py._mc_uniform`), this kernel walks no faces:
+:mod:`mcmatlab_py.monte_carlo._uniform`), this kernel walks no faces:
 
 * free paths are whole moves, and only a move that leaves the cuboid is cut at its face;
 * while successive moves stay in one voxel the path is only added up; the losses
@@ -21,7 +21,7 @@ one medium fills the grid and every face is escaping (``boundary_type`` 1, the c
 
 Launch, Fresnel reflection at the escaping faces (mismatched interfaces), per-``k``
 roulette and the escape tallies are those of the general white kernel; the random
-numbers are drawn as in :mod:`mcmatlab_py._mc_uniform` (ziggurat free paths, azimuths from
+numbers are drawn as in :mod:`mcmatlab_py.monte_carlo._uniform` (ziggurat free paths, azimuths from
 the unit disc), so a seed gives other (statistically equal) numbers than the general
 kernel, still the same for any number of threads.
 """
@@ -121,6 +121,9 @@ def _spread(q, w, e, mua, s, u, px, py, pz, ux, uy, uz,
     return alive
 
 
+# The one-medium form of _white_kernel.white_batch (as monte_carlo._uniform is of the direct
+# kernel): no voxel look-ups, the whole free path at once; the few lines they share (the
+# settle and flush of the weights) are in _white_steps.
 @numba.njit(cache=True, fastmath=_FASTMATH)
 def white_uniform_batch(
     b, mua, kid, mus, g, nref, nx, ny, nz, dx, dy, dz, n_out, matched, roulette,
@@ -129,7 +132,7 @@ def white_uniform_batch(
     """Run the photons of batch ``b`` for every absorption ``mua`` (K,) cm^-1 (all > 0)
     of the one medium (scattering ``mus`` cm^-1, anisotropy ``g``, index ``nref``) that
     fills the grid. ``fold``, ``acc`` (n_rows, K) and ``tally`` (N_TALLY, K) as
-    :func:`mcmatlab_py._white_kernel.white_batch`."""
+    :func:`mcmatlab_py.emulator._white_kernel.white_batch`."""
     K = mua.size
     Lx = nx * dx
     Ly = ny * dy

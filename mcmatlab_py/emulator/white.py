@@ -1,6 +1,6 @@
 """Perturbation ("white") Monte Carlo of a homogeneous block: NA for many ``mua`` per run.
 
-:func:`white_absorbed` runs the kernel of :mod:`mcmatlab_py._white_kernel` once for one
+:func:`white_absorbed` runs the kernel of :mod:`mcmatlab_py.emulator._white_kernel` once for one
 ``mus`` and returns the absorbed power for every ``mua`` of a list; the emulator's
 ``method="white"`` build (:meth:`mcmatlab_py.emulator.AbsorptionEmulator.build`) makes one
 such run per column of its table (``n_mus`` runs instead of ``n_mua * n_mus``).
@@ -50,7 +50,7 @@ class WhiteResult:
 
     ``absorbed`` is (K, nx, ny, nz) absorbed weight summed over the packets
     (launched-packet units), one map per ``mua_k``; ``tally`` (N_TALLY, K) the totals of
-    the ``T_*`` slots of :mod:`mcmatlab_py._mc_kernel` in the same units.
+    the ``T_*`` slots of :mod:`mcmatlab_py.monte_carlo._kernel` in the same units.
     """
 
     mua: np.ndarray  #: (K,) cm^-1

@@ -6,7 +6,7 @@ fluence rate (W/cm^2), temperature (deg C) and fractional damage (0..1); ``n`` a
 number or a function of wavelength; ``VHC`` and ``TC`` a number or a function
 ``f(T, FD)``. Functions of FR, T or FD receive 1-D arrays over the voxels of the
 medium and must compute element-wise; such a medium is split into ``n_bins``
-sub-media (see :mod:`mcmatlab_py.media_bins`).
+sub-media (see :mod:`mcmatlab_py.geometry.media_bins`).
 """
 
 from __future__ import annotations
@@ -137,7 +137,7 @@ class Medium(StrictAttributes):
         Phase function of the scattering angle theta (rad) per solid angle, not
         necessarily normalised (MCmatlab's ``customPhaseFunc``): ``f(theta)``,
         ``f(wavelength, theta)`` or values at equispaced angles over [0, pi]. Used
-        instead of Henyey-Greenstein (``g`` is then ignored); see :mod:`mcmatlab_py.optics`.
+        instead of Henyey-Greenstein (``g`` is then ignored); see :mod:`mcmatlab_py.monte_carlo.optics`.
     """
 
     name: str
@@ -238,7 +238,7 @@ class Medium(StrictAttributes):
             return float(v)
         if self.depends_on_state(field):
             raise ValueError(f"{self._label}.{field} depends on FR, T or FD: evaluate it with "
-                             "values(), or bin it with mcmatlab_py.media_bins")
+                             "values(), or bin it with mcmatlab_py.geometry.media_bins")
         if wavelength is None:
             raise ValueError(f"{self._label}.{field} is a function of wavelength: set "
                              "MC.wavelength (nm)")

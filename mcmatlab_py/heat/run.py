@@ -99,7 +99,7 @@ def run_heat(model) -> None:  # noqa: C901  (one loop with its callbacks)
 
     vhc0, tc0 = element_props(0.0)
     dt_max = None
-    # steps chosen by accuracy (mcmatlab_py.heat_steps); the *_t functions of time keep
+    # steps chosen by accuracy (mcmatlab_py.heat.steps); the *_t functions of time keep
     # the schedule's steps, so that their Monte Carlo re-runs stay at its times
     adaptive = (HS.dt is None and HS.step_control == "accuracy" and not varying_optics
                 and HS.VHC_t is None and HS.TC_t is None)

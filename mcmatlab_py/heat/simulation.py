@@ -131,7 +131,7 @@ class HeatSimulation(StrictAttributes):
     * ``max_media_temps``: (n_media,) deg C, the highest temperature each medium of
       ``G.media`` reached at a node of its elements (``-inf`` for a medium on no voxel).
     * ``media_properties``, ``M``: the thermal sub-media and their voxel map
-      (:class:`mcmatlab_py.media_bins.ThermalMediaProperties`) at the end of the run.
+      (:class:`mcmatlab_py.geometry.media_bins.ThermalMediaProperties`) at the end of the run.
     * ``mesh``: the scikit-fem ``MeshTet`` used; ``snapshots``: list of (t, T_nodes).
     * ``movie_frames``: (n, h, w, 3) uint8 frames kept by ``defer_movie_write``.
     """
@@ -143,7 +143,7 @@ class HeatSimulation(StrictAttributes):
     n_pulses: int = 1
     dt: float | None = None  #: s, time step; None: chosen automatically (``step_control``)
     #: with ``dt = None``: "accuracy" (steps from a local error estimate against ``rtol``,
-    #: :mod:`mcmatlab_py.heat_steps`) or "stability" (MCmatlab's rule, :func:`auto_dt`)
+    #: :mod:`mcmatlab_py.heat.steps`) or "stability" (MCmatlab's rule, :func:`auto_dt`)
     step_control: str = "accuracy"
     rtol: float = 1e-3  #: "accuracy": local error per step, of the run's temperature rise
     #: s, "accuracy": sensor readings at the multiples of this (the steps land on them);

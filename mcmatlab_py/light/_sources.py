@@ -1,6 +1,6 @@
 """Numba kernels that launch one photon packet of a light source (arrays and scalars only).
 
-The Python layer (:mod:`mcmatlab_py.light_source`) packs a source into four arrays:
+The Python layer (:mod:`mcmatlab_py.light.source`) packs a source into four arrays:
 
 * ``si`` (``SI_SIZE``,) int64: the kind of source and of its distributions, and where
   the tables of custom distributions lie in ``tab``;
@@ -114,7 +114,7 @@ def sample_pwl(tab, off, n, xi):
 
     ``tab[off : off + n]`` holds the density at the nodes ``t_i = i / (n - 1)`` and
     ``tab[off + n : off + 2 n]`` its cumulative integral normalised to 1 (see
-    :func:`mcmatlab_py.light_source.pwl_table`). The bin is found by bisection; within
+    :func:`mcmatlab_py.light.source.pwl_table`). The bin is found by bisection; within
     it the density is linear, its integral a quadratic, solved in the cancellation-free
     form ``t = 2 c / (q0 + sqrt(q0^2 + 2 (q1 - q0) c))``. The position of ``xi`` inside
     its bin is again uniform, so one number serves both steps.

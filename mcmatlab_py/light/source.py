@@ -1,4 +1,4 @@
-"""Light sources: validation and packing for the launch kernel (:mod:`mcmatlab_py._sources`).
+"""Light sources: validation and packing for the launch kernel (:mod:`mcmatlab_py.light._sources`).
 
 MCmatlab's ``lightSource`` has six source types (``sourceType``), accepted here by
 number or by name:
@@ -176,7 +176,7 @@ def _number(name: str, value) -> float:
 
 
 def validate_light_source(src, G) -> None:
-    """Check and normalise the fields of a :class:`~mcmatlab_py.model.LightSource`.
+    """Check and normalise the fields of a :class:`~mcmatlab_py.light.source.LightSource`.
 
     Raises ValueError naming the field and the value; everything the kernel needs is
     then built by :func:`source_arrays` without further checks.
@@ -266,7 +266,7 @@ def pwl_table(q: np.ndarray) -> np.ndarray:
     """(2 n,) float64: a density at n equispaced nodes, then its normalised cumulative integral.
 
     The density is linear between nodes (trapezoids); the kernel samples it exactly
-    (:func:`mcmatlab_py._sources.sample_pwl`).
+    (:func:`mcmatlab_py.light._sources.sample_pwl`).
     """
     q = np.asarray(q, dtype=np.float64)
     cdf = np.concatenate([[0.0], np.cumsum(0.5 * (q[1:] + q[:-1]))])

@@ -24,7 +24,7 @@ def run_batches(
     ``track`` (n_media,) bool or None and ``flu`` (n_workers, nvox or 1): the track-length
     tally (:func:`transport_batch`; the Python layer sets ``uniform_medium = -1`` with it).
     ``safe`` (nvox,) float32: the safety distances of the general kernel
-    (:func:`mcmatlab_py.safety.safety_distances`).
+    (:func:`mcmatlab_py.monte_carlo.safety.safety_distances`).
 
     ``acc`` is (n_workers, nvox), ``tally`` (n_workers, N_TALLY or more) and ``ext``
     (n_workers, n_ext), one row per worker; the workers (one per thread) claim batches one at a time from a
@@ -35,7 +35,7 @@ def run_batches(
     """
     n_workers = acc.shape[0]
     counter = np.zeros(1, dtype=np.int64)
-    uniform = False  # the one-medium kernel (mcmatlab_py._mc_uniform) runs a plain run
+    uniform = False  # the one-medium kernel (mcmatlab_py.monte_carlo._uniform) runs a plain run
     if oi is None:  # the optional outputs need the general kernel (pruned at compile time)
         uniform = uniform_path_applies(uniform_medium, boundary_type, nref, mua, mus, phase_idx)
     for k in numba.prange(n_workers):

@@ -1,7 +1,7 @@
 """The voxel Monte Carlo on an NVIDIA GPU, through numba's CUDA target (MCmatlab's ``useGPU``).
 
-The same photon physics as the CPU kernel (:mod:`mcmatlab_py._mc_kernel`): the step
-functions of :mod:`mcmatlab_py._mc_steps`, the launch of :mod:`mcmatlab_py._sources` and
+The same photon physics as the CPU kernel (:mod:`mcmatlab_py.monte_carlo._kernel`): the step
+functions of :mod:`mcmatlab_py.monte_carlo._steps`, the launch of :mod:`mcmatlab_py.light._sources` and
 the generator of :mod:`mcmatlab_py._rng` are the very same ``@numba.njit`` functions,
 which numba's CUDA target compiles again as device functions when a CUDA kernel calls
 them. Only the transport loop is written out here, as the CPU kernel's without the hooks
@@ -76,6 +76,10 @@ _INF = np.inf
 _FASTMATH = {"nsz", "arcp", "contract", "afn", "reassoc"}
 
 
+# A copy of the transport loop of _kernel.transport_batch, kept apart on purpose: numba.cuda
+# device code cannot call the CPU's @numba.njit functions (nor their fixed-point atomics
+# and prefetch), so the loop is written again with cuda.jit device steps. A change to the
+# physics there is made here too (tests/test_mc_gpu.py compares the two statistically).
 @cuda.jit(fastmath=_FASTMATH)
 def transport_streams(
     M, mua, mus, g, nref, uniform_medium, nx, ny, nz, dx, dy, dz,
@@ -85,7 +89,7 @@ def transport_streams(
 ):  # fmt: skip
     """Thread ``t`` runs the packets of stream ``stream_start + t``, adding into ``acc`` and
     ``tally`` (int64 fixed point, atomically). Arguments as
-    :func:`mcmatlab_py._mc_kernel.transport_batch`, with ``phase_idx`` an array (-1: HG) and
+    :func:`mcmatlab_py.monte_carlo._kernel.transport_batch`, with ``phase_idx`` an array (-1: HG) and
     ``track`` an array (all False: no track-length tally; ``flu`` then unused)."""
     t = cuda.grid(1)
     if t >= n_streams:

@@ -74,21 +74,21 @@ def transport_batch(
     ----------
     M : (nx*ny*nz,) int32, medium index per voxel, C order of (nx, ny, nz).
     safe : (nx*ny*nz,) float32 cm, how far a packet in each voxel may move without meeting
-        a voxel of another kind of medium (:func:`mcmatlab_py.safety.safety_distances`).
+        a voxel of another kind of medium (:func:`mcmatlab_py.monte_carlo.safety.safety_distances`).
     mua, mus, g, nref : (n_media,) float64 optical properties (cm^-1, -, -).
     boundary_type : 0 none escape, 1 all escape, 2 top escapes, 3 top and bottom
         escape with cyclic sides (MCmatlab).
-    si, sf, stab, svox : the source (:mod:`mcmatlab_py._sources`).
+    si, sf, stab, svox : the source (:mod:`mcmatlab_py.light._sources`).
     phase_idx : (n_media,) int32, row of ``phase_tab`` of a tabulated phase function, or -1.
     phase_tab : (n_tables, 2 L) float64 density and cumulative of the scattering angle.
     normals : (nx*ny*nz*3,) float32 smoothed interface normals, used if ``use_normals``.
     acc : (nx*ny*nz,) int64 absorbed fixed-point weight, updated in place.
     tally : (N_TALLY,) int64, updated in place.
-    oi, of, consider, ext, paths, path_n : the optional outputs (:mod:`mcmatlab_py._mc_outputs`);
+    oi, of, consider, ext, paths, path_n : the optional outputs (:mod:`mcmatlab_py.monte_carlo._outputs`);
         ``oi = None`` compiles them out.
     track : (n_media,) bool, media whose fluence is tallied along the path (track length),
         or None (compiled out); a move through several voxels is split among them
-        (:func:`mcmatlab_py._mc_track.track_walk`).
+        (:func:`mcmatlab_py.monte_carlo._track.track_walk`).
     flu : (nx*ny*nz,) int64, the track-length tally: weight times length, ``FLU_ONE`` per
         launched packet crossing a voxel's diagonal (:func:`fluence_scale`).
     """
@@ -192,7 +192,7 @@ def transport_batch(
                         rs = 0.0
                 if rs > 0.0:
                     # a free move: no voxel of another kind of medium lies within rs of the
-                    # packet (mcmatlab_py.safety); only the cuboid's faces can stop it. An
+                    # packet (mcmatlab_py.monte_carlo.safety); only the cuboid's faces can stop it. An
                     # interaction within rs leaves the rest of that ball to the next move, and
                     # the medium of a kind as the packet's: no look-up
                     hit = tau < mut * rs

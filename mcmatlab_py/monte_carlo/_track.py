@@ -1,7 +1,7 @@
 """Numba kernel of the track-length tally along a straight move through several voxels.
 
-The general kernel (:mod:`mcmatlab_py._mc_kernel`) moves a packet through a run of voxels
-of one kind of medium in one step (:mod:`mcmatlab_py.safety`); where that medium's fluence
+The general kernel (:mod:`mcmatlab_py.monte_carlo._kernel`) moves a packet through a run of voxels
+of one kind of medium in one step (:mod:`mcmatlab_py.monte_carlo.safety`); where that medium's fluence
 is tallied along the path, :func:`track_walk` splits the move at the voxel faces it
 crosses and adds each voxel's share, as a walk face by face would. The packet's own
 position is not touched: the transport does not depend on whether the tally runs.

@@ -3,9 +3,9 @@
 When one medium fills the grid, every boundary is an escaping face (``boundary_type
 1``) and only the plain outputs are asked for, the walk needs no voxel faces: the packet
 moves a whole free path at once and only a path that ends outside the cuboid is cut at
-the face it crosses. :func:`mcmatlab_py._mc_kernel.run_batches` then runs
+the face it crosses. :func:`mcmatlab_py.monte_carlo._kernel.run_batches` then runs
 :func:`transport_uniform_batch` instead of the general kernel. It computes the same
-physics as :func:`mcmatlab_py._mc_kernel.transport_batch` (same launch, fixed-point
+physics as :func:`mcmatlab_py.monte_carlo._kernel.transport_batch` (same launch, fixed-point
 weights, deposits, Fresnel at the faces, roulette and escape tallies), faster:
 
 * the optics are scalars, and the voxel of an interaction is found from its position
@@ -53,7 +53,7 @@ def transport_uniform_batch(
 ):  # fmt: skip
     """Run the photons of batch ``b`` in the medium ``m`` that fills the grid.
 
-    The arguments are those of :func:`mcmatlab_py._mc_kernel.transport_batch`; ``acc``
+    The arguments are those of :func:`mcmatlab_py.monte_carlo._kernel.transport_batch`; ``acc``
     (nx*ny*nz,) and ``tally`` are int64 fixed-point weights, updated in place.
     """
     Lx = nx * dx

@@ -31,7 +31,7 @@ def gpu_available() -> bool:
 
 def simulate_gpu(G, MC, M, mua, mus, g, nref, *, seed, n_photons, time_limit_s,
                   label) -> MCResult:
-    """The plain run on a CUDA GPU (:mod:`mcmatlab_py._mc_cuda`): the same totals as
+    """The plain run on a CUDA GPU (:mod:`mcmatlab_py.monte_carlo._cuda`): the same totals as
     :func:`simulate`, statistically (each CUDA thread runs its own random stream)."""
     spec = output_spec(G, MC, len(mua), parent_media(G, MC, len(mua)))
     if spec.active:

@@ -122,7 +122,7 @@ def track_length(sums: WideSums, track, d: tuple, shape: tuple) -> np.ndarray | 
 
 
 def kernel_safety(args: tuple, spec: OutputSpec | None = None) -> np.ndarray:
-    """(nvox,) float32 cm: the safety distances (:mod:`mcmatlab_py.safety`) of the grid of
+    """(nvox,) float32 cm: the safety distances (:mod:`mcmatlab_py.monte_carlo.safety`) of the grid of
     the kernel arguments ``args``; where deposition criteria count the transitions between
     media, each medium is its own kind. A grid of one medium needs none: ``inf``."""
     M = args[0]
@@ -194,7 +194,7 @@ def optical_arrays(media, wavelength: float | None = None
     """(mua, mus, g, n) arrays of a list of media at ``wavelength`` (nm), float64.
 
     One value per medium: media that depend on FR, T or FD are binned by
-    :func:`mcmatlab_py.media_bins.optical_media_properties` (as ``run_monte_carlo`` does).
+    :func:`mcmatlab_py.geometry.media_bins.optical_media_properties` (as ``run_monte_carlo`` does).
     """
     for m in media:
         if m.is_state_dependent:

@@ -2,7 +2,7 @@
 
 :func:`output_spec` turns ``model.MC``'s requests (light collector, far field, boundary
 irradiance, MCML bins, deposition criteria, example paths) into the arrays of
-:mod:`mcmatlab_py._mc_outputs`, or ``None`` when nothing is requested: the kernel is then
+:mod:`mcmatlab_py.monte_carlo._outputs`, or ``None`` when nothing is requested: the kernel is then
 compiled without them. :func:`store_outputs` normalises the fixed-point tallies as
 MCmatlab does (per W launched; per cm^2 for maps and images, W/W per far-field bin).
 """

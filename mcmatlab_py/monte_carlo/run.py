@@ -176,7 +176,7 @@ def run_monte_carlo(model, client=None) -> None:
 
 
 def run_simulation(G, MC, *, client=None, power: float = 1.0) -> None:
-    """Validate ``G`` and ``MC`` (a :class:`~mcmatlab_py.model.MonteCarloSimulation` or its
+    """Validate ``G`` and ``MC`` (a :class:`~mcmatlab_py.monte_carlo.simulation.MonteCarloSimulation` or its
     fluorescence subclass), run the Monte Carlo, and fill ``MC``.
 
     ``power``: W launched per W the outputs are normalised to. The maps (``NA``, ``NFR``,
@@ -184,7 +184,7 @@ def run_simulation(G, MC, *, client=None, power: float = 1.0) -> None:
     (``absorbed_fraction``, ``escaped``, ...) stay fractions of the launched power. The
     fluorescence run gives the fluorescence emitted per W of incident excitation, so its maps
     are per W incident as MCmatlab's. An array ``MC.wavelength`` runs each wavelength in
-    turn (:mod:`mcmatlab_py.broadband`).
+    turn (:mod:`mcmatlab_py.monte_carlo.broadband`).
     """
     M_raw = G.medium_map()  # validates G
     MC.validate(G)

@@ -1,6 +1,6 @@
 """Safety distances of a voxel grid: how far a packet may move without meeting another medium.
 
-The general Monte Carlo kernel (:mod:`mcmatlab_py._mc_kernel`) moves a packet through a
+The general Monte Carlo kernel (:mod:`mcmatlab_py.monte_carlo._kernel`) moves a packet through a
 run of voxels of one medium in a single step where nothing can change along the way:
 from any point of voxel ``v`` it may go up to ``safe[v]`` cm in any direction and stay
 among voxels whose optics equal those of ``v``. Only within one voxel of a change of

@@ -68,7 +68,7 @@ class MonteCarloSimulation(StrictAttributes):
       ``cores_used`` (kernel CPU time over wall time: below ``n_threads`` when other
       programs took the cores).
 
-    Optional outputs (:mod:`mcmatlab_py.mc_outputs`; the plain run computes none of them):
+    Optional outputs (:mod:`mcmatlab_py.monte_carlo.outputs`; the plain run computes none of them):
 
     * ``NI_xpos``, ``NI_xneg``, ``NI_ypos``, ``NI_yneg``, ``NI_zpos``, ``NI_zneg`` (with
       ``calc_normalized_irradiance``): the power leaving through each face pixel per area
@@ -85,7 +85,7 @@ class MonteCarloSimulation(StrictAttributes):
     * ``example_paths`` (4, k): x, y, z (cm) and weight of the first ``n_example_paths``
       packets, each path preceded by a NaN column (MCmatlab's layout).
 
-    Broadband runs (``wavelength`` a 1-D array of n, :mod:`mcmatlab_py.broadband`): every map
+    Broadband runs (``wavelength`` a 1-D array of n, :mod:`mcmatlab_py.monte_carlo.broadband`): every map
     gets a last axis of n wavelengths, ``NA`` and ``NFR`` (nx, ny, nz, n), ``NI_*`` (.., ..,
     n), ``far_field`` (res, res, n), ``light_collector.image`` with a last axis of n, each
     slice per W incident in all (slice k is ``spectrum[k]`` times a monochromatic run's
@@ -120,7 +120,7 @@ class MonteCarloSimulation(StrictAttributes):
     light_source: LightSource = field(default_factory=LightSource)
     #: nm; selects the value of media given as functions of wavelength (MCmatlab's default
     #: 800 nm); a 1-D array runs each wavelength in turn (broadband, MCmatlab's Example 23):
-    #: the maps get a last axis of ``len(wavelength)`` (:mod:`mcmatlab_py.broadband`)
+    #: the maps get a last axis of ``len(wavelength)`` (:mod:`mcmatlab_py.monte_carlo.broadband`)
     wavelength: float | np.ndarray | None = 800.0
     #: broadband runs: the spectral power ``S(wavelength)`` (one number >= 0; not normalised:
     #: the shares ``S / sum(S)`` become ``spectrum``); None: equal power at every wavelength
@@ -182,7 +182,7 @@ class MonteCarloSimulation(StrictAttributes):
     seed_used: int | None = None
     #: (nx, ny, nz) int32 sub-medium index the kernel ran on (``G``'s map unless media were split)
     M: np.ndarray | None = None
-    #: the sub-media's mua, mus, g, n (:class:`mcmatlab_py.media_bins.OpticalMediaProperties`)
+    #: the sub-media's mua, mus, g, n (:class:`mcmatlab_py.geometry.media_bins.OpticalMediaProperties`)
     media_properties: object = None
     NI_xpos: np.ndarray | None = None
     NI_xneg: np.ndarray | None = None
