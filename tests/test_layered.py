@@ -304,7 +304,7 @@ def test_identify_both_layers_end_to_end(tmp_path):
     assert all(t.have.any() for t in emu.tables)  # every node's table was read
     assert est.param_std[-1, 0] < est.param_std[0, 0]  # the data told something about mua
     with pytest.raises(ValueError, match=r"but it \(AbsorptionEmulator\) takes \('mua', 'mus'\): "
-                       "use mcmatlab_py.emulator.media.TwoMediaEmulator"):
+                       "use mcmatlab_py.emulator_media.TwoMediaEmulator"):
         setup.absorption = emu.tables[0]
         TissueForwardModel(setup)
     setup.estimate = ("mua", "mus")  # and the other way round: a one-medium estimate
