@@ -55,13 +55,14 @@ def main(argv=None):
                 run_tasks(_identity, items, client=client)
                 empty = (time.perf_counter() - t0) / len(items)
                 print(f"task overhead: {1e3 * empty:.2f} ms per empty task (400 tasks, 2 workers)")
-                from mcmatlab_py import monte_carlo as mc
+                from mcmatlab_py.monte_carlo import batch_range
+                from mcmatlab_py.monte_carlo import host as mc
 
                 m = paper_model((20, 20, 10), n_photons=8000, progress=False)
-                a = mc._kernel_args(m.G, m.MC, m.G.medium_map(), *mc.optical_arrays(m.G.media),
-                                    1, 8000)
+                a = mc.kernel_args(m.G, m.MC, m.G.medium_map(), *mc.optical_arrays(m.G.media),
+                                   1, 8000)
                 ranges = [(i, i + 1) for i in range(8)]
-                task = functools.partial(mc.batch_range, a)
+                task = functools.partial(batch_range, a)
                 run_tasks(task, ranges, client=client)
                 t0 = time.perf_counter()
                 parts = run_tasks(task, ranges, client=client)

@@ -45,7 +45,7 @@ def time_eval(emu, repeat=2000):
 
 def time_builds(n_photons: int) -> None:
     """Both build methods from scratch (temporary caches), alternating, in this process."""
-    from mcmatlab_py.white import white_column
+    from mcmatlab_py.emulator.white import white_column
 
     # compile (or load) both kernels outside the timings
     tiny = EmulatorSpec.from_model(paper_model((4, 4, 2), progress=False), n_photons=100)

@@ -5,7 +5,7 @@ One thread each, photons per CPU-second, in one run:
 * ``block``: the paper's tissue (100 x 100 x 50 voxels, 0.5 x 0.5 x 0.25 cm, mua 1, mus 100,
   g 0.9, 1 mm top-hat) with one corner voxel of a second, identical medium, which sends the
   run to the general kernel; the yardstick is the same block of one medium, which takes the
-  one-medium kernel (``mcmatlab_py/_mc_uniform.py``).
+  one-medium kernel (``mcmatlab_py/monte_carlo/_uniform.py``).
 * ``ex01``, ``ex04``, ``ex05``: MCmatlab's Examples 1, 4 and 5 (the gallery's scripts in
   ``examples/mcmatlab/``) reduced to 61 x 61 x 60, 50^3 and 50^3 voxels; Example 5 is its
   excitation run, with the lens imaging and 100 example paths. The yardstick is the same
@@ -226,7 +226,7 @@ def breakdown(names: list[str], n: int, rounds: int) -> None:
     thread, this process): the free moves (a safety map of zeros walks every packet face by
     face, as the kernel did before them) and the track-length tally of thin media
     (``MC.calc_normalized_fluence_rate = False``)."""
-    from mcmatlab_py import monte_carlo as mc
+    from mcmatlab_py.monte_carlo import host as mc
 
     real = mc.kernel_safety
 

@@ -28,7 +28,7 @@ E, A
     Arrhenius activation energy (J/mol) and frequency factor (1/s)
 wavelength
     nm (``MC.wavelength``), selects media given as functions of wavelength; an array
-    of them runs a broadband simulation (:mod:`mcmatlab_py.broadband`)
+    of them runs a broadband simulation (:mod:`mcmatlab_py.monte_carlo.broadband`)
 spectrum
     power share of each wavelength of a broadband run (``MC.spectrum_func``
     normalised)
@@ -63,11 +63,11 @@ ES
 
 from ._strict import NotBuiltError
 from .fluorescence import FluorescenceMonteCarloSimulation
-from .light_source import IntensityDistribution
-from .media import Medium
+from .geometry.media import Medium
+from .geometry.spectra import calc_mua, calc_mus
+from .geometry.stl import find_inside_voxels
+from .light.source import IntensityDistribution
 from .model import Geometry, LightSource, Model, MonteCarloSimulation
-from .spectra import calc_mua, calc_mus
-from .stl import find_inside_voxels
 
 __all__ = ["FluorescenceMonteCarloSimulation", "Geometry", "IntensityDistribution",
            "LightSource", "Medium", "Model", "MonteCarloSimulation", "NotBuiltError", "calc_mua",

@@ -47,7 +47,7 @@ import numpy as np
 
 from fem.checks import check_number, shorten, unknown_name_hint
 
-from .media import Medium
+from .geometry.media import Medium
 from .model import Model
 
 __all__ = ["MAX_CONFIG_BYTES", "ConfigError", "check_keys", "load_model", "model_from_config",

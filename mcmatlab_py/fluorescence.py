@@ -17,7 +17,7 @@ emitted power is the absorbed power times ``QY`` times the ratio of the photon e
 field, collector image) are per W of *incident excitation*, as MCmatlab's; its fractions
 (``absorbed_fraction``, ``escaped``, ...) are fractions of the emitted fluorescence.
 
-Broadband (MCmatlab's Example 23; :mod:`mcmatlab_py.broadband`): with an array of
+Broadband (MCmatlab's Example 23; :mod:`mcmatlab_py.monte_carlo.broadband`): with an array of
 excitation wavelengths :math:`\\lambda_k` (``MC.NA`` then (nx, ny, nz, n_x), slice k per W
 incident in all) and an array of fluorescence wavelengths :math:`\\lambda_j`, each voxel
 emits the photons absorbed at every :math:`\\lambda_k` times :math:`QY(\\lambda_k)`, spread
@@ -28,7 +28,7 @@ over the :math:`\\lambda_j` by its emission spectrum normalised over them,
 
 (``ES`` not given: equal shares), as MCmatlab's ``runMonteCarlo``. ``FMC.source_distribution``
 is then (nx, ny, nz, n_f), ``FMC.emitted_power`` (n_f,), and the fluorescence maps get the
-wavelength axis of :mod:`mcmatlab_py.broadband`, each wavelength run with its own emitters.
+wavelength axis of :mod:`mcmatlab_py.monte_carlo.broadband`, each wavelength run with its own emitters.
 With one fluorescence wavelength the spectrum only tells whether a medium emits there.
 """
 
@@ -38,8 +38,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .broadband import is_broadband
-from .model import MonteCarloSimulation
+from .monte_carlo.broadband import is_broadband
+from .monte_carlo.run import run_simulation
+from .monte_carlo.simulation import MonteCarloSimulation
 
 __all__ = ["FluorescenceMonteCarloSimulation", "fluorescence_emitters",
            "run_fluorescence_monte_carlo"]
@@ -49,7 +50,7 @@ __all__ = ["FluorescenceMonteCarloSimulation", "fluorescence_emitters",
 class FluorescenceMonteCarloSimulation(MonteCarloSimulation):
     """Fluorescence Monte Carlo settings and results (MCmatlab's ``model.FMC``).
 
-    The settings and outputs are those of :class:`~mcmatlab_py.model.MonteCarloSimulation`
+    The settings and outputs are those of :class:`~mcmatlab_py.monte_carlo.simulation.MonteCarloSimulation`
     (``n_photons_requested``, ``simulation_time_requested``, ``boundary_type``,
     ``matched_interfaces``, ``use_light_collector``, ``light_collector``, ``far_field_res``,
     ``calc_normalized_irradiance``, ``n_example_paths``, ...), with these differences:
@@ -166,8 +167,6 @@ def run_fluorescence_monte_carlo(model, client=None, emitters: np.ndarray | None
     nz) fluorescence emitted at ``FMC.wavelength``, W/cm^3 per W incident, instead of
     :func:`fluorescence_emitters` of ``model.MC`` (e.g. summed over excitation wavelengths).
     """
-    from .monte_carlo import run_simulation
-
     G, MC, FMC = model.G, model.MC, model.FMC
     if not isinstance(FMC, FluorescenceMonteCarloSimulation):
         raise ValueError(f"model.FMC must be a FluorescenceMonteCarloSimulation, got {FMC!r}")

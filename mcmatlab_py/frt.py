@@ -1,7 +1,7 @@
 """Media that depend on fluence rate, temperature and damage, coupled by iteration.
 
 MCmatlab evaluates such media on the voxels and splits them into ``n_bins`` sub-media
-(:mod:`mcmatlab_py.media_bins`). Two loops couple them to the simulations:
+(:mod:`mcmatlab_py.geometry.media_bins`). Two loops couple them to the simulations:
 
 * the fluence-rate loop of the Monte Carlo (MCmatlab's ``MC.FRdepIterations``: set
   ``MC.P`` and ``MC.fr_dep_iterations`` and ``model.run_monte_carlo()`` calls
@@ -22,9 +22,12 @@ from contextlib import contextmanager
 
 import numpy as np
 
-from .broadband import total
-from .media import FLUORESCENCE_FIELDS, OPTICAL_FIELDS, THERMAL_FIELDS, check_positive
-from .media_bins import optical_media_properties, thermal_media_properties
+from .fluorescence import fluorescence_emitters
+from .geometry.media import FLUORESCENCE_FIELDS, OPTICAL_FIELDS, THERMAL_FIELDS, check_positive
+from .geometry.media_bins import optical_media_properties, thermal_media_properties
+from .monte_carlo.broadband import total
+from .monte_carlo.run import run_monte_carlo
+from .monte_carlo.simulation import check_energy_balance
 
 __all__ = ["MediaCoupling", "fluence_rate_iterations", "same_sub_media"]
 
@@ -47,9 +50,6 @@ def fluence_rate_iterations(model, power: float, n_iterations: int, *, client=No
     Fills ``model.MC`` as :meth:`Model.run_monte_carlo` does (which calls this with
     ``MC.P`` and ``MC.fr_dep_iterations``); ``client`` as there.
     """
-    from .model import check_energy_balance
-    from .monte_carlo import run_monte_carlo
-
     MC = model.MC
     power = check_positive("fluence_rate_iterations", "power", power, allow_zero=True)
     n_iterations = int(n_iterations)
@@ -146,8 +146,6 @@ class MediaCoupling:
         own ``emitters`` (:meth:`Model.run_fluorescence_monte_carlo`) gets those of
         ``model.MC`` here.
         """
-        from .fluorescence import fluorescence_emitters
-
         model = self.model
         MC, FMC = model.MC, model.FMC
         if FMC.simulation_time is None or not (excitation_ran or self.fluorescence_dependent):

@@ -58,7 +58,7 @@ def beam_area(model_or_source, G=None) -> tuple[float, str]:
     ``(area, how)``: ``how`` says which rule gave it. Pencil beams, point sources and custom
     distributions raise a ``ValueError`` asking for the area.
     """
-    from .light_source import source_kind
+    from .light.source import source_kind
 
     src = getattr(getattr(model_or_source, "MC", None), "light_source", model_or_source)
     G = G if G is not None else getattr(model_or_source, "G", None)

@@ -14,7 +14,7 @@ import pytest
 
 from enkf.app.config import ConfigError, identify_config_from_dict
 from mcmatlab_py.emulator import AbsorptionEmulator, EmulatorSpec
-from mcmatlab_py.emulator_media import BeamRadiusEmulator
+from mcmatlab_py.emulator.media import BeamRadiusEmulator
 
 EX = Path(__file__).parents[1] / "examples"
 
@@ -126,7 +126,7 @@ def test_forward_model_says_which_absorption_model_the_radius_needs(tiny):
 
     out = identify_config_from_dict(_cfg(tiny))
     one = lambda mua, mus: np.zeros((np.size(mua), 5, 5, 5))  # noqa: E731
-    with pytest.raises(ValueError, match="use mcmatlab_py.emulator_media.BeamRadiusEmulator"):
+    with pytest.raises(ValueError, match="use mcmatlab_py.emulator.media.BeamRadiusEmulator"):
         TissueForwardModel(out.setup(one))
 
 

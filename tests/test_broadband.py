@@ -17,9 +17,9 @@ import numpy as np  # noqa: E402
 import pytest  # noqa: E402
 
 from mcmatlab_py import Medium, Model, NotBuiltError  # noqa: E402
-from mcmatlab_py.broadband import photon_split, wavelength_seeds  # noqa: E402
 from mcmatlab_py.fluorescence import fluorescence_emitters  # noqa: E402
-from mcmatlab_py.heat_run import heat_source  # noqa: E402
+from mcmatlab_py.heat import heat_source  # noqa: E402
+from mcmatlab_py.monte_carlo.broadband import photon_split, wavelength_seeds  # noqa: E402
 
 WL_X = np.array([420.0, 460.0, 500.0])  # nm, excitation
 WL_F = np.array([560.0, 600.0, 640.0])  # nm, fluorescence

@@ -190,7 +190,7 @@ def test_automatic_step_is_chosen_again_when_the_media_conduct_faster(monkeypatc
     every step); when the tissue heats and conducts 26 times faster the steps are cut into
     sub-steps within the new bound, and the run agrees with one of 1e-4 s steps to 1e-3 K
     (measured: 2e-4 K). With the first step kept it is 100 times further off (2.4e-2 K)."""
-    import mcmatlab_py.heat as heat
+    import mcmatlab_py.heat.run as heat
 
     reference = conducting_block(0.5, dt=1e-4).simulate_heat_distribution().HS
     HS = conducting_block(0.5).simulate_heat_distribution().HS
@@ -246,7 +246,7 @@ def test_coupled_heat_run_reruns_the_fluorescence_and_heats_where_it_is_absorbed
     heats with NA - emitted + fluorescence absorbed (calcdTdtArrays): the heat gained is
     exactly P times that source, as in force over each update interval."""
     from mcmatlab_py.fluorescence import fluorescence_emitters
-    from mcmatlab_py.heat_run import heat_source
+    from mcmatlab_py.heat import heat_source
 
     model = fluorescent_block(lambda wl, FR, T, FD: np.where(T > 45.0, 20.0, 1.0), QY=0.5)
     G, MC, FMC, HS = model.G, model.MC, model.FMC, model.HS

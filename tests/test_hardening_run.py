@@ -71,7 +71,7 @@ def test_heat_refuses_before_the_monte_carlo(tmp_path, capsys, bad_toml, old, ne
 
 def test_heat_mesh_that_cannot_fit_is_refused():
     from mcmatlab_py import Medium, Model
-    from mcmatlab_py.budget import check_heat
+    from mcmatlab_py.heat import check_heat
 
     m = Model()
     m.G.media = [Medium("t", mua=1.0, mus=100.0, VHC=3.7, TC=0.0037)]
@@ -105,7 +105,7 @@ def test_data_with_no_usable_reading_is_refused(tmp_path, capsys):
 
 
 def test_energy_balance_is_checked_after_every_run(monkeypatch):
-    import mcmatlab_py.monte_carlo as mc
+    import mcmatlab_py.monte_carlo.run as mc
     from mcmatlab_py import Medium, Model
     from mcmatlab_py.model import EnergyBalanceError
 

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from mcmatlab_py import Medium, Model
-from mcmatlab_py.heat_steps import GAMMA, ErrorControlledSteps
+from mcmatlab_py.heat.steps import GAMMA, ErrorControlledSteps
 
 LAM, C0, Y0 = 3.0, 2.0, 1.0  # 1/s, K/s, K: y' = -LAM y + C0, y(0) = Y0
 

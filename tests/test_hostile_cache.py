@@ -23,7 +23,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-import mcmatlab_py.emulator as emulator_module
+import mcmatlab_py.emulator.absorption as emulator_module
 from mcmatlab_py.emulator import AbsorptionEmulator, EmulatorSpec, cache_key
 
 

@@ -378,7 +378,7 @@ def test_a_stream_the_health_check_stops_ends_as_a_file_does(tmp_path, capsys, c
 
 def test_a_mesh_file_that_is_a_fifo_is_refused(fifo):
     pytest.importorskip("pyvista")
-    from mcmatlab_py.stl import find_inside_voxels
+    from mcmatlab_py.geometry.stl import find_inside_voxels
 
     X, Y, Z = np.meshgrid(*[np.array([0.25, 0.75])] * 3, indexing="ij")
     with pytest.raises(ValueError, match="mesh file .* is a pipe or FIFO, not a regular file"):

@@ -127,7 +127,7 @@ def test_a_power_function_returning_nonsense_is_named(value, needle):
 def test_steps_chosen_by_accuracy_are_not_counted_from_the_stability_bound():
     """HS.step_control = "accuracy" takes as many steps as the temperatures need: a long
     run is not refused from the stability bound's count, which "stability" runs take."""
-    from mcmatlab_py.budget import check_heat
+    from mcmatlab_py.heat import check_heat
 
     model = _tiny()
     model.HS.dt = None

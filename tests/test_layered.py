@@ -183,7 +183,7 @@ def both_layers(cfg=None):
 
 
 def test_lagrange_weights_are_exact_for_polynomials_of_their_degree():
-    from mcmatlab_py.emulator_media import lagrange_weights
+    from mcmatlab_py.emulator.media import lagrange_weights
 
     nodes = np.log([2.5, 5.0, 10.0])
     x = np.linspace(nodes[0], nodes[-1], 7)
@@ -195,7 +195,7 @@ def test_lagrange_weights_are_exact_for_polynomials_of_their_degree():
 
 
 def test_two_media_emulator_equals_each_node_table_at_its_node(tmp_path):
-    from mcmatlab_py.emulator_media import TwoMediaEmulator
+    from mcmatlab_py.emulator.media import TwoMediaEmulator
 
     spec = layered()  # medium 1 estimated first, medium 0 (the top layer) second
     emu = TwoMediaEmulator.build(spec, 0, (2.5, 10.0), (75.0, 300.0), cache_dir=tmp_path,
@@ -304,7 +304,7 @@ def test_identify_both_layers_end_to_end(tmp_path):
     assert all(t.have.any() for t in emu.tables)  # every node's table was read
     assert est.param_std[-1, 0] < est.param_std[0, 0]  # the data told something about mua
     with pytest.raises(ValueError, match=r"but it \(AbsorptionEmulator\) takes \('mua', 'mus'\): "
-                       "use mcmatlab_py.emulator_media.TwoMediaEmulator"):
+                       "use mcmatlab_py.emulator.media.TwoMediaEmulator"):
         setup.absorption = emu.tables[0]
         TissueForwardModel(setup)
     setup.parameters.estimate = ("mua", "mus")  # and the other way round: a one-medium estimate
@@ -360,8 +360,8 @@ def test_two_media_emulator_between_nodes_agrees_with_direct_monte_carlo(tmp_pat
     weights) and of the reference's (10 times the photons)."""
     import dataclasses
 
-    from mcmatlab_py.emulator_media import TwoMediaEmulator
-    from mcmatlab_py.exact import direct_member
+    from mcmatlab_py.emulator.exact import direct_member
+    from mcmatlab_py.emulator.media import TwoMediaEmulator
 
     spec = layered(n_photons=20_000)
     emu = TwoMediaEmulator.build(spec, 0, (2.5, 10.0), (75.0, 300.0), cache_dir=tmp_path,

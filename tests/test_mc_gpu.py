@@ -216,7 +216,7 @@ PTX = textwrap.dedent("""
     # no GPU: device functions ask the current device for its compute capability
     D.get_current_device = lambda: types.SimpleNamespace(compute_capability=(8, 0))
     from numba import cuda, types as T
-    from mcmatlab_py import _mc_cuda as KC
+    from mcmatlab_py.monte_carlo import _cuda as KC
     f64, i64, i32, b = T.float64, T.int64, T.int32, T.boolean
 
     def A(dt, nd=1):

@@ -1,8 +1,8 @@
 """The general kernel's free moves through runs of voxels of one kind of medium.
 
-:mod:`mcmatlab_py.safety` gives each voxel the distance within which a packet meets no
+:mod:`mcmatlab_py.monte_carlo.safety` gives each voxel the distance within which a packet meets no
 voxel of other optics, and the kernel moves a whole free path there at once
-(:mod:`mcmatlab_py._mc_kernel`). These tests hold the distances against a brute-force
+(:mod:`mcmatlab_py.monte_carlo._kernel`). These tests hold the distances against a brute-force
 search, and the moves against the walk face by face that a safety map of zeros gives
 (the kernel's behaviour before free moves): with matched interfaces the two cross the same
 voxels and draw the same random numbers, so the same seed gives the same numbers up to
@@ -18,8 +18,8 @@ import numpy as np
 import pytest
 
 from mcmatlab_py import Medium, Model
-from mcmatlab_py import monte_carlo as mc
-from mcmatlab_py.safety import medium_kinds, safety_distances
+from mcmatlab_py.monte_carlo import host as mc
+from mcmatlab_py.monte_carlo.safety import medium_kinds, safety_distances
 
 
 def test_safety_is_the_distance_to_the_nearest_voxel_of_another_kind():

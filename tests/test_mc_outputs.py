@@ -13,7 +13,7 @@ import pytest
 
 from mcmatlab_py import Medium, Model
 from mcmatlab_py.combine import combine_models
-from mcmatlab_py.layered import absorption_vs_depth, radial_reflectance_transmittance
+from mcmatlab_py.monte_carlo.layered import absorption_vs_depth, radial_reflectance_transmittance
 
 C = 29979245800.0  # cm/s
 

@@ -183,7 +183,7 @@ def test_wide_sums_are_exact_past_int64():
 
 def test_moving_the_sums_often_changes_no_bit(monkeypatch):
     """Where a run moves its int64 sums into the wide ones does not change any number."""
-    import mcmatlab_py.monte_carlo as mc
+    import mcmatlab_py.monte_carlo.host as mc
 
     def run(flush, threads):
         monkeypatch.setattr(mc, "FLUSH_PHOTONS", flush)
@@ -306,7 +306,7 @@ def test_atomic_counter_hands_out_each_batch_exactly_once():
     """The work queue of run_batches: every index claimed once, by whichever thread."""
     import numba
 
-    from mcmatlab_py._atomic import fetch_add
+    from mcmatlab_py.monte_carlo._atomic import fetch_add
 
     @numba.njit(parallel=True)
     def claim(n_items, n_workers):
@@ -341,7 +341,7 @@ def test_noise_falls_as_one_over_sqrt_photons():
 @pytest.mark.parametrize("matched, roulette", [(True, True), (False, True), (False, False)])
 def test_voxel_walk_agrees_with_the_one_medium_kernel(matched, roulette):
     """Two identical media force the general kernel's voxel-by-voxel walk; a block of one
-    medium runs the one-medium kernel (mcmatlab_py._mc_uniform), which draws its numbers
+    medium runs the one-medium kernel (mcmatlab_py.monte_carlo._uniform), which draws its numbers
     differently: layer by layer and face by face the two agree within the photon noise of
     two independent runs."""
     N = 40_000

@@ -37,7 +37,7 @@ def adding_doubling(mua, mus, g, d, n):
 def test_slab_total_reflectance_and_transmittance_match_adding_doubling(mua, mus, g, d, n,
                                                                         kernel):
     """Cyclic sides run the general kernel. A block 40 cm wide whose faces all escape runs
-    the one-medium kernel (mcmatlab_py._mc_uniform); what leaves through its sides, after
+    the one-medium kernel (mcmatlab_py.monte_carlo._uniform); what leaves through its sides, after
     at least 20 cm inside, is below exp(-mua 20 cm) <= 5e-5: far below the tolerance."""
     N = 400_000
     model = slab_model(mua, mus, g, d, N, n=n, matched=n == 1.0, seed=11)

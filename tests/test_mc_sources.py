@@ -1,6 +1,6 @@
 """Every MCmatlab light source, against its analytic distribution.
 
-The launch sampler is tested directly (:func:`mcmatlab_py.light_source.sample_light_source`,
+The launch sampler is tested directly (:func:`mcmatlab_py.light.source.sample_light_source`,
 no transport: fast); a few end-to-end runs check what the kernel does with the packets
 (focusing, refraction at the surface). Tolerances come from the number of samples: a
 fraction p estimated from N samples has standard error sqrt(p (1 - p) / N); a mean, the
@@ -15,7 +15,7 @@ import pytest
 from scipy.stats import chi2
 
 from mcmatlab_py import Medium, Model
-from mcmatlab_py.light_source import LG01_RADIUS_RATIO, beam_axes, sample_light_source
+from mcmatlab_py.light.source import LG01_RADIUS_RATIO, beam_axes, sample_light_source
 
 N = 200_000  # samples per sampler test
 
@@ -363,7 +363,7 @@ def test_tilted_mirror_reflects_about_the_smoothed_normal(smoothing):
 
 
 def test_interface_normals_of_a_sphere_point_along_the_radius():
-    from mcmatlab_py.optics import interface_normals
+    from mcmatlab_py.monte_carlo.optics import interface_normals
 
     n, R = 32, 10.0
     i = np.arange(n) - (n - 1) / 2
@@ -404,8 +404,8 @@ def test_tabulated_phase_function_is_sampled_with_its_moments():
     (MCmatlab example 21, 1 + cos^2) has E[cos^2] = 0.4."""
     import numba
 
-    from mcmatlab_py._sources import sample_pwl
-    from mcmatlab_py.optics import phase_function_table
+    from mcmatlab_py.light._sources import sample_pwl
+    from mcmatlab_py.monte_carlo.optics import phase_function_table
 
     @numba.njit
     def cosines(tab, n, k):

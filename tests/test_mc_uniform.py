@@ -1,4 +1,4 @@
-"""The one-medium Monte Carlo kernel (mcmatlab_py._mc_uniform) and its random draws.
+"""The one-medium Monte Carlo kernel (mcmatlab_py.monte_carlo._uniform) and its random draws.
 
 The kernel itself is held to the published and analytic references of
 tests/test_mc_physics.py and tests/test_mc_references.py, which run blocks of one medium
@@ -93,8 +93,8 @@ def test_the_one_medium_kernel_is_chosen_only_where_it_applies():
     """Escaping faces and one medium: the one-medium kernel (other numbers than the general
     kernel for the same seed); cyclic sides or several media: the general kernel, whose
     numbers a second medium identical to the first does not change."""
-    from mcmatlab_py._mc_kernel import N_TALLY  # noqa: F401 (the module compiles)
-    from mcmatlab_py._mc_uniform import uniform_path_applies
+    from mcmatlab_py.monte_carlo._kernel import transport_batch  # noqa: F401 (the module compiles)
+    from mcmatlab_py.monte_carlo._uniform import uniform_path_applies
 
     nref = np.array([1.3])
     ab = (np.array([1.0]), np.array([100.0]))

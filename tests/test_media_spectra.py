@@ -6,8 +6,9 @@ import math
 import numpy as np
 import pytest
 
-from mcmatlab_py import Medium, Model, NotBuiltError, spectra
-from mcmatlab_py.media_bins import (
+from mcmatlab_py import Medium, Model, NotBuiltError
+from mcmatlab_py.geometry import spectra
+from mcmatlab_py.geometry.media_bins import (
     farthest_point_bins,
     optical_media_properties,
     thermal_media_properties,

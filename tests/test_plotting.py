@@ -172,7 +172,7 @@ def test_far_field_and_boundary_figures_are_drawn_as_mcmatlab():
     """The far field as radiant intensity (per bin over its solid angle: the bins' solid
     angles sum to 4 pi), a face no light leaves drawn black from 0 with its units, and
     slice titles without rounding noise."""
-    from mcmatlab_py.mc_outputs import far_field_solid_angles
+    from mcmatlab_py.monte_carlo.outputs import far_field_solid_angles
     from mcmatlab_py.plotting.outputs import plot_boundary_irradiance, plot_far_field
 
     sr = far_field_solid_angles(12)

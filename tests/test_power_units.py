@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from mcmatlab_py import LightSource, Medium, Model
-from mcmatlab_py.heat_run import heat_source
+from mcmatlab_py.heat import heat_source
 from mcmatlab_py.power import (
     absolute_absorption,
     apply_power,

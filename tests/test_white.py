@@ -14,7 +14,6 @@ import numba
 import numpy as np
 import pytest
 
-from mcmatlab_py import _mc_kernel as K
 from mcmatlab_py._strict import NotBuiltError
 from mcmatlab_py.emulator import (
     AbsorptionEmulator,
@@ -24,7 +23,8 @@ from mcmatlab_py.emulator import (
     symmetrize,
     white_supported,
 )
-from mcmatlab_py.white import white_absorbed, white_column
+from mcmatlab_py.emulator.white import white_absorbed, white_column
+from mcmatlab_py.monte_carlo import _tally as K
 
 C = 1.1
 
@@ -225,7 +225,7 @@ def test_white_two_layers_energy_balance_and_refraction():
 def test_loss_point_inverts_where_the_weight_is_lost(x):
     """The point of a move where the one-medium white kernel puts a weight's loss: the
     inverse of the share lost before t, (1 - exp(-x t)) / (1 - exp(-x))."""
-    from mcmatlab_py._white_uniform import loss_point
+    from mcmatlab_py.emulator._white_uniform import loss_point
 
     t = np.linspace(0.0, 1.0, 41)
     lost = -math.expm1(-x)

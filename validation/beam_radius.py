@@ -2,7 +2,7 @@
 radius against direct Monte Carlo, and the filter on truths lit by another radius.
 
 Part 1, the emulator. ``filter.estimate = ["mua", "mus", "beam_radius"]`` reads the
-absorbed power from a :class:`~mcmatlab_py.emulator_media.BeamRadiusEmulator`: one table
+absorbed power from a :class:`~mcmatlab_py.emulator.media.BeamRadiusEmulator`: one table
 over (mua, mus) per node radius, ``log(load + offset)`` interpolated in ``log radius``.
 At radii between and beyond the nodes it is compared with a table built directly at that
 radius (the same photons and seed, so the two share most of their Monte Carlo noise and
@@ -36,7 +36,7 @@ from emulator_accuracy import rel_l2, top99  # noqa: E402
 from enkf.app.config import identify_config_from_dict  # noqa: E402
 from mcmatlab_py.config import read_toml  # noqa: E402
 from mcmatlab_py.emulator import AbsorptionEmulator  # noqa: E402
-from mcmatlab_py.emulator_media import BeamRadiusEmulator  # noqa: E402
+from mcmatlab_py.emulator.media import BeamRadiusEmulator  # noqa: E402
 
 #: cm: radii between the nodes, at the prior's edges (+-10%) and beyond them
 RADII = (0.085, 0.09, 0.095, 0.1, 0.105, 0.11, 0.115)

@@ -5,7 +5,7 @@ power, on the filter's 20 x 20 x 10 grid and on a finer 40 x 40 x 20 grid. The
 reference's own noise is estimated from two independent reference runs and reported
 beside the error (it inflates the measured error). Each table is built by the methods
 asked for (``table``: direct Monte Carlo per point; ``white``: one perturbation run per
-mus column, :mod:`mcmatlab_py.white`), and their errors are reported side by side. Writes
+mus column, :mod:`mcmatlab_py.emulator.white`), and their errors are reported side by side. Writes
 validation/reports/emulator_accuracy.md.
 
     python validation/emulator_accuracy.py [--ref-photons 4000000] [--grids 20 40]

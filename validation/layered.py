@@ -96,8 +96,8 @@ def sensor_setup(cfg, absorption, kind: str, seed: int = 0, camera_error: float 
 def emulator_study(cfg, photons: int, ref_photons: int) -> list[str]:
     """Build times and load errors of the two build methods (section 1)."""
     from mcmatlab_py.emulator import AbsorptionEmulator, EmulatorSpec, table_point, table_row
-    from mcmatlab_py.exact import direct_member
-    from mcmatlab_py.white import white_column
+    from mcmatlab_py.emulator.exact import direct_member
+    from mcmatlab_py.emulator.white import white_column
 
     spec = EmulatorSpec.from_model(cfg.model, medium=cfg.medium, mesh_divisions=tuple(cfg.grid),
                                    **{**cfg.emulator_kw, "n_photons": photons})

@@ -3,7 +3,7 @@
 The block of ``examples/two_layer.toml`` (an 80 micrometre epidermis over the dermis) with
 ``filter.medium = ["dermis", "epidermis"]``: the filter estimates the dermis's ``mua``,
 ``mus`` and the epidermis's ``mua2``, ``mus2`` (priors 0.5-2 x (1, 100) and (5, 150)
-cm^-1), with :class:`mcmatlab_py.emulator_media.TwoMediaEmulator` (a 4 x 4 grid of the
+cm^-1), with :class:`mcmatlab_py.emulator.media.TwoMediaEmulator` (a 4 x 4 grid of the
 dermis tables over the epidermis's optics).
 
 1. **Emulator** (``--emulator``): build time from an empty cache, and the relative L2 error
@@ -64,7 +64,7 @@ def both_config(layered):
 def emulator_study(cfg, ref_photons: int) -> list[str]:
     """Build time and load errors of the two-media emulator (section 1)."""
     from mcmatlab_py.emulator import EmulatorSpec
-    from mcmatlab_py.exact import direct_member
+    from mcmatlab_py.emulator.exact import direct_member
 
     spec = EmulatorSpec.from_model(cfg.model, medium=cfg.medium, mesh_divisions=tuple(cfg.grid),
                                    **cfg.emulator_kw)

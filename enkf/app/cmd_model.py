@@ -6,7 +6,7 @@ import time
 from pathlib import Path
 
 from fem.checks import check_number
-from mcmatlab_py.budget import check_heat
+from mcmatlab_py.heat import check_heat
 from mcmatlab_py.model import MAX_PHOTONS
 
 from .common import apply_threads, close_client, dask_client
@@ -102,7 +102,7 @@ def cmd_mc(args) -> int:
 
 def _output_names() -> tuple[str, ...]:
     """``MC``'s optional outputs (the maps beyond NA and NFR, their axes, the paths)."""
-    from mcmatlab_py.broadband import AXES, MAPS
+    from mcmatlab_py.monte_carlo.broadband import AXES, MAPS
 
     return (*(m for m in MAPS if m not in ("NA", "NFR")), *AXES, "example_paths")
 

@@ -46,10 +46,10 @@ class TissueForwardModel:
         takes = tuple(getattr(absorption, "extra_names", ()))
         if self._extra != takes:
             if any(n in SECOND_MEDIUM_NAMES for n in self._extra + takes):
-                use = ("mcmatlab_py.emulator_media.TwoMediaEmulator" if "mua2" in self._extra
+                use = ("mcmatlab_py.emulator.media.TwoMediaEmulator" if "mua2" in self._extra
                        else "a one-medium absorption model")
             else:
-                use = ("mcmatlab_py.emulator_media.BeamRadiusEmulator" if self._extra
+                use = ("mcmatlab_py.emulator.media.BeamRadiusEmulator" if self._extra
                        else "an absorption model of a known beam")
             raise ValueError(f"estimate = {setup.parameters.estimate} passes {('mua', 'mus') + self._extra} "
                              f"to the absorption model, but it ({type(absorption).__name__}) "

@@ -32,10 +32,10 @@ PARAMETER_NAMES = ("mua", "mus", "VHC", "TC")
 #: (``parameter_model = "coagulation"``, :mod:`enkf.tissue.coagulation`)
 COAGULATION_NAMES = ("mua_coag", "mus_coag")
 #: the optics of a second estimated medium of a layered block (e.g. the epidermis over the
-#: dermis whose optics are ``mua``, ``mus``; :class:`mcmatlab_py.emulator_media.TwoMediaEmulator`)
+#: dermis whose optics are ``mua``, ``mus``; :class:`mcmatlab_py.emulator.media.TwoMediaEmulator`)
 SECOND_MEDIUM_NAMES = ("mua2", "mus2")
 #: the beam's radius as an uncertain input the ensemble carries beside the optics
-#: (:class:`mcmatlab_py.emulator_media.BeamRadiusEmulator`; issue #18)
+#: (:class:`mcmatlab_py.emulator.media.BeamRadiusEmulator`; issue #18)
 BEAM_NAMES = ("beam_radius",)
 #: the optical parameters an absorption model takes, in its call's order
 OPTICS_NAMES = PARAMETER_NAMES[:2] + SECOND_MEDIUM_NAMES

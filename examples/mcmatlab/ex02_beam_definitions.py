@@ -20,7 +20,7 @@ previous one as MCmatlab's script changes one model step by step:
     python examples/mcmatlab/ex02_beam_definitions.py [--quick] [--out DIR]
 
 The checks compare each source with its definition: one number of the focal plane,
-drawn with the run's own sampler (:func:`mcmatlab_py.light_source.sample_light_source`),
+drawn with the run's own sampler (:func:`mcmatlab_py.light.source.sample_light_source`),
 and one of the angles, from the run's far field where a bin edge allows it.
 
 Differences from MCmatlab: a fixed photon count per source instead of 0.1 min, and
@@ -41,8 +41,8 @@ from pathlib import Path
 import numpy as np
 
 from mcmatlab_py import Medium, Model
-from mcmatlab_py.light_source import beam_axes, sample_light_source
-from mcmatlab_py.mc_outputs import far_field_solid_angles
+from mcmatlab_py.light.source import beam_axes, sample_light_source
+from mcmatlab_py.monte_carlo.outputs import far_field_solid_angles
 
 LINE_LENGTH = 0.05  #: cm, the isotropic line emitter
 TOPHAT_RADIUS = 0.01  #: cm, focal plane of the second source

@@ -32,7 +32,7 @@ from pathlib import Path
 import numpy as np
 
 from mcmatlab_py import Medium, Model
-from mcmatlab_py.light_collector import DepositionCriteria
+from mcmatlab_py.light.collector import DepositionCriteria
 
 C = 29979245800.0  #: cm/s, speed of light in vacuum (the media have n = 1)
 

@@ -25,7 +25,7 @@ from pathlib import Path
 import numpy as np
 
 from mcmatlab_py import IntensityDistribution, Medium, Model
-from mcmatlab_py.mc_outputs import far_field_solid_angles
+from mcmatlab_py.monte_carlo.outputs import far_field_solid_angles
 
 CYLINDER_RADIUS = 0.01  #: cm; its axis lies along x at y = 0, z = 3 radii
 

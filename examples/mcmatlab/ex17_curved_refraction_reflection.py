@@ -5,7 +5,7 @@ A hemisphere of water (radius 0.4 mm, n = 1.3) sits on the bottom of a cuboid of
 a plane wave falls on it from above. Refraction and reflection at the curved surface
 use interface normals from the Sobel gradient of the voxelised droplet, smoothed over
 ``MC.smoothing_length_scale`` (Tran & Jacques 2020, J. Biomed. Opt. 25(2) 025001, whose
-figure 3 this reproduces; :func:`mcmatlab_py.optics.interface_normals`). The droplet
+figure 3 this reproduces; :func:`mcmatlab_py.monte_carlo.optics.interface_normals`). The droplet
 focuses the light towards the middle of its base; grazing incidence at its rim
 reflects more. ``n_example_paths = 100`` stores paths to draw.
 

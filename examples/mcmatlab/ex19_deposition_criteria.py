@@ -25,7 +25,7 @@ from pathlib import Path
 import numpy as np
 
 from mcmatlab_py import Medium, Model
-from mcmatlab_py.light_collector import DepositionCriteria
+from mcmatlab_py.light.collector import DepositionCriteria
 
 Z_SURFACE = 0.03  #: cm, the tissue surface under the air
 MUA, MUS = 1.0, 10.0  #: cm^-1, the tissue

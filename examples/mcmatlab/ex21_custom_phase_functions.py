@@ -31,7 +31,7 @@ from pathlib import Path
 import numpy as np
 
 from mcmatlab_py import Medium, Model
-from mcmatlab_py.mc_outputs import far_field_solid_angles
+from mcmatlab_py.monte_carlo.outputs import far_field_solid_angles
 
 G_HG = 0.9  #: anisotropy of the Henyey-Greenstein comparison
 

@@ -5,9 +5,9 @@ Two layers fill a 5 x 5 x 1 cm cuboid (101 x 101 x 150 voxels): "tissue 1" (mua 
 mus = 100 cm^-1, g = 0.9) down to z = 2 mm, "tissue 2" (mua = 0.2) below; a pencil beam
 along +z enters the centre of the top, 532 nm, every face escaping. The views MCML
 gives: A(z), the absorbed power per unit depth, and F(z), the fluence rate summed over
-x and y (:func:`mcmatlab_py.layered.absorption_vs_depth`, MCmatlab's ``plotAzFz``), and
+x and y (:func:`mcmatlab_py.monte_carlo.layered.absorption_vs_depth`, MCmatlab's ``plotAzFz``), and
 the reflectance R(r) and transmittance T(r) against the distance from the beam
-(:func:`mcmatlab_py.layered.radial_reflectance_transmittance`, MCmatlab's
+(:func:`mcmatlab_py.monte_carlo.layered.radial_reflectance_transmittance`, MCmatlab's
 ``plotRadialReflectanceTransmittance``), here also MCML's own radial bins
 (``MC.n_radial_bins``: ``Rd_r``, ``Tt_r``).
 
@@ -32,7 +32,7 @@ from pathlib import Path
 import numpy as np
 
 from mcmatlab_py import Medium, Model
-from mcmatlab_py.layered import absorption_vs_depth
+from mcmatlab_py.monte_carlo.layered import absorption_vs_depth
 
 LAYER_DEPTH = 0.2  #: cm, the interface between the layers
 #: MCML manual Table 6.1 (van de Hulst): total diffuse reflectance and total transmittance

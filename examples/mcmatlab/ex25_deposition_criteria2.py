@@ -30,7 +30,7 @@ from pathlib import Path
 import numpy as np
 
 from mcmatlab_py import IntensityDistribution, Medium, Model, calc_mua, calc_mus
-from mcmatlab_py.light_collector import DepositionCriteria
+from mcmatlab_py.light.collector import DepositionCriteria
 
 Z_SURFACE = 0.01  #: cm, the skin surface under the water
 EPIDERMIS = 0.006  #: cm, epidermis thickness

@@ -24,7 +24,7 @@ from pathlib import Path
 import numpy as np
 
 from mcmatlab_py import Medium, Model
-from mcmatlab_py.light_source import sample_light_source
+from mcmatlab_py.light.source import sample_light_source
 
 Z_SURFACE = 0.03  #: cm, the tissue surface below the air layer
 SPHERE_CENTRE = (0.0, 0.0, 0.1)  #: cm

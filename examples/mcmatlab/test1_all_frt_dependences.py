@@ -33,7 +33,7 @@ from pathlib import Path
 import numpy as np
 
 from mcmatlab_py import Medium, Model
-from mcmatlab_py.heat_run import heat_source
+from mcmatlab_py.heat import heat_source
 
 POWER = 2.0  #: W
 EXCITATION, FLUORESCENCE = 532.0, 600.0  #: nm

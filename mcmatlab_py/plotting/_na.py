@@ -6,7 +6,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..broadband import total
+from ..monte_carlo.broadband import total
 
 __all__ = ["plot_na_slices"]
 

@@ -4,8 +4,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..broadband import is_broadband, total
-from .slices import orthogonal_slices, slices_through_maximum
+from ..monte_carlo.broadband import is_broadband, total
+from .slices import new_figure, orthogonal_slices, slices_through_maximum
 
 __all__ = ["fluorescence_figures", "geometry_figures", "heat_figures", "heat_slices",
            "light_slices", "media_properties_figure", "monte_carlo_figures",
@@ -20,15 +20,6 @@ __all__ = ["fluorescence_figures", "geometry_figures", "heat_figures", "heat_sli
 DEFAULT_SLICES = (0.5, 0.5, 0.0)
 #: a log colour scale spans at most this many decades below the maximum
 LOG_DECADES = 6
-
-
-def _figure(width=12.0, height=4.2, name=""):
-    import matplotlib.pyplot as plt
-
-    fig = plt.figure(figsize=(width, height), layout="constrained")
-    if name and fig.canvas.manager is not None:
-        fig.canvas.manager.set_window_title(name)
-    return fig
 
 
 def positive_log_norm(data: np.ndarray):
@@ -50,7 +41,7 @@ def geometry_figures(model) -> dict:
     """``geometry`` (the media on three slices) and ``media_properties``."""
     G = model.G
     M = G.medium_map()
-    fig = _figure(name="Geometry illustration")
+    fig = new_figure(name="Geometry illustration")
     orthogonal_slices(fig, M, G, DEFAULT_SLICES, categories=_media_names(G),
                       title="Geometry illustration")
     return {"geometry": fig, "media_properties": media_properties_figure(model, M)}
@@ -72,7 +63,7 @@ def media_properties_figure(model, M=None):
     a bar to its largest value over the voxels and a tick at its smallest (they differ for
     FR-, T- or FD-dependent media); over the wavelengths when ``MC`` or ``FMC`` is broadband
     (:func:`mcmatlab_py.plotting.spectral.media_properties_vs_wavelength`)."""
-    from ..media_bins import optical_media_properties, thermal_media_properties
+    from ..geometry.media_bins import optical_media_properties, thermal_media_properties
 
     G, MC, HS = model.G, model.MC, model.HS
     if is_broadband(MC.wavelength) or is_broadband(model.FMC.wavelength):
@@ -93,7 +84,7 @@ def media_properties_figure(model, M=None):
         rows += [(th.VHC, th.parent, r"VHC [J cm$^{-3}$ K$^{-1}$]"),
                  (th.TC, th.parent, r"TC [W cm$^{-1}$ K$^{-1}$]")]
     names = _media_names(G)
-    fig = _figure(width=min(16.0, 2.6 * len(rows) + 1), height=3.8, name="Media properties")
+    fig = new_figure(width=min(16.0, 2.6 * len(rows) + 1), height=3.8, name="Media properties")
     axes = fig.subplots(1, len(rows))
     x = np.arange(len(names))
     colors = [f"C{i % 10}" for i in x]
@@ -163,7 +154,7 @@ def _log_slice_figures(G, fields, per: str = "incident") -> dict:
     cmap = base.with_extremes(bad=base(0.0), under=base(0.0))
     figs = {}
     for key, data, what, unit in fields:
-        fig = _figure(name=key)
+        fig = new_figure(name=key)
         shown = np.where(data > 0, data, np.nan)
         orthogonal_slices(fig, shown, G, light_slices(data), cmap=cmap,
                           norm=positive_log_norm(data), label=f"{key} [{unit}]",
@@ -217,7 +208,7 @@ def heat_figures(model) -> dict:
     figs = {}
     sensors = np.asarray(HS.temp_sensor_positions, float).reshape(-1, 3)
     if sensors.size:
-        fig = _figure(name="Temperature sensor illustration")
+        fig = new_figure(name="Temperature sensor illustration")
         axes, _ = orthogonal_slices(fig, M, G, pos, categories=names,
                                     title="Temperature sensor illustration")
         for ax, (a, b) in zip(axes, ((0, 1), (0, 2), (1, 2)), strict=True):
@@ -228,7 +219,7 @@ def heat_figures(model) -> dict:
                 ax.text(u, v, ",".join(ids), ha="center", va="center", fontsize=11,
                         weight="bold")
         figs["sensor_positions"] = fig
-        fig = _figure(width=8.0, height=4.8, name="Temperature sensor data")
+        fig = new_figure(width=8.0, height=4.8, name="Temperature sensor data")
         ax = fig.subplots()
         ijk = G.grid.voxel_of_points(sensors.T)  # (3, n_sensors), inside: validated
         for i in range(sensors.shape[0]):
@@ -239,7 +230,7 @@ def heat_figures(model) -> dict:
         ax.grid(True, which="both", alpha=0.4)
         ax.legend(loc="best")
         figs["sensor_temperatures"] = fig
-    fig = _figure(name="Temperature")
+    fig = new_figure(name="Temperature")
     lim = np.asarray(HS.plot_temp_limits, float)
     from matplotlib.colors import Normalize
 
@@ -251,12 +242,12 @@ def heat_figures(model) -> dict:
     if any(m.E is not None and m.A is not None and m.A > 0 for m in G.media):
         Om = HS.Omega_voxels
         pos = heat_slices(HS, Om)  # through the most damaged voxel
-        fig = _figure(name="Thermal damage illustration")
+        fig = new_figure(name="Thermal damage illustration")
         orthogonal_slices(fig, np.where(Om > 1, len(names), M), G, pos,
                           categories=[*names, "damage"],
                           title=r"Thermal damage illustration ($\Omega > 1$)")
         figs["damage"] = fig
-        fig = _figure(name="Fractional damage")
+        fig = new_figure(name="Fractional damage")
         orthogonal_slices(fig, -np.expm1(-Om), G, pos, cmap="viridis",
                           norm=Normalize(0.0, max(1e-12, float(-np.expm1(-Om.max())))),
                           label=r"$1 - e^{-\Omega}$", title=r"Fractional damage $1 - e^{-\Omega}$")

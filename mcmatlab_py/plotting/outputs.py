@@ -16,9 +16,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..broadband import is_broadband
-from ..layered import absorption_vs_depth, radial_reflectance_transmittance
-from ..mc_outputs import far_field_solid_angles
+from ..monte_carlo.broadband import is_broadband
+from ..monte_carlo.layered import absorption_vs_depth, radial_reflectance_transmittance
+from ..monte_carlo.outputs import far_field_solid_angles
 
 __all__ = ["plot_az_fz", "plot_boundary_irradiance", "plot_example_paths", "plot_far_field",
            "plot_light_collector", "plot_radial_reflectance_transmittance"]

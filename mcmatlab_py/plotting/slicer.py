@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..broadband import total
+from ..monte_carlo.broadband import total
 
 __all__ = ["interactive_slicer", "voxel_image"]
 

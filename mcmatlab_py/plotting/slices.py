@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["MIDDLE", "orthogonal_slices", "slice_indices", "slices_through_maximum",
+__all__ = ["new_figure", "MIDDLE", "orthogonal_slices", "slice_indices", "slices_through_maximum",
            "update_slices"]
 
 #: relative slice positions through the middle of the cuboid
@@ -113,3 +113,13 @@ def update_slices(axes, images, data: np.ndarray, G, positions) -> None:
         hline, vline = [line for line in ax.lines if line.get_gid() == "cut"]
         hline.set_ydata([h, h])
         vline.set_xdata([v, v])
+
+
+def new_figure(width=12.0, height=4.2, name=""):
+    """A constrained-layout figure of ``width`` x ``height`` inches, its window titled ``name``."""
+    import matplotlib.pyplot as plt
+
+    fig = plt.figure(figsize=(width, height), layout="constrained")
+    if name and fig.canvas.manager is not None:
+        fig.canvas.manager.set_window_title(name)
+    return fig

@@ -14,7 +14,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..broadband import is_broadband
+from ..monte_carlo.broadband import is_broadband
+from .slices import new_figure
 
 __all__ = ["media_properties_vs_wavelength", "spectrum_figure"]
 
@@ -44,8 +45,6 @@ def _range_over_voxels(model, medium, field: str, mask, wavelength: float):
 
 def media_properties_vs_wavelength(model, M=None):
     """The media-properties figure of a broadband model (see the module docstring)."""
-    from .figures import _figure
-
     G, HS = model.G, model.HS
     M = G.medium_map() if M is None else M
     wl = _wavelengths(model)
@@ -62,7 +61,7 @@ def media_properties_vs_wavelength(model, M=None):
     n_axes = len(fields) + 2 * thermal
     cols = min(3, n_axes)
     rows = -(-n_axes // cols)
-    fig = _figure(width=4.6 * cols, height=3.4 * rows, name="Media properties")
+    fig = new_figure(width=4.6 * cols, height=3.4 * rows, name="Media properties")
     axes = np.atleast_1d(fig.subplots(rows, cols)).ravel()
     for ax in axes[n_axes:]:
         ax.set_visible(False)
@@ -87,7 +86,7 @@ def media_properties_vs_wavelength(model, M=None):
     if thermal:
         T = HS.T_voxels if HS.T_voxels is not None else HS.T_initial
         FD = 0.0 if HS.Omega_voxels is None else -np.expm1(-HS.Omega_voxels)
-        from ..media_bins import thermal_media_properties
+        from ..geometry.media_bins import thermal_media_properties
 
         th = thermal_media_properties(G.media, M, T, FD)
         x = np.arange(len(present))
@@ -105,8 +104,6 @@ def media_properties_vs_wavelength(model, M=None):
 
 def spectrum_figure(model, simulation: str = "MC"):
     """Power per wavelength of a broadband ``model.MC`` or ``model.FMC`` run, W/W incident."""
-    from .figures import _figure
-
     sim = getattr(model, simulation)
     if not is_broadband(sim.wavelength) or sim.absorbed_fraction is None:
         raise ValueError(f"{simulation} holds no broadband run: set {simulation}.wavelength to an "
@@ -120,7 +117,7 @@ def spectrum_figure(model, simulation: str = "MC"):
     else:
         launched, what = np.asarray(sim.emitted_power), "fluorescence emitted"
     escaped = np.nansum(np.vstack(list(sim.escaped.values())), axis=0)
-    fig = _figure(width=7.5, height=4.0, name=f"{simulation} spectrum")
+    fig = new_figure(width=7.5, height=4.0, name=f"{simulation} spectrum")
     ax = fig.subplots()
     lines = {what: launched, "absorbed in the cuboid": launched * np.nan_to_num(
         sim.absorbed_fraction), "escaped": launched * escaped}

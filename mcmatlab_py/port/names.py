@@ -14,12 +14,12 @@ from __future__ import annotations
 import re
 
 from ..fluorescence import FluorescenceMonteCarloSimulation
-from ..geometry import Geometry
-from ..heat import HeatSimulation
-from ..light_collector import DepositionCriteria, LightCollector
-from ..light_source import IntensityDistribution
-from ..media import Medium
-from ..model import LightSource, MonteCarloSimulation
+from ..geometry.cuboid import Geometry
+from ..geometry.media import Medium
+from ..heat.simulation import HeatSimulation
+from ..light.collector import DepositionCriteria, LightCollector
+from ..light.source import IntensityDistribution, LightSource
+from ..monte_carlo.simulation import MonteCarloSimulation
 
 __all__ = ["MEDIUM_FIELDS", "SPECIAL", "Unconvertible", "child_class", "python_name", "root_class"]
 

@@ -139,11 +139,11 @@ class IdentifyConfig:
         kw = dict(cache_dir=cache_dir, progress=progress, out_of_range="clamp", client=client,
                   method=self.emulator_method, on_demand=self.emulator_on_demand)
         if self.second_medium is not None:
-            from mcmatlab_py.emulator_media import TwoMediaEmulator
+            from mcmatlab_py.emulator.media import TwoMediaEmulator
 
             return TwoMediaEmulator.build(spec, self.second_medium, **self.media_nodes, **kw)
         if self.beam_nodes is not None:
-            from mcmatlab_py.emulator_media import BeamRadiusEmulator
+            from mcmatlab_py.emulator.media import BeamRadiusEmulator
 
             return BeamRadiusEmulator.build(spec, **self.beam_nodes, **kw)
         return AbsorptionEmulator.build(spec, **kw)

@@ -40,7 +40,7 @@ class ParameterModel:
         ``prior_range`` times the nominal values (unless ``prior`` names the parameter).
     estimate : tuple of str
         ``("mua", "mus")`` or ``("mua", "mus", "VHC", "TC")``; with a second estimated
-        medium (a :class:`~mcmatlab_py.emulator_media.TwoMediaEmulator` as absorption)
+        medium (a :class:`~mcmatlab_py.emulator.media.TwoMediaEmulator` as absorption)
         ``("mua", "mus", "mua2", "mus2")``, optionally followed by ``"VHC", "TC"``;
         ``nominal`` then also holds ``mua2`` and ``mus2``.
     prior_range : (lo, hi)
