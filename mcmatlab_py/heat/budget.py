@@ -6,6 +6,7 @@ from __future__ import annotations
 from fem.checks import shorten
 
 from ..budget import HEAT_BYTES_PER_NODE, check_memory, check_steps
+from .mesh import heat_mesh_divisions
 from .simulation import auto_dt
 
 __all__ = ["check_heat"]
@@ -15,7 +16,7 @@ def check_heat(G, HS) -> None:
     """Refuse a heat simulation of ``(model.G, model.HS)`` that cannot fit or finish: more
     than :data:`mcmatlab_py.budget.MAX_STEPS` steps (``HS.dt``, the durations) or more memory than the machine
     has (``HS.mesh_divisions``, the voxel grid)."""
-    div = HS.mesh_divisions if HS.mesh_divisions is not None else (G.nx, G.ny, G.nz)
+    div = heat_mesh_divisions(G, HS, warn=False) or (G.nx, G.ny, G.nz)
     # steps chosen by accuracy (mcmatlab_py.heat.run's condition): their number follows the
     # temperatures, not the stability bound, and is not known ahead
     adaptive = (HS.dt is None and getattr(HS, "step_control", "stability") == "accuracy"

@@ -5,7 +5,61 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["Setup", "damage_parameters", "voxels_to_nodes"]
+__all__ = ["Setup", "damage_parameters", "heat_mesh_divisions", "voxels_to_nodes"]
+
+#: the most nodes of the finer heat mesh chosen for optics that follow T or FD
+#: (about 1.4 GB at the ~657 bytes per node of a heat run)
+FINE_MESH_MAX_NODES = 2**21
+
+
+def _optics_follow_heat(media) -> bool:
+    """True if an optical property of a medium changes with T or FD (not only with FR)."""
+    for m in media:
+        for f in ("mua", "mus", "g"):
+            if not m.depends_on_state(f):
+                continue
+            fn = getattr(m, f)
+            try:
+                wl = 600.0
+                probes = [float(np.asarray(fn(wl, 0.0, T, FD)).ravel()[0])
+                          for T, FD in ((20.0, 0.0), (90.0, 0.0), (20.0, 1.0))]
+            except Exception:  # noqa: BLE001 - a function we cannot probe: assume it does
+                return True
+            if len(set(probes)) > 1:
+                return True
+    return False
+
+
+def heat_mesh_divisions(G, HS, *, warn: bool = True) -> tuple | None:
+    """The heat mesh's divisions: ``HS.mesh_divisions``, else the voxels (None), or twice
+    the voxels where optics follow the temperature or the damage.
+
+    Such optics are re-evaluated from the temperature at the voxel centres. With nodes on
+    the voxel corners only, the P1 field next to a strongly absorbing voxel over-reads
+    its neighbour's centre (MCmatlab's Example 15 on 24^3 voxels: the egg white beside the
+    absorber 22.8 deg C above its start, the exact sine-series solution 13.5; the damaged
+    volume 18 times too large), and the error is carried into every later Monte Carlo
+    re-run. A mesh twice as fine puts nodes on the voxel centres (14.0 deg C there;
+    ``validation/reports/mcmatlab_agreement.md``, ex14 and ex15). It is chosen when it
+    has at most :data:`FINE_MESH_MAX_NODES` nodes; above, a warning names the setting.
+    """
+    if HS.mesh_divisions is not None:
+        return tuple(HS.mesh_divisions)
+    if not _optics_follow_heat(G.media):
+        return None
+    fine = (2 * G.nx, 2 * G.ny, 2 * G.nz)
+    nodes = (fine[0] + 1) * (fine[1] + 1) * (fine[2] + 1)
+    if nodes <= FINE_MESH_MAX_NODES or not warn:
+        return fine if nodes <= FINE_MESH_MAX_NODES else None
+    import warnings
+
+    warnings.warn(
+        f"the optics follow the temperature or the damage, read at the voxel centres: a heat "
+        f"mesh on the voxel corners ({G.nx} x {G.ny} x {G.nz} divisions) over-reads them "
+        f"next to a strong absorber, and twice as fine ({nodes:,} nodes) is more than "
+        f"{FINE_MESH_MAX_NODES:,}; set HS.mesh_divisions (e.g. {fine}) to choose",
+        stacklevel=4)
+    return None
 
 
 def voxels_to_nodes(L, values) -> np.ndarray:
@@ -28,10 +82,11 @@ class Setup:
         import fem
 
         self.grid = fem.BoxGrid(G.nx, G.ny, G.nz, G.Lx, G.Ly, G.Lz)
-        if HS.mesh_divisions is None:
+        divisions = heat_mesh_divisions(G, HS)
+        if divisions is None:
             self.mesh_grid = self.grid
         else:
-            self.mesh_grid = fem.BoxGrid(*HS.mesh_divisions, G.Lx, G.Ly, G.Lz)
+            self.mesh_grid = fem.BoxGrid(*divisions, G.Lx, G.Ly, G.Lz)
         self.mesh = self.mesh_grid.mesh()
         self.L = fem.voxel_load_matrix(self.mesh, self.grid)  # (npoints, nvox) cm^3
         # media per element: the voxel that holds the element's centroid

@@ -163,6 +163,10 @@ class HeatSimulation(StrictAttributes):
     temp_sensor_positions: list = field(default_factory=list)  #: [(x, y, z)] cm
     theta: float = 1.0  #: 1 backward Euler, 0.5 Crank-Nicolson
     mesh_divisions: tuple | None = None  #: (nx, ny, nz) of the FEM mesh; None: the voxels
+    #: the implicit solves on an NVIDIA GPU (MCmatlab's useGPU; the ``gpu`` extra):
+    #: Jacobi-preconditioned CG with the matrices on the device (:mod:`fem.gpu`)
+    use_gpu: bool = False
+    gpu_device: int = 0  #: index of the CUDA device used with ``use_gpu`` (MCmatlab's GPUdevice)
     n_updates: int = 10  #: reports (plots, frames) per pulse; at least one per phase
     #: every this many updates, re-evaluate FR-, T-, FD-dependent media (0: never)
     media_prop_recalc_period: int = 0
@@ -210,7 +214,7 @@ class HeatSimulation(StrictAttributes):
     _owner_label = "HS"
     _renamed = {"Tinitial": "T_initial", "sensorsTimeVector": "sensor_times",
                 "silentMode": "progress (= not silentMode)"}
-    _not_built = ("useGPU", "useAllCPUs")
+    _not_built = ("useAllCPUs",)
 
     def validate(self, G) -> None:
         if not callable(self.P):
@@ -232,6 +236,10 @@ class HeatSimulation(StrictAttributes):
         self.rtol = check_number("HS.rtol", self.rtol, lo=1e-9, hi=0.5)
         if self.mass not in ("lumped", "averaged"):
             raise ValueError(f"HS.mass must be 'lumped' or 'averaged', got {self.mass!r}")
+        if not isinstance(self.use_gpu, bool | np.bool_):
+            raise ValueError(f"HS.use_gpu must be True or False, got {self.use_gpu!r}")
+        self.gpu_device = int(check_number("HS.gpu_device", self.gpu_device, integer=True, lo=0,
+                                           hi=1024))
         if self.sensor_interval is not None:
             self.sensor_interval = check_positive("HS", "sensor_interval", self.sensor_interval)
         if self.dt is not None:

@@ -123,7 +123,7 @@ class CallTranslator(ExprTranslator):
                 if rule == "mc_P":
                     parts.append("P")
                     break
-                if rule in ("media_func", "media_params", "silent", "all_cpus", "hs_gpu"):
+                if rule in ("media_func", "media_params", "silent", "all_cpus"):
                     if not write:
                         raise Unconvertible(f"reading MCmatlab's {label(cls)}.{name}")
                     return ".".join([*parts, name]), rule

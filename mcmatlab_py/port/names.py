@@ -55,7 +55,6 @@ SPECIAL = {
     ("MC", "useAllCPUs"): "all_cpus",
     ("FMC", "useAllCPUs"): "all_cpus",
     ("HS", "useAllCPUs"): "all_cpus",
-    ("HS", "useGPU"): "hs_gpu",
     ("MC", "matchedInterfaces"): "matched",
     ("FMC", "matchedInterfaces"): "matched",
     ("HS", "T"): "hs_T",

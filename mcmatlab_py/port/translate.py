@@ -211,8 +211,6 @@ class Translator(ControlTranslator, CallTranslator, MediaTranslator):
             return [f"{indent}{owner}.progress = {value}  # (MCmatlab's silentMode)"]
         if special == "all_cpus":
             raise Unconvertible("numba runs on every core already (MC.n_threads = None)")
-        if special == "hs_gpu":
-            raise Unconvertible("the heat simulation runs on the CPU here (HS.useGPU is not built)")
         if isinstance(rhs, m_ast.Matrix_Expression):
             e = self._ex_Matrix_Expression(rhs, scope, as_setting=True)
         else:
