@@ -124,6 +124,7 @@ def test_use_gpu_on_the_simulator_agrees_with_the_cpu():
         import json, sys
         sys.setswitchinterval(1e-4)
         m = layered_model(nz=4, nxy=3)
+        m.HS.dt = 0.02  # the same steps on both sides
         m.HS.use_gpu = True
         m.simulate_heat_distribution()
         print(json.dumps(m.HS.sensor_temps.tolist()))
@@ -134,6 +135,7 @@ def test_use_gpu_on_the_simulator_agrees_with_the_cpu():
     assert out.returncode == 0, out.stderr[-3000:]
     gpu = np.array(json.loads(out.stdout.strip().splitlines()[-1]))
     m = layered_model(nz=4, nxy=3)  # noqa: F821
+    m.HS.dt = 0.02
     cpu = _heat(m).sensor_temps
     assert gpu.shape == cpu.shape
     assert np.max(np.abs(gpu - cpu)) < 1e-6
