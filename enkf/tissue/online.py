@@ -130,6 +130,28 @@ class OnlineIdentifier:
             return comps[int(np.argmax(np.where(self._alive, self._weights, -1.0)))].state_ensemble
         return self._X
 
+    @property
+    def param_ensemble(self) -> np.ndarray:
+        """(N, n_par) the members' parameters after the last reading, ``names`` first
+        (with a drift bank, those of the filter the data support most)."""
+        if self._bank is not None:
+            comps = list(self._bank.values())
+            return comps[int(np.argmax(np.where(self._alive, self._weights, -1.0)))].param_ensemble
+        return self._theta
+
+    def filter_ensembles(self) -> list[tuple]:
+        """``[(name, weight, X (N, n_nodes) deg C, theta (N, n_par)), ...]``: each filter's
+        members after the last reading and its probability (one filter: name None, weight
+        1; with a drift bank its filters by name, those the health check stopped left out,
+        the weights of the others summing to 1). What a forecast from the members needs
+        (:meth:`enkf.tissue.advice.Advisor.online`)."""
+        if self._bank is None:
+            return [(None, 1.0, self._X, self._theta)]
+        w = np.where(self._alive, self._weights, 0.0)
+        w = w / w.sum()
+        return [(name, float(w[j]), c._X, c._theta) for j, (name, c) in
+                enumerate(self._bank.items()) if self._alive[j]]
+
     def innovation_persistence(self, laser: str = "off") -> tuple[float, int]:
         """Lag-1 correlation of the normalized innovations of the readings so far, while
         the laser is ``"off"`` (default), ``"on"``, or over ``"all"``, and the number of
