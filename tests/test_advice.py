@@ -327,6 +327,7 @@ def test_follow_writes_the_advice_with_each_line(tmp_path, cache, hot_files):
     ("target_depth = 0.05\nplan_pulses = [[2.0, 1.0]]", "advice.plan_pulses[0]"),
     ("target_depth = 0.05\nquantiles = [0.5, 0.9]", "advice.quantiles"),
     ("target_depth = 0.05\nstep = 1e-6", "forecast steps"),
+    ("target_depth = 0.05\ndrift = \"trend\"", "advice.drift must be one of"),
     ("target_dept = 0.05", "unknown key advice.target_dept"),
     ("protected_T = 50.0\ntarget_depth = 0.05", "need the protected tissue"),
 ])

@@ -10,8 +10,11 @@ recorded run at its own pace (``tissue-enkf replay RUN_DIR``). The page has:
 - the damage-risk map: the probability of a damage integral above 1 on the x-z plane
   through the beam;
 - with a drift bank, the weight the data give to optics that drift while heated;
-- a status line: the time, the readings, the latest estimate, and ``finished`` once
-  ``run.json`` says the run ended.
+- with ``[advice]`` (``advice.csv``, :mod:`enkf.tissue.advice`): when to stop the laser,
+  the median and the interval (5%-95% by default) after each reading, and the risks
+  under the plan that the protected tissue or the surface passes its limit;
+- a status line: the time, the readings, the latest estimate, the latest advice, and
+  ``finished`` once ``run.json`` says the run ended.
 
 The page polls the files every 100 ms and sends only what is new (bokeh's ``stream``):
 it keeps up with 10 Hz readings without taking anything from the filter's process.
@@ -30,7 +33,7 @@ from pathlib import Path
 
 import numpy as np
 
-__all__ = ["RunSource", "make_document", "serve"]
+__all__ = ["RunSource", "advice_columns", "advice_text", "make_document", "serve"]
 
 _BAND = 2.0  #: the bands are mean +- 2 sd
 _UNITS = {"mua": "1/cm", "mus": "1/cm", "VHC": "J/(cm^3 K)", "TC": "W/(cm K)",
@@ -54,6 +57,64 @@ def _columns(header: list[str]) -> dict:
     return {"params": params, "temps": temps, "drift": "drift_weight" in header}
 
 
+def advice_columns(header: list[str]) -> dict:
+    """advice.csv's columns the page shows: the stop time's median and interval
+    (``stop``: (median, lower, upper), the quantile columns in the file's order) and the
+    risks under the plan (``risks``: ``{label: column}``)."""
+    q = [c for c in header if re.fullmatch(r"stop_time_q[\dp]+_s", c)]
+    risks = {f"P({r} over its limit)": f"p_{r}_plan" for r in ("protected", "surface")
+             if f"p_{r}_plan" in header}
+    return {"stop": ("stop_time_median_s", *q[:2]), "risks": risks,
+            "quantiles": [c[len("stop_time_q"):-2].replace("p", ".") for c in q[:2]]}
+
+
+def advice_text(header: list[str], row: list[float]) -> str:
+    """The status line's advice from one row of advice.csv: when to stop (median and
+    interval; beyond the forecast's horizon: ``not within the horizon``) and the risks."""
+    idx = {c: i for i, c in enumerate(header)}
+    cols = advice_columns(header)
+
+    def when(c):
+        v = row[idx[c]]
+        return f"{v:.2f} s" if np.isfinite(v) else "beyond the horizon"
+
+    med, lo, hi = cols["stop"]
+    q = cols["quantiles"]
+    parts = [f"stop the laser at {when(med)} ({q[0]}%-{q[1]}%: {when(lo)} to {when(hi)})"]
+    parts += [f"{label} = {row[idx[c]]:.2f}" for label, c in cols["risks"].items()]
+    return " &middot; ".join(parts)
+
+
+class _CsvTail:
+    """The whole lines added to a CSV file since the last call, as floats (the header
+    kept apart): the writer may be mid-line."""
+
+    def __init__(self, path: Path):
+        self.path, self.offset, self.header = path, 0, None
+
+    def read(self) -> list[list[float]]:
+        try:
+            with open(self.path, "rb") as fh:
+                fh.seek(self.offset)
+                chunk = fh.read()
+        except OSError:
+            return []
+        end = chunk.rfind(b"\n") + 1
+        self.offset += end
+        out = []
+        for row in csv.reader(chunk[:end].decode("utf-8", "replace").splitlines()):
+            if not row:
+                continue
+            if self.header is None:
+                self.header = row
+                continue
+            try:
+                out.append([float(v) for v in row])
+            except ValueError:
+                continue
+        return out
+
+
 class RunSource:
     """What the page shows of a run directory: new estimate rows, the frame, the risk.
 
@@ -73,6 +134,9 @@ class RunSource:
         self.t0 = time.monotonic()
         self._stamp = {}
         self.frames = None  # replay: (times, frames)
+        self._advice = _CsvTail(self.dir / "advice.csv")
+        self.advice_rows: list[list[float]] = []  # replay: every row, revealed by the clock
+        self.advice_shown = 0
         if replay_speed is not None:
             self._load_recorded()
 
@@ -124,8 +188,26 @@ class RunSource:
         self.offset += end
         return self._parse(chunk[:end].decode("utf-8", "replace"))
 
+    @property
+    def advice_header(self) -> list[str] | None:
+        """advice.csv's column names (None before its first line)."""
+        return self._advice.header
+
+    def new_advice(self) -> list[list[float]]:
+        """advice.csv's rows not yet sent to the page (its columns:
+        :attr:`advice_header`)."""
+        if self.speed is None:
+            return self._advice.read()
+        t = self.now()
+        k = self.advice_shown
+        while k < len(self.advice_rows) and self.advice_rows[k][0] <= t:
+            k += 1
+        out, self.advice_shown = self.advice_rows[self.advice_shown:k], k
+        return out
+
     def _load_recorded(self) -> None:
         self.rows = self._read_new()
+        self.advice_rows = self._advice.read()
         info = self.run_info()
         data = info.get("follow") or (info.get("data") or [None])[0]
         if data is None:
@@ -252,9 +334,48 @@ def make_document(doc, source: RunSource, parent: int | None = None) -> None:
         return f
 
     plots = column(Div(text=""))
-    doc.add_root(column(title, status, row(f_frame, f_risk), plots))
+    advice_figs = column(Div(text=""))  # with advice.csv: when to stop, and the risks
+    doc.add_root(column(title, status, row(f_frame, f_risk), plots, advice_figs))
     doc.title = f"tissue-enkf: {source.dir.name}"
-    state = {"last": None, "n": 0, "built": False, "done": False}
+    state = {"last": None, "n": 0, "built": False, "done": False, "advice": None}
+
+    def build_advice():
+        cols = advice_columns(source.advice_header)
+        q = cols["quantiles"]
+        f = figure(title=f"when to stop the laser: median, {q[0]}%-{q[1]}%", width=420,
+                   height=260, x_axis_label="time (s)", y_axis_label="stop at (s)",
+                   toolbar_location=None)
+        src = ColumnDataSource({"t": [], "m": [], "lo": [], "hi": []})
+        f.varea(x="t", y1="lo", y2="hi", source=src, fill_color="green", fill_alpha=0.25)
+        f.line(x="t", y="m", source=src, line_color="green", line_width=2)
+        sources["advice"] = src
+        children = [f]
+        if cols["risks"]:
+            g = figure(title="risks under the plan", width=420, height=260, y_range=(0, 1),
+                       x_axis_label="time (s)", y_axis_label="probability",
+                       toolbar_location=None)
+            rsrc = ColumnDataSource({"t": [], **{c: [] for c in cols["risks"].values()}})
+            for j, (label, c) in enumerate(cols["risks"].items()):
+                g.line(x="t", y=c, source=rsrc, line_width=2, legend_label=label,
+                       line_color=("magenta", "red")[j % 2])
+            g.legend.location = "top_left"
+            sources["risks"] = rsrc
+            children.append(g)
+        advice_figs.children = [row(*children)]
+
+    def stream_advice(rows):
+        h = source.advice_header
+        idx = {c: i for i, c in enumerate(h)}
+        cols = advice_columns(h)
+        a = np.array(rows, dtype=float)
+        a[~np.isfinite(a)] = np.nan  # beyond the horizon: not drawn
+        t = a[:, idx["time_s"]]
+        med, lo, hi = cols["stop"]
+        sources["advice"].stream({"t": t, "m": a[:, idx[med]], "lo": a[:, idx[lo]],
+                                  "hi": a[:, idx[hi]]})
+        if "risks" in sources:
+            sources["risks"].stream({"t": t, **{c: a[:, idx[c]] for c in cols["risks"].values()}})
+        state["advice"] = rows[-1]
 
     def build():
         cols = source.cols
@@ -307,6 +428,8 @@ def make_document(doc, source: RunSource, parent: int | None = None) -> None:
             w = last[idx["drift_weight"]]
             parts.append(f"optics {'drifting' if w >= 0.5 else 'still'} while heated "
                          f"(P(drift) = {w:.2f})")
+        if state["advice"] is not None:
+            parts.append(advice_text(source.advice_header, state["advice"]))
         head = "<b>final estimate</b> (finished)" if done else "<b>running</b>"
         return head + " &middot; " + " &middot; ".join(parts)
 
@@ -321,6 +444,11 @@ def make_document(doc, source: RunSource, parent: int | None = None) -> None:
             build()
         if rows:
             stream(rows)
+        adv = source.new_advice()
+        if adv:
+            if "advice" not in sources:
+                build_advice()
+            stream_advice(adv)
         fr = source.frame()
         if fr is not None:
             frame_src.data = {"image": [np.asarray(fr, float)]}
@@ -331,7 +459,7 @@ def make_document(doc, source: RunSource, parent: int | None = None) -> None:
         if rk is not None:
             risk_src.data = {"image": [np.asarray(rk, float)]}
         done = source.finished()
-        if rows or done != state["done"]:
+        if rows or adv or done != state["done"]:
             status.text = status_text(done)
             state["done"] = done
 

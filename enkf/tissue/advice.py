@@ -5,9 +5,8 @@ Every member of the filter carries its optics :math:`\theta_n`, its temperature 
 :math:`\Omega_n` at a few points: the **target** (every point of it must reach
 :math:`\Omega \ge 1`), the **protected** tissue (none of it may pass its damage or
 temperature limit) and the **surface** (its temperature limit). At each reading each
-member is forecast, with its optics held at their present values (the random walk's
-expectation), under the planned laser schedule and under "laser off now"; from its
-forecast come
+member is forecast under the planned laser schedule and under "laser off now", its optics
+carried forward as its filter's parameter model moves them (below); from its forecast come
 
 * the **target time**: when :math:`\min_\text{target}\Omega_n` reaches 1 under the plan
   (``inf``: not within the horizon, the plan's last pulse plus ``tail``);
@@ -20,6 +19,28 @@ forecast come
 
 Across the members (weighted, for a bank of filters) these are the medians and
 quantiles of the times and the probabilities of the risks (:class:`AdviceRow`).
+
+**The optics in the forecast.** A filter whose random walk models still optics (below
+``hold_below`` log units a step, the still filter's 0.002) holds each member's optics at
+their present values, the walk's expectation. A filter whose optics drift (the drift
+bank's drifting filters, or any filter with a larger walk) carries each member's walk on:
+over the forecast's heated steps (the walk's own ``random_walk_when_off`` factor for the
+others) the member's log optics take the filter's own walk std a step, drawn afresh at
+each reading, plus the member's own recent trend: the slope of its log optics against
+heated time over the last ``trend_window`` s of heating (a member's track, as the
+filter's analyses moved it, tells which way its optics have been going; the members'
+trends scatter, and the interval with them, while the filter is still learning)
+(:attr:`Advisor.drift`: ``"walk+trend"``, ``"walk"`` or ``"hold"``). The optics only act
+through the load while the laser heats, so they are set piecewise constant over
+``drift_step`` s of the plan's pulses, at the middle of each piece: the forecast's
+temperatures then sum the responses to each piece's load (:func:`~enkf.tissue.
+advice_forecast.heat`). Under the bank's weights the still filter's members hold and the
+drifting ones drift, so the interval widens with the evidence of a drift.
+
+``parameter_model = "coagulation"`` is refused: its optics follow each member's damage at
+every node that absorbs (a light-weighted coagulated fraction), which the few points'
+forecast does not carry; stepping every member's whole field over the horizon would take
+about the filter's own step a forecast step, far beyond a reading's 100 ms.
 
 Each member's point temperatures come from :class:`~enkf.tissue.advice_forecast.
 PointForecast`: the forecast is linear in the state and the absorbed power, so rows
@@ -44,12 +65,14 @@ from __future__ import annotations
 
 import math
 import time
+import zlib
 from dataclasses import dataclass, field
 
 import numpy as np
 
 import fem
 
+from .advice_drift import member_trends, optics_paths, remember
 from .advice_forecast import (
     PointForecast,
     damage,
@@ -59,11 +82,13 @@ from .advice_forecast import (
     region_points,
 )
 
-__all__ = ["RISKS", "AdviceRow", "Advisor", "MemberAdvice", "Plan", "advice_summary",
-           "online_ensembles", "plot_advice"]
+__all__ = ["DRIFT_FORECASTS", "RISKS", "AdviceRow", "Advisor", "MemberAdvice", "Plan",
+           "advice_summary", "online_ensembles", "plot_advice"]
 
 #: the risks reported: (region, scenario); "at_target": stopped at the member's stop time
 RISKS = tuple(f"{r}_{s}" for r in ("protected", "surface") for s in ("plan", "off", "at_target"))
+#: how the forecast moves each member's optics (module docstring)
+DRIFT_FORECASTS = ("walk+trend", "walk", "hold")
 #: most points kept of a region (the hottest of a protected one, the coldest of a target)
 #: and of the surface (its hottest nodes), ranked under the plan at the nominal optics
 REGION_POINTS, SURFACE_POINTS = 8, 4
@@ -106,6 +131,11 @@ class Plan:
     def end(self) -> float:
         """s: when the last pulse ends (0 without pulses)."""
         return self.pulses[-1][1] if self.pulses else 0.0
+
+    def on_time(self, t0: float, t1: float) -> float:
+        """s of ``[t0, t1)`` with a pulse on (the heated time the optics drift over)."""
+        return sum(max(0.0, min(t1, b) - max(t0, a)) for a, b in self.pulses) \
+            if self.power > 0 else 0.0
 
     def mean_power(self, t0: float, t1: float) -> float:
         """W averaged over ``[t0, t1)``: the energy the pulses deliver in it over its length."""
@@ -160,6 +190,9 @@ class _Track:
     T_max: np.ndarray  #: (N, p) deg C
     reached: np.ndarray  #: (N,) s when the target reached Omega >= 1 (nan: not yet)
     advice: dict = field(default_factory=dict)  #: {step: MemberAdvice}
+    heated: float = 0.0  #: s of the plan's heating up to ``time``
+    #: [(heated s, (N, n_estimate) the members' log optics), ...] at the readings
+    history: list = field(default_factory=list)
 
 
 class Advisor:
@@ -186,18 +219,39 @@ class Advisor:
     quantiles : (lower, upper) of the reported interval (default 5% and 95%).
     engine : "auto" (adjoint where the heat step is the members' shared one), "adjoint",
         "direct".
+    drift : "walk+trend" (default), "walk" or "hold"
+        How a drifting filter's optics move in the forecast (module docstring); "hold":
+        every member's optics at their present values.
+    trend_window : s of heating over which a drifting filter's trend is fitted.
+    drift_step : s, the pieces over which the drifting optics are held in the forecast.
+    hold_below : log units a step: a filter whose walk is below it holds its optics.
+    seed : int, the draws of the walks (one stream per reading and filter).
     """
 
     def __init__(self, setup, *, E: float, A: float, target, plan: Plan | None = None,
                  protected=None, protected_omega: float | None = None,
                  protected_T: float | None = None, surface_T: float | None = None,
                  step: float | None = None, tail: float = 5.0, max_horizon: float = 30.0,
-                 quantiles=(0.05, 0.95), min_weight: float = 0.01, engine: str = "auto"):
+                 quantiles=(0.05, 0.95), min_weight: float = 0.01, engine: str = "auto",
+                 drift: str = "walk+trend", trend_window: float = 1.0,
+                 drift_step: float = 0.5, hold_below: float = 0.005, seed: int = 0):
         from .forward import TissueForwardModel
 
-        if setup.parameters.kind == "coagulation":
-            raise ValueError("advice is not built for parameter_model = 'coagulation' (its "
-                             "optics follow the damage the forecast makes)")
+        if setup.parameters.kind != "random_walk":
+            # coagulation: each member's optics follow its own damage, which the point
+            # forecast does not carry at the nodes that absorb; trend: the rates ride
+            # in the state behind the optics. Neither forecast is built.
+            raise ValueError(f"advice needs parameter_model = 'random_walk', got "
+                             f"{setup.parameters.kind!r}: the forecast does not move the "
+                             f"optics with the damage (coagulation) or with filtered rates "
+                             f"(trend); identify without [advice], or with the random walk")
+        if drift not in DRIFT_FORECASTS:
+            raise ValueError(f"Advisor.drift must be one of {DRIFT_FORECASTS}, got {drift!r}")
+        for name, v in (("trend_window", trend_window), ("drift_step", drift_step),
+                        ("hold_below", hold_below)):
+            if isinstance(v, bool) or not (isinstance(v, int | float | np.number)
+                                           and np.isfinite(v) and v > 0):
+                raise ValueError(f"Advisor.{name} must be a finite number > 0, got {v!r}")
         if step is None:
             step = setup.heat.max_dt if setup.heat.max_dt is not None else 0.1
         for name, v in (("E", E), ("A", A), ("step", step), ("max_horizon", max_horizon),
@@ -225,6 +279,15 @@ class Advisor:
         self.protected_omega, self.protected_T, self.surface_T = \
             protected_omega, protected_T, surface_T
         self.min_weight = float(min_weight)
+        self.drift, self.trend_window = drift, float(trend_window)
+        self.drift_step, self.hold_below, self.seed = float(drift_step), float(hold_below), int(seed)
+        # each filter's walk (log units a step) and its factor with the laser off: the
+        # bank's filters by name, a lone filter as None
+        comps = {None: setup} if setup.parameters.drift is None else \
+            setup.parameters.drift.components(setup)
+        n_est = len(setup.parameters.estimate)
+        self.walks = {k: (np.array(c.parameters.walk_std()[:n_est], float),
+                          float(c.parameters.random_walk_when_off)) for k, c in comps.items()}
         if plan is None:
             owner = getattr(setup.power, "__self__", None)
             if owner is None or getattr(setup.power, "__name__", "") != "laser_power":
@@ -262,20 +325,24 @@ class Advisor:
         self.P = self.forecast.P
         self.tracks: dict = {}
 
-    def _track(self, key, t: float, X, step: int | None) -> _Track:
+    def _track(self, key, t: float, X, step: int | None, theta=None) -> _Track:
         """Follow a filter's members to ``t`` (s) with the ensemble ``X`` (N, n) deg C
-        (``step`` 0 starts afresh; None: the online filter, whose members started from the
-        prior's uniform ``T_initial`` at 0 s)."""
+        and parameters ``theta`` (N, >= n_estimate) (``step`` 0 starts afresh; None: the
+        online filter, whose members started from the prior's uniform ``T_initial`` at
+        0 s)."""
         Tp = (self.P @ np.asarray(X, float).T).T
         tr = self.tracks.get(key)
         if step == 0 or (tr is None and t <= 0):
             N, p = Tp.shape
             old = {} if tr is None else tr.advice  # a replay keeps the advice given
-            self.tracks[key] = _Track(float(t), Tp, np.zeros((N, p)), Tp.copy(),
-                                      np.full(N, np.nan), old)
-            return self.tracks[key]
+            self.tracks[key] = tr = _Track(float(t), Tp, np.zeros((N, p)), Tp.copy(),
+                                           np.full(N, np.nan), old)
+            tr.heated = self.plan.on_time(0.0, float(t))
+            self._remember(tr, theta)
+            return tr
         if tr is None:
             tr = self._track(key, 0.0, np.full_like(X, float(self.setup.T_initial)), 0)
+        tr.heated += self.plan.on_time(tr.time, t) if t > tr.time else 0.0
         if t > tr.time:
             tg = self.slices["target"]
             before = tr.omega[:, tg].min(axis=1)
@@ -287,20 +354,60 @@ class Advisor:
             tr.reached[new] = tr.time + np.clip(frac, 0, 1) * (t - tr.time)
         np.maximum(tr.T_max, Tp, out=tr.T_max)
         tr.time, tr.T = float(t), Tp
+        self._remember(tr, theta)
         return tr
 
+    def _remember(self, tr: _Track, theta) -> None:
+        """Keep the members' log optics at this reading (their trends)."""
+        if theta is not None and self.drift == "walk+trend":
+            n = len(self.setup.parameters.estimate)
+            remember(tr.history, tr.heated, np.log(np.asarray(theta, float)[:, :n]),
+                     self.trend_window)
+
+    def trend(self, key) -> np.ndarray:
+        """(N, n_estimate) 1/s of heating: the slope of each member's log optics in the
+        filter ``key`` against heated time over its last ``trend_window`` s of heating
+        (:func:`~enkf.tissue.advice_drift.member_trends`)."""
+        n = len(self.setup.parameters.estimate)
+        tr = self.tracks.get(key)
+        return np.zeros(n) if tr is None else member_trends(tr.history, self.trend_window, n)
+
+    def optics_paths(self, key, theta, t0: float, K: int):
+        """The members of filter ``key`` with optics ``theta`` at ``t0`` over the next
+        ``K`` steps: ``(thetas (S, N, n), seg (K,))`` or None where they hold
+        (:func:`~enkf.tissue.advice_drift.optics_paths`)."""
+        if self.drift == "hold":
+            return None
+        n = len(self.setup.parameters.estimate)
+        walk, when_off = self.walks.get(key, self.walks.get(None, (np.zeros(n), 0.0)))
+        h = self.step
+        on = np.array([self.plan.on_time(t0 + j * h, t0 + (j + 1) * h) / h for j in range(K)])
+        rng = np.random.default_rng([self.seed, zlib.crc32(str(key).encode()),
+                                     int(round(t0 * 1e6))])
+        trend = self.trend(key) if self.drift == "walk+trend" else np.zeros(n)
+        return optics_paths(np.asarray(theta, float)[:, :n], on, h, walk, when_off, trend,
+                            self.drift_step, self.hold_below, rng)
+
     # ------------------------------------------------------------------ forecast
-    def member_advice(self, tr: _Track, X, theta) -> MemberAdvice:
+    def member_advice(self, tr: _Track, X, theta, key=None) -> MemberAdvice:
         """The members' advice from their state ``X`` (N, n) deg C, their parameters
-        ``theta`` (N, >= n_estimate) and what ``tr`` followed so far."""
+        ``theta`` (N, >= n_estimate) and what ``tr`` followed so far (``key``: the bank's
+        filter, whose walk moves the optics)."""
         tic = time.perf_counter()
         t0, h = tr.time, self.step
         end = min(max(self.plan.end, t0) + self.tail, t0 + self.max_horizon)
         K = int(min(self.K, max(1, math.ceil((end - t0) / h - 1e-9))))
         H, G = self.forecast.responses(X, theta, K)
+        seg = None
+        paths = self.optics_paths(key, theta, t0, K)
+        if paths is not None:  # the drifting optics' loads, piece by piece
+            thetas, seg = paths
+            S, N0, n_est = thetas.shape
+            G = self.forecast.load_responses(thetas.reshape(S * N0, n_est), K)
+            G = G.reshape(S, N0, K, -1).transpose(1, 0, 2, 3)
         P = np.array([self.plan.mean_power(t0 + j * h, t0 + (j + 1) * h) for j in range(K)])
         N, tg = X.shape[0], self.slices["target"]
-        plan = heat(H, G, P, np.full(N, K))
+        plan = heat(H, G, P, np.full(N, K), seg)
         _, path = damage(self.E, self.A, h, tr.omega[:, tg], plan[..., tg], path=True)
         target = np.where(np.isnan(tr.reached), first_crossing(path, t0, h),
                           tr.reached)
@@ -311,9 +418,11 @@ class Advisor:
             C = int(np.clip(need.max(), 0, K)) + 1
             Yc = np.empty((C, N, K + 1, tg.stop - tg.start))
             Yc[0] = H[..., tg]
+            Gt = G[..., tg] if seg is not None else G[:, None, :, tg]
+            sg = seg if seg is not None else np.zeros(K, int)
             for c in range(1, C):
                 Yc[c] = Yc[c - 1]
-                Yc[c, :, c:] += P[c - 1] * G[:, :K - c + 1, tg]
+                Yc[c, :, c:] += P[c - 1] * Gt[:, sg[c - 1], :K - c + 1]
             final = damage(self.E, self.A, h, np.tile(tr.omega[:, tg], (C, 1)),
                            Yc.reshape(C * N, K + 1, -1)).min(axis=1).reshape(C, N)
             for n in np.flatnonzero(np.isfinite(target)):
@@ -328,7 +437,7 @@ class Advisor:
                     stop[n] = target[n]
         risks = {}
         own = np.where(np.isfinite(stop), np.ceil((stop - t0) / h - 1e-9), K).astype(int)
-        scenarios = (("plan", plan), ("off", H), ("at_target", heat(H, G, P, own)))
+        scenarios = (("plan", plan), ("off", H), ("at_target", heat(H, G, P, own, seg)))
         for region, T_lim, om_lim in (("protected", self.protected_T, self.protected_omega),
                                       ("surface", self.surface_T, None)):
             if region not in self.slices:
@@ -350,9 +459,11 @@ class Advisor:
     def __call__(self, rep) -> None:
         """The callback of :func:`~enkf.tissue.identify`: follow each filter's members
         (a restart's replay re-runs their damage) and forecast after each reading."""
-        tr = self._track(rep.component, rep.time, rep.state_ensemble, rep.step)
+        tr = self._track(rep.component, rep.time, rep.state_ensemble, rep.step,
+                         rep.param_ensemble)
         if not rep.replayed:
-            tr.advice[rep.step] = self.member_advice(tr, rep.state_ensemble, rep.param_ensemble)
+            tr.advice[rep.step] = self.member_advice(tr, rep.state_ensemble, rep.param_ensemble,
+                                                     rep.component)
 
     def table(self, est=None) -> list[AdviceRow]:
         """The advice at each step followed: the members of the bank's filters weighed by
@@ -382,14 +493,14 @@ class Advisor:
         weight >= ``min_weight`` forecast, identical ensembles once)."""
         t = ident.time
         parts, done = [], []
-        for name, w, X, theta in online_ensembles(ident):
-            tr = self._track(name, t, X, None)
+        for name, w, X, theta in ident.filter_ensembles():
+            tr = self._track(name, t, X, None, theta)
             if w < self.min_weight:
                 continue
             # the drifting filters before their restarts are one filter: forecast once
             same = [a for (X0, th0), a in done
                     if np.array_equal(th0, theta) and np.array_equal(X0, X)]
-            adv = same[0] if same else self.member_advice(tr, X, theta)
+            adv = same[0] if same else self.member_advice(tr, X, theta, name)
             done.append(((X, theta), adv))
             parts.append((w, adv))
         return self.mix(parts)
@@ -422,15 +533,9 @@ class Advisor:
 
 def online_ensembles(ident) -> list[tuple]:
     """``[(name, weight, X (N, n) deg C, theta (N, n_par)), ...]``: the filters of an
-    :class:`~enkf.tissue.OnlineIdentifier` after its last update (one, weight 1, without a
-    bank; a bank's filters that stopped are left out)."""
-    bank = getattr(ident, "_bank", None)
-    if bank is None:
-        return [(None, 1.0, ident._X, ident._theta)]
-    w = np.where(ident._alive, ident._weights, 0.0)
-    w = w / w.sum()
-    return [(name, float(w[j]), c._X, c._theta) for j, (name, c) in enumerate(bank.items())
-            if ident._alive[j]]
+    :class:`~enkf.tissue.OnlineIdentifier` after its last update
+    (:meth:`~enkf.tissue.OnlineIdentifier.filter_ensembles`)."""
+    return ident.filter_ensembles()
 
 
 def advice_summary(advisor: Advisor, rows: list) -> dict:

@@ -109,9 +109,23 @@ class PointForecast:
                 G = (QW[:K * p] @ (BW @ q.T)).T.reshape(N, K, p)
             return H, G
         H = self._series(X, theta, 0.0, K)
-        zero = self._series(np.zeros_like(X), theta, 0.0, K)
-        G = self._series(np.zeros_like(X), theta, 1.0, K) - zero
-        return H, G[:, 1:]
+        return H, self.load_responses(theta, K)
+
+    def load_responses(self, theta, K: int | None = None) -> np.ndarray:
+        """``G`` (N, K, p): the point temperatures' response to 1 W over one step with the
+        optics ``theta`` (N, >= n_estimate), 1..K steps after it (:meth:`responses`'s
+        ``G`` alone: the drifting optics' later loads)."""
+        K = self.K if K is None else K
+        theta = np.asarray(theta, float)[:, :self.n_est]
+        N, p = theta.shape[0], self.P.shape[0]
+        if self.engine == "adjoint":
+            QW, BW = self.W
+            q = self.model.loads(theta, 1.0)
+            with blas_threads(1):
+                return (QW[:K * p] @ (BW @ q.T)).T.reshape(N, K, p)
+        n = self.P.shape[1]
+        zero = self._series(np.zeros((N, n)), theta, 0.0, K)
+        return (self._series(np.zeros((N, n)), theta, 1.0, K) - zero)[:, 1:]
 
 
 def low_rank(M, rtol: float, seed: int = 0) -> tuple[np.ndarray, np.ndarray]:
@@ -136,15 +150,25 @@ def low_rank(M, rtol: float, seed: int = 0) -> tuple[np.ndarray, np.ndarray]:
     return np.eye(m), np.array(M)
 
 
-def heat(H, G, P, c) -> np.ndarray:
+def heat(H, G, P, c, seg=None) -> np.ndarray:
     """(N, K+1, p): the laser-off temperatures ``H`` plus the responses ``G`` to the
     powers ``P`` (K,) W over each member's first ``c`` (N,) steps (then off):
-    ``Y_k = H_k + sum_(j < min(k, c)) P_j G_(k-1-j)``."""
-    K = G.shape[1]
-    on = np.asarray(P, float)[None, :] * (np.arange(K)[None, :] < np.asarray(c)[:, None])
-    j = np.arange(K + 1)[:, None] - 1 - np.arange(K)[None, :]  # (K+1, K): the step of lag m
-    S = np.where(j >= 0, on[:, np.clip(j, 0, K - 1)], 0.0)  # (N, K+1, K): its power
-    return H + np.einsum("nkm,nmp->nkp", S, G)
+    ``Y_k = H_k + sum_(j < min(k, c)) P_j G_(k-1-j)``.
+
+    ``G`` (N, K, p) holds for every step; with drifting optics it is (N, S, K, p), the
+    responses of S sets of optics, and ``seg`` (K,) names the set of each step ``j``:
+    ``Y_k = H_k + sum_(j < min(k, c)) P_j G_(seg_j, k-1-j)``."""
+    if seg is None:
+        G, seg = G[:, None], np.zeros(G.shape[1], int)
+    K = G.shape[2]
+    c = np.broadcast_to(np.asarray(c), (H.shape[0],))
+    Y = np.array(H, float)
+    for j in range(K):  # each step's pulse spreads to the samples after it
+        if P[j] == 0.0:
+            continue
+        on = (j < c)[:, None, None]
+        Y[:, j + 1:] += np.where(on, P[j] * G[:, seg[j], :K - j], 0.0)
+    return Y
 
 
 def damage(E: float, A: float, h: float, omega0, Y, path: bool = False):

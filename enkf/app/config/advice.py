@@ -17,6 +17,8 @@
     max_horizon = 30.0             # s, the farthest a forecast reaches
     quantiles = [0.05, 0.95]       # the interval reported around the median
     step = 0.1                     # s, the forecast's heat step (default HS.dt, else 0.1)
+    drift = "walk+trend"           # drifting filters' optics in the forecast: their walk
+                                   # and each member's trend; "walk"; "hold"
 
 The damage law is the estimated medium's (``G.media[i].E`` and ``.A``). Every value is
 checked on load: a :class:`~mcmatlab_py.config.ConfigError` names the key and the value.
@@ -35,7 +37,7 @@ __all__ = ["ADVICE_KEYS", "AdviceSpec", "advice_settings"]
 
 ADVICE_KEYS = {f"{w}_{k}" for w in ("target", "protected") for k in ("depth", "point", "region")}
 ADVICE_KEYS |= {"protected_T", "protected_omega", "surface_T", "plan_power", "plan_pulses",
-                "tail", "max_horizon", "quantiles", "step"}
+                "tail", "max_horizon", "quantiles", "step", "drift"}
 #: the most heat steps a forecast may take (its stored rows grow with them)
 MAX_STEPS = 5000
 
@@ -51,7 +53,7 @@ class AdviceSpec:
         """The :class:`~enkf.tissue.advice.Advisor` of this table on ``setup``."""
         from ...tissue.advice import Advisor, Plan
 
-        return Advisor(setup, plan=Plan(*self.plan), **self.kw)
+        return Advisor(setup, plan=Plan(*self.plan), seed=setup.seed, **self.kw)
 
 
 def _num(key, v, **kw):
@@ -137,9 +139,11 @@ def advice_settings(table, model, medium: int, grid, setup_kw: dict) -> AdviceSp
         raise ConfigError(f"[advice] needs the damage law of the estimated medium: set "
                           f"G.media[{medium}].E (J/mol) and .A (1/s, > 0), got E = "
                           f"{shorten(repr(m.E))}, A = {shorten(repr(m.A))}")
-    if setup_kw.get("parameter_model") == "coagulation":
-        raise ConfigError("[advice] is not built for filter.parameter_model = \"coagulation\" "
-                          "(the forecast holds each member's optics)")
+    if setup_kw.get("parameter_model", "random_walk") != "random_walk":
+        raise ConfigError(f"[advice] needs filter.parameter_model = \"random_walk\", got "
+                          f"{setup_kw['parameter_model']!r}: the forecast does not move the "
+                          "optics with each member's damage (coagulation) or with filtered "
+                          "rates (trend)")
     target = _place(table, "target", G)
     if target is None:
         raise ConfigError("[advice] needs a target: advice.target_depth, target_point or "
@@ -179,6 +183,12 @@ def advice_settings(table, model, medium: int, grid, setup_kw: dict) -> AdviceSp
     if not q[0] < 0.5 < q[1] < 1:
         raise ConfigError(f"advice.quantiles must have 0 < lower < 0.5 < upper < 1, got {q}")
     kw["quantiles"] = tuple(q)
+    from ...tissue.advice import DRIFT_FORECASTS
+
+    kw["drift"] = table.get("drift", "walk+trend")
+    if kw["drift"] not in DRIFT_FORECASTS:
+        raise ConfigError(f"advice.drift must be one of {', '.join(map(repr, DRIFT_FORECASTS))}, "
+                          f"got {shorten(repr(kw['drift']))}")
     plan = _plan(table, HS)
     end = plan[1][-1][1] if plan[1] else 0.0
     steps = min(end + kw["tail"], kw["max_horizon"]) / kw["step"]
