@@ -94,11 +94,6 @@ def build(quick: bool = False) -> Model:
     HS.progress = not quick
     if quick:
         HS.mesh_divisions = (15, 15, 15)
-    else:
-        # these optics follow the temperature or the damage, read at the voxel centres: a
-        # heat mesh twice as fine reads them better (docs/heat.md), but at 100^3 voxels its
-        # 8 million nodes are beyond a laptop: the voxel corners, chosen explicitly
-        HS.mesh_divisions = (G.nx, G.ny, G.nz)
     return model
 
 
