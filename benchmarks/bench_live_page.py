@@ -10,7 +10,12 @@ frame), the filter's step time (run.json ``step_s``: the wall time of each updat
 and 95th percentile) and the stream's length against the data's. The two runs alternate
 ``--repeat`` times (the machine's other load changes between them).
 
+The filter reads the frames as super-pixels, the means of ``--binning`` x ``--binning``
+blocks (default 4: 16 x 16 readings of a 64 x 64 frame; 1 reads every pixel, whose dense
+4096 x 4096 model-error covariance takes seconds a step).
+
     python benchmarks/bench_live_page.py [--frames 100] [--rate 10] [--repeat 2] [--pixels 64]
+                                         [--binning 4]
 """
 
 from __future__ import annotations
@@ -40,6 +45,7 @@ spot_center = [{c}, {c}]
 # the frames are a stand-in for the model's image: a wide model error keeps the filter on
 # them (the benchmark times the steps; validation/ measures the estimates)
 model_error_rel_std = 0.5
+binning = {binning}
 """
 
 
@@ -116,13 +122,16 @@ def main(argv=None):
     ap.add_argument("--rate", type=float, default=10.0)
     ap.add_argument("--repeat", type=int, default=2)
     ap.add_argument("--pixels", type=int, default=64, help="the frames are PIXELS x PIXELS")
+    ap.add_argument("--binning", type=int, default=4,
+                    help="sensors.camera.binning: the filter reads the means of BINNING x BINNING "
+                         "blocks (1: every pixel)")
     args = ap.parse_args(argv)
     work = Path(tempfile.mkdtemp(prefix="bench_live_"))
     text = (ROOT / "examples" / "tiny.toml").read_text()
     head, tail = text.split("[sensors]", 1)
     cfg = work / "camera.toml"
     cfg.write_text(head + CONFIG.format(rate=args.rate, n=args.pixels, pixel=0.48 / args.pixels,
-                                        c=(args.pixels - 1) / 2)
+                                        c=(args.pixels - 1) / 2, binning=args.binning)
                    + "\n[filter]" + tail.split("[filter]", 1)[1])
     cache = str(work / "cache")
     f = frames(args.frames, args.rate, args.pixels)

@@ -132,3 +132,23 @@ def _tiff_bytes(frame) -> bytes:
     buf = io.BytesIO()
     tifffile.imwrite(buf, frame.astype("f4"))
     return buf.getvalue()
+
+
+def test_a_binned_camera_reads_super_pixels(tmp_path, cache, capsys):
+    """sensors.camera.binning = 2: the 8 x 8 frames are read as 4 x 4 block means (the
+    filter's readings), the spot's centre still found in the camera's own pixels; a
+    binning that does not divide the frames is refused."""
+    cfg = camera_config(tmp_path)
+    cfg.write_text(cfg.read_text().replace("rotation = 2.0", "rotation = 2.0\nbinning = 2"))
+    tifffile.imwrite(tmp_path / "stack.tif", frames().astype("f4"), imagej=True,
+                     metadata={"finterval": 0.1, "axes": "TYX"})
+    out = tmp_path / "id"
+    assert run("identify", cfg, "--data", tmp_path / "stack.tif", "--out", out, "--quiet",
+               "--cache-dir", cache) == 0
+    s = json.loads((out / "summary.json").read_text())
+    col, row = s["camera"]["spot_center_px"]
+    assert abs(col - SPOT[0]) < 0.2 and abs(row - SPOT[1]) < 0.2
+    cfg.write_text(cfg.read_text().replace("binning = 2", "binning = 3"))
+    assert run("identify", cfg, "--data", tmp_path / "stack.tif", "--out", tmp_path / "bad",
+               "--quiet", "--cache-dir", cache) == 2
+    assert "sensors.camera.binning must divide the shape [8, 8]" in capsys.readouterr().err

@@ -94,7 +94,7 @@ def follow_folder(path: str | Path, start: Callable, on_update: Callable, *,
             if t > 0 or identifier.history:
                 skip(name, f"time {t!r} s is not after the last frame's {identifier.time!r} s")
             return
-        est = identifier.update(t, frame.reshape(-1))
+        est = identifier.update(t, identifier.setup.sensors.image.readings(frame))
         count += 1
         on_update(est, name)
 

@@ -212,6 +212,6 @@ def observation_operator(setup: TissueFilterSetup, mesh):
         xyz.append(setup.sensors.positions)
     if setup.sensors.image is not None:
         blocks.append(setup.sensors.image.matrix(mesh))
-        var.append(np.full(setup.sensors.image.n_pixels, float(setup.sensors.image.noise_var)))
+        var.append(np.full(setup.sensors.image.n_pixels, setup.sensors.image.reading_noise_var))
         xyz.append(setup.sensors.image.pixel_centers())
     return (sp.vstack(blocks).tocsr(), np.concatenate(var), np.vstack(xyz))

@@ -16,7 +16,7 @@ localization for the perturbed-observation filter.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 import scipy.sparse as sp
@@ -45,6 +45,10 @@ class ThermalImage:
     model_error_lengths : tuple of float
         cm, the correlation lengths of that error between pixels (squared exponential),
         an error of ``model_error_rel_std`` at each; 0: independent pixels.
+    binning : int
+        Super-pixels: each reading is the mean of a ``binning x binning`` block of the
+        camera's pixels (``shape`` stays the frames' shape and must be a multiple of it);
+        1 (default): one reading per pixel. See :meth:`readings`.
     """
 
     x_range: tuple[float, float]
@@ -66,6 +70,10 @@ class ThermalImage:
     rotation: float = 0.0
     #: the image is mirrored (its columns run along -x before the rotation)
     mirror: bool = False
+    #: the camera's pixels per super-pixel side: the filter reads block means (a 64 x 64
+    #: camera at 10 Hz as 16 x 16 readings, docs/camera.md); their noise is
+    #: ``noise_var / binning**2`` and their model error the block mean of the pixels'
+    binning: int = 1
 
     @classmethod
     def registered(cls, shape, pixel_size, spot_center, rotation: float = 0.0,
@@ -119,19 +127,46 @@ class ThermalImage:
             raise ValueError(f"ThermalImage.model_error_lengths must be one or more finite "
                              f"lengths >= 0 (cm), got {self.model_error_lengths!r}")
         object.__setattr__(self, "model_error_lengths", tuple(float(x) for x in lengths))
+        b = self.binning
+        if isinstance(b, bool) or int(b) != b or b < 1 or ny % int(b) or nx % int(b):
+            raise ValueError(f"ThermalImage.binning must be an integer >= 1 that divides the "
+                             f"shape {tuple(self.shape)}, got {b!r}")
+        object.__setattr__(self, "binning", int(b))
         if not np.isfinite(self.rotation):
             raise ValueError(f"ThermalImage.rotation must be a finite angle (deg), got "
                              f"{self.rotation!r}")
 
     def error_correlation(self) -> np.ndarray:
         """(n_pixels, n_pixels): the sum over ``model_error_lengths`` of the correlations
-        ``exp(-d^2 / (2 length^2))`` between pixel centres (the identity for length 0)."""
-        return self.point_correlation(self.pixel_centers()[:, :2])
+        ``exp(-d^2 / (2 length^2))`` between pixel centres (the identity for length 0);
+        with :attr:`binning`, those of the block means of the camera's pixels."""
+        if self.binning == 1:
+            return self.point_correlation(self.pixel_centers()[:, :2])
+        # the kernel on the camera's (rotated) pixel grid depends on the distance along its
+        # rows times the one along its columns: C = K_rows (x) K_cols for each length, and
+        # the block means are the blocks' means of those 1-D kernels (never the p^2 matrix
+        # of the camera's pixels)
+        ny, nx = (int(v) for v in self.shape)
+        b = self.binning
+        out = 0.0
+        for ell in self.model_error_lengths:
+            K = []
+            for n, (lo, hi) in ((ny, self.y_range), (nx, self.x_range)):
+                c = (np.arange(n) + 0.5) * (hi - lo) / n
+                d2 = (c[:, None] - c[None, :]) ** 2
+                k = (d2 == 0).astype(float) if ell == 0 else np.exp(-0.5 * d2 / ell ** 2)
+                K.append(k.reshape(n // b, b, n // b, b).mean(axis=(1, 3)))
+            out = out + np.kron(K[0], K[1])
+        return out
 
     def point_correlation(self, points_xy: np.ndarray) -> np.ndarray:
         """(q, n_pixels): the same sum between points of the top face ``points_xy`` (q, 2)
         cm and the pixel centres (length 0: one where a point is a pixel's centre)."""
         pts = np.asarray(points_xy, float).reshape(-1, 2)
+        if self.binning > 1:  # the block means of the camera's pixels'
+            (ny, nx), b = self.grid, self.binning
+            fine = replace(self, binning=1).point_correlation(pts)
+            return fine.reshape(-1, ny, b, nx, b).mean(axis=(2, 4)).reshape(-1, ny * nx)
         d2 = np.sum((pts[:, None, :] - self.pixel_centers()[None, :, :2]) ** 2, axis=-1)
         return sum((d2 == 0).astype(float) if ell == 0 else np.exp(-0.5 * d2 / ell ** 2)
                    for ell in self.model_error_lengths)
@@ -186,8 +221,33 @@ class ThermalImage:
         return a_z[:, None] * a_y[None, :] * C, a_z ** 2 * len(self.model_error_lengths)
 
     @property
+    def grid(self) -> tuple[int, int]:
+        """(ny, nx) of the readings: :attr:`shape` over :attr:`binning`."""
+        return int(self.shape[0]) // self.binning, int(self.shape[1]) // self.binning
+
+    @property
     def n_pixels(self) -> int:
-        return int(self.shape[0]) * int(self.shape[1])
+        """The readings of a frame (super-pixels with :attr:`binning`)."""
+        return self.grid[0] * self.grid[1]
+
+    @property
+    def reading_noise_var(self) -> float:
+        """deg C^2: the noise of one reading, the mean of ``binning**2`` pixels'."""
+        return float(self.noise_var) / self.binning ** 2
+
+    def readings(self, frames: np.ndarray) -> np.ndarray:
+        """(..., n_pixels) deg C: the readings of frames (..., ny, nx) of :attr:`shape`,
+        each the mean of its ``binning x binning`` block (NaN where any of its pixels is
+        dead: the noise of a mean of fewer pixels would be larger than stated)."""
+        f = np.asarray(frames, float)
+        ny, nx = (int(v) for v in self.shape)
+        if f.shape[-2:] != (ny, nx):
+            raise ValueError(f"frames must end with the camera's shape ({ny}, {nx}), got "
+                             f"{f.shape}")
+        if self.binning > 1:
+            (gy, gx), b = self.grid, self.binning
+            f = f.reshape(*f.shape[:-2], gy, b, gx, b).mean(axis=(-3, -1))
+        return f.reshape(*f.shape[:-2], self.n_pixels)
 
     def pixel_centers(self) -> np.ndarray:
         """(n_pixels, 3) cm, pixel centres on z = 0, rows of the frame in C order."""
@@ -195,7 +255,7 @@ class ThermalImage:
 
     def _points(self, s: int) -> np.ndarray:
         """(n_pixels, s*s, 3) sub-pixel sample points (midpoints of an s x s split)."""
-        ny, nx = (int(v) for v in self.shape)
+        ny, nx = self.grid
         (x0, x1), (y0, y1) = self.x_range, self.y_range
         dx, dy = (x1 - x0) / nx, (y1 - y0) / ny
         u = (np.arange(s) + 0.5) / s
@@ -210,12 +270,16 @@ class ThermalImage:
 
     def sample_points(self) -> np.ndarray:
         """(n_pixels * subsamples^2, 3) cm: every probe point, pixel by pixel."""
-        return self._points(int(self.subsamples)).reshape(-1, 3)
+        return self._points(self._probes()).reshape(-1, 3)
+
+    def _probes(self) -> int:
+        # a super-pixel's midpoints are its pixels' (the same footprint average)
+        return int(self.subsamples) * self.binning
 
     def average(self, values: np.ndarray) -> np.ndarray:
         """Pixel values (..., n_pixels) from values at :meth:`sample_points` (..., n_points)."""
         v = np.asarray(values, float)
-        s2 = int(self.subsamples) ** 2
+        s2 = self._probes() ** 2
         return v.reshape(*v.shape[:-1], self.n_pixels, s2).mean(axis=-1)
 
     def matrix(self, mesh, interpolation: str = "cubic") -> sp.csr_matrix:
@@ -243,7 +307,7 @@ class ThermalImage:
                              f"outside the tissue [{lo.round(6)}, {hi.round(6)}]")
         grid = fem.structured_grid(mesh) if interpolation == "cubic" else None
         P = _cubic_surface_probes(grid, pts) if grid is not None else fem.probe_matrix(mesh, pts.T)
-        s2 = int(self.subsamples) ** 2
+        s2 = self._probes() ** 2
         A = sp.csr_matrix((np.full(pts.shape[0], 1.0 / s2),
                            (np.repeat(np.arange(self.n_pixels), s2), np.arange(pts.shape[0]))),
                           shape=(self.n_pixels, pts.shape[0]))

@@ -31,8 +31,9 @@ from ...tissue.image import ThermalImage, estimate_spot_center
 
 __all__ = ["CAMERA_KEYS", "CameraRegistration", "camera_settings"]
 
-CAMERA_KEYS = {"x_range", "y_range", "shape", "noise_var", "subsamples", "model_error_rel_std",
-               "model_error_lengths", "pixel_size", "spot_center", "rotation", "mirror",
+CAMERA_KEYS = {"x_range", "y_range", "shape", "noise_var", "subsamples", "binning",
+               "model_error_rel_std", "model_error_lengths", "pixel_size", "spot_center",
+               "rotation", "mirror",
                "emissivity"}
 
 
@@ -94,7 +95,12 @@ def camera_settings(cam: dict, G, num, pair, model_error: dict
                   for i, v in enumerate(shape))
     kw = dict(noise_var=num("sensors.camera.noise_var", cam.get("noise_var", 0.01), positive=True),
               subsamples=num("sensors.camera.subsamples", cam.get("subsamples", 4), integer=True,
-                             lo=1), **model_error)
+                             lo=1),
+              binning=num("sensors.camera.binning", cam.get("binning", 1), integer=True, lo=1),
+              **model_error)
+    if shape[0] % kw["binning"] or shape[1] % kw["binning"]:
+        raise ConfigError(f"sensors.camera.binning must divide the shape {list(shape)}, got "
+                          f"{kw['binning']}")
     emissivity = None
     if "emissivity" in cam:
         emissivity = num("sensors.camera.emissivity", cam["emissivity"], positive=True, hi=1.0)

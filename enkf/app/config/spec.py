@@ -118,7 +118,7 @@ class IdentifyConfig:
         # times from a clock start at the first frame: the laser's start, unless
         # data.time_offset says otherwise
         offset = 0.0 if clock and data.time_offset is None else data.time_offset
-        return apply_time_offset(path, times, frames.reshape(len(times), -1), offset)
+        return apply_time_offset(path, times, self.setup_kw["image"].readings(frames), offset)
 
     def camera_record(self) -> dict:
         """summary.json's ``camera``: where the spot's centre was found (or nothing)."""
