@@ -1,7 +1,7 @@
 """One default config whether the optics hold still, drift, or the laser pulses.
 
 ``examples/own_data.toml`` as shipped (its default ``[filter.drift] mode = "auto"``: a
-still filter and drifting ones, their restarts through 2, 3 and 6 knots, weighed by their
+still filter and drifting ones, their restarts through 2, 3 and 9 knots, weighed by their
 evidence, ``enkf.tissue.drift``), only the
 laser's schedule changed to the truth's, against the independent forward models of
 ``validation/independent_models.py`` (A: analog Monte Carlo and finite differences on

@@ -56,7 +56,12 @@ class DriftBank:
         The forms of the drift, one drifting filter each: the knots of its restarts'
         piecewise-linear paths in heated time (each >= 2). A form with more free values
         (every knot of every drifting parameter) than the ensemble has members is left
-        out (e.g. 6 knots of two media's four optics with 20 members).
+        out (e.g. 6 knots of two media's four optics with 20 members). The default:
+        a line, a bend, and a path whose knots are an eighth of the heated time apart,
+        fine enough for a step of the optics over a tenth of it (the onset of
+        coagulation): with 6 knots, the step of ``validation/drift_bank.py`` left the
+        restarts' end values on the wrong side of the mua-mus ridge and both optics'
+        bands missed on 9 of 20 seeds (``validation/reports/drift_bank.md``).
     restart_discrepancy : float
         The restarts' model discrepancy (relative sd of the rise).
     rtps : float
@@ -69,7 +74,7 @@ class DriftBank:
     prior_weight: float = 0.5
     restart_weight: float = 0.05
     restart_delay: float = 2.5
-    restart_knots: tuple = (2, 3, 6)
+    restart_knots: tuple = (2, 3, 9)
     restart_discrepancy: float = 0.01
     rtps: float = 0.1
 
