@@ -63,7 +63,7 @@ class DirectSolver:
 
 
 class BatchedPCG:
-    """Jacobi-preconditioned CG for all members at once.
+    r"""Jacobi-preconditioned CG for all members at once.
 
     Parameters
     ----------
@@ -75,9 +75,15 @@ class BatchedPCG:
     precond : callable, optional
         ``precond(R, a, b) -> Z`` approximately solving ``A_n z_n = r_n`` for
         residual columns R (nfree, N); default Jacobi.
+    jacobi_below : float
+        With ``precond``: solves whose step matrix is this close to its diagonal, i.e.
+        :math:`\max_{i,n} (b_n K_{ii} + R_{ii}) / (a_n M_{ii})` below it (short steps: the
+        mass dominates), use Jacobi instead, whose iterations then cost a fraction of the
+        preconditioner's for as few or fewer of them. 0 (default): never.
     """
 
-    def __init__(self, M, K, R, rtol: float = 1e-10, maxiter: int = 2000, precond=None):
+    def __init__(self, M, K, R, rtol: float = 1e-10, maxiter: int = 2000, precond=None,
+                 jacobi_below: float = 0.0):
         self.M, self.K, self.R = sp.csr_matrix(M), sp.csr_matrix(K), sp.csr_matrix(R)
         self.m_diag = self.M.diagonal()
         self.k_diag = self.K.diagonal()
@@ -86,7 +92,13 @@ class BatchedPCG:
         self.R_is_diag = self.R.nnz == np.count_nonzero(self.r_diag)
         self.rtol, self.maxiter = rtol, maxiter
         self.precond = precond
+        self.jacobi_below = float(jacobi_below)
+        if self.jacobi_below > 0:  # the diagonal's stiffness over mass, per unit scale
+            m = np.where(self.m_diag > 0, self.m_diag, np.inf)
+            self._k_over_m = float(np.max(self.k_diag / m))
+            self._r_over_m = float(np.max(self.r_diag / m))
         self.last_iterations = 0
+        self.last_jacobi = False
 
     def _operator(self, a, b):
         """X -> A X for columns X (nfree, N), A_n = a_n M + b_n K + R."""
@@ -108,7 +120,14 @@ class BatchedPCG:
         B = np.ascontiguousarray(r.T)
         # a copy: for one member x0.T is contiguous already, and X is updated in place
         X = np.zeros_like(B) if x0 is None else np.array(x0.T, dtype=float, order="C")
-        if self.precond is None:
+        jacobi = self.precond is None
+        if not jacobi and self.jacobi_below > 0:
+            a_min = float(np.min(a))
+            stiff = (float(np.max(b / a)) * self._k_over_m + self._r_over_m / a_min
+                     if a_min > 0 else np.inf)
+            jacobi = stiff < self.jacobi_below
+        self.last_jacobi = jacobi
+        if jacobi:
             dinv = 1.0 / (self.m_diag[:, None] * a + self.k_diag[:, None] * b
                           + self.r_diag[:, None])
 

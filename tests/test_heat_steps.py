@@ -101,9 +101,12 @@ def test_accuracy_steps_meet_their_tolerance(reference):
     assert np.abs(acc.T_nodes - reference.T_nodes).max() <= 1e-3 * rise
     assert np.abs(acc.sensor_temps[-1] - reference.sensor_temps[-1]).max() <= 1e-3 * rise
     assert np.abs(stab.T_nodes - reference.T_nodes).max() >= 1e-2 * rise / 3
-    # every step ends inside the run; the updates and the pulse's end are steps
+    # every step ends inside the run; the pulse's end is a step, and with
+    # HS.steps_at_updates so are the updates
     t = acc.sensor_times
     assert t[0] == 0.0 and t[-1] == pytest.approx(0.6) and np.all(np.diff(t) > 0)
+    assert np.min(np.abs(t - 0.3)) < 1e-12
+    t = block(steps_at_updates=True).HS.sensor_times
     for edge in (0.3, 0.15, 0.45):
         assert np.min(np.abs(t - edge)) < 1e-12
 

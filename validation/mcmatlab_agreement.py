@@ -449,7 +449,9 @@ function model = mcmrec_heat(model, varargin)
     mua = model.MC.mediaProperties.mua;
     model.MC.NFR = single(src.NA ./ reshape(mua(model.MC.M), size(src.NA)));
   end
+  t_heat = tic;  % the heat engine's own wall time (benchmarks/bench_heat_vs_mcmatlab.py)
   model = simulateHeatDistribution(model, varargin{:});
+  MCMREC.heat_s = toc(t_heat);
   mcmrec_save(model, 'HS', MCMREC.T0);
 end
 
@@ -478,6 +480,7 @@ function mcmrec_save(model, kind, T0)
     s.T = model.HS.T; s.T0 = T0;
     s.sensorTemps = model.HS.sensorTemps; s.sensorsTimeVector = model.HS.sensorsTimeVector;
     s.Omega = model.HS.Omega; s.maxMediaTemps = model.HS.maxMediaTemps;
+    s.heat_wall_s = MCMREC.heat_s;
   else
     S = model.(kind);
     s.NFR = S.NFR; s.NA = S.NA; s.nPhotons = S.nPhotons;

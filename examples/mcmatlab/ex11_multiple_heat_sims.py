@@ -68,6 +68,7 @@ def build(quick: bool = False) -> Model:
     HS.T_initial = 37.0  # deg C
     HS.plot_temp_limits = (37.0, 100.0)
     HS.n_updates = 10
+    HS.steps_at_updates = True  # the chained runs march the steps of the one long run (check)
     # MCmatlab's (0.5, 0.6, 1) puts the xy slice on the bottom wall of its 3-D view; on the
     # flat panels here that is the bottom face, unheated: slice through the hottest voxel
     HS.slice_positions = None

@@ -149,6 +149,12 @@ class HeatSimulation(StrictAttributes):
     #: s, "accuracy": sensor readings at the multiples of this (the steps land on them);
     #: None: at the end of every step, as MCmatlab's
     sensor_interval: float | None = None
+    #: "accuracy": end a step at every update (``n_updates`` per pulse) even where nothing
+    #: reads the state there. False (default): only where something does (live plot, movie,
+    #: snapshots, media that follow T or FD, fluorescence, a power ``P(t)``) and at the
+    #: phases' edges, so that the steps grow as the field settles (MCmatlab's Example 4 held
+    #: at its 450 updates took 450 steps, free 62, 3.6 times faster)
+    steps_at_updates: bool = False
     large_time_steps: bool = False  #: with ``step_control = "stability"``: ten times longer steps
     #: the heat capacity's matrix: "lumped" (a discrete maximum principle: no node colder
     #: than the coldest start or boundary, as MCmatlab's finite volumes) or "averaged" (the
@@ -240,6 +246,9 @@ class HeatSimulation(StrictAttributes):
             raise ValueError(f"HS.use_gpu must be True or False, got {self.use_gpu!r}")
         self.gpu_device = int(check_number("HS.gpu_device", self.gpu_device, integer=True, lo=0,
                                            hi=1024))
+        if not isinstance(self.steps_at_updates, bool | np.bool_):
+            raise ValueError(f"HS.steps_at_updates must be True or False, got "
+                             f"{self.steps_at_updates!r}")
         if self.sensor_interval is not None:
             self.sensor_interval = check_positive("HS", "sensor_interval", self.sensor_interval)
         if self.dt is not None:
