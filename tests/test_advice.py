@@ -15,7 +15,7 @@ import fem
 from enkf.app.cli import main
 from enkf.tissue import TissueForwardModel, identify
 from enkf.tissue.advice import AdviceRow, Advisor, MemberAdvice, Plan, online_ensembles
-from enkf.tissue.advice_forecast import damage, first_crossing, heat, low_rank
+from enkf.tissue.advice.forecast import damage, first_crossing, heat, low_rank
 from enkf.tissue.drift import DriftBank, weighted_quantiles
 from enkf.tissue.risk import MCMATLAB_A, MCMATLAB_E
 from mcmatlab_py.heat import HeatSimulation

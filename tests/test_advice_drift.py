@@ -12,7 +12,7 @@ import pytest
 from enkf.problem import StepReport
 from enkf.tissue import TissueForwardModel
 from enkf.tissue.advice import Advisor, Plan
-from enkf.tissue.advice_forecast import heat
+from enkf.tissue.advice.forecast import heat
 from enkf.tissue.drift import DriftBank
 
 sys.path.insert(0, str(Path(__file__).parent))

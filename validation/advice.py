@@ -102,7 +102,7 @@ def run_one(case: str, seed: int, check_rows: bool = False) -> dict:
     """One filter run with the advice at every reading; with ``check_rows``, the
     forecast's low-rank rows set against the full ones on the members of a few readings."""
     from enkf.tissue import identify
-    from enkf.tissue.advice_forecast import PointForecast
+    from enkf.tissue.advice.forecast import PointForecast
 
     model = MODELS[seed % len(MODELS)]
     rng = np.random.default_rng([seed, list(CASES).index(case), 53])

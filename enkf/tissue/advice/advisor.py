@@ -1,65 +1,5 @@
-r"""How long to keep the laser on: each member forecast to the target's coagulation.
-
-Every member of the filter carries its optics :math:`\theta_n`, its temperature field
-:math:`T_n` and (followed here along its analysed trajectory) its Arrhenius damage
-:math:`\Omega_n` at a few points: the **target** (every point of it must reach
-:math:`\Omega \ge 1`), the **protected** tissue (none of it may pass its damage or
-temperature limit) and the **surface** (its temperature limit). At each reading each
-member is forecast under the planned laser schedule and under "laser off now", its optics
-carried forward as its filter's parameter model moves them (below); from its forecast come
-
-* the **target time**: when :math:`\min_\text{target}\Omega_n` reaches 1 under the plan
-  (``inf``: not within the horizon, the plan's last pulse plus ``tail``);
-* the **stop time**: the earliest switch-off (at the end of a forecast step, interpolated
-  in :math:`\log\Omega`) after which the target still reaches :math:`\Omega \ge 1` as the
-  tissue cools, at or before the target time;
-* whether the protected points or the surface pass their limits (so far or within the
-  horizon) under the plan, with the laser off now, and with the laser stopped at the
-  member's own stop time ("at target": what coagulating the target costs).
-
-Across the members (weighted, for a bank of filters) these are the medians and
-quantiles of the times and the probabilities of the risks (:class:`AdviceRow`).
-
-**The optics in the forecast.** A filter whose random walk models still optics (below
-``hold_below`` log units a step, the still filter's 0.002) holds each member's optics at
-their present values, the walk's expectation. A filter whose optics drift (the drift
-bank's drifting filters, or any filter with a larger walk) carries each member's walk on:
-over the forecast's heated steps (the walk's own ``random_walk_when_off`` factor for the
-others) the member's log optics take the filter's own walk std a step, drawn afresh at
-each reading, plus the member's own recent trend: the slope of its log optics against
-heated time over the last ``trend_window`` s of heating (a member's track, as the
-filter's analyses moved it, tells which way its optics have been going; the members'
-trends scatter, and the interval with them, while the filter is still learning)
-(:attr:`Advisor.drift`: ``"walk+trend"``, ``"walk"`` or ``"hold"``). The optics only act
-through the load while the laser heats, so they are set piecewise constant over
-``drift_step`` s of the plan's pulses, at the middle of each piece: the forecast's
-temperatures then sum the responses to each piece's load (:func:`~enkf.tissue.
-advice_forecast.heat`). Under the bank's weights the still filter's members hold and the
-drifting ones drift, so the interval widens with the evidence of a drift.
-
-``parameter_model = "coagulation"`` is refused: its optics follow each member's damage at
-every node that absorbs (a light-weighted coagulated fraction), which the few points'
-forecast does not carry; stepping every member's whole field over the horizon would take
-about the filter's own step a forecast step, far beyond a reading's 100 ms.
-
-Each member's point temperatures come from :class:`~enkf.tissue.advice_forecast.
-PointForecast`: the forecast is linear in the state and the absorbed power, so rows
-computed once by the adjoint of the heat step (and stored as a low-rank product) turn
-any member's state and optics into its temperatures at the points after every step of
-the horizon: two small matrix products a reading. Members with their own heat capacity
-and conductivity are stepped forward one by one instead. The forecast steps as the
-filter does (``setup.heat.max_dt``, the readings' 0.1 s by default), with the plan's power
-averaged over each step (:meth:`Plan.mean_power`), and the damage is the trapezoid in
-the Arrhenius rate over those steps, as :class:`~enkf.tissue.risk.RiskTracker`'s.
-
-The drift bank (``setup.parameters.drift``) runs several filters: the advice mixes their members,
-each filter's weight (its probability after the reading) shared evenly by its members,
-as the bank's own estimates do; online, a filter below ``min_weight`` is not forecast.
-
-Use it as the callback of :func:`enkf.tissue.identify` (then :meth:`Advisor.table`
-with the bank's weights), or after each :meth:`OnlineIdentifier.update` with
-:meth:`Advisor.online`.
-"""
+"""The advisor: each member of the current ensemble forecast to the target under the plan
+and with the laser off (:mod:`enkf.tissue.advice` says what and why)."""
 
 from __future__ import annotations
 
@@ -72,8 +12,9 @@ import numpy as np
 
 import fem
 
-from .advice_drift import member_trends, optics_paths, remember
-from .advice_forecast import (
+from ..drift import weighted_quantiles
+from .drift import member_trends, optics_paths, remember
+from .forecast import (
     PointForecast,
     damage,
     first_crossing,
@@ -81,103 +22,9 @@ from .advice_forecast import (
     nominal_peak,
     region_points,
 )
+from .plan import DRIFT_FORECASTS, REGION_POINTS, SURFACE_POINTS, AdviceRow, MemberAdvice, Plan
 
-__all__ = ["DRIFT_FORECASTS", "RISKS", "AdviceRow", "Advisor", "MemberAdvice", "Plan",
-           "advice_summary", "online_ensembles", "plot_advice"]
-
-#: the risks reported: (region, scenario); "at_target": stopped at the member's stop time
-RISKS = tuple(f"{r}_{s}" for r in ("protected", "surface") for s in ("plan", "off", "at_target"))
-#: how the forecast moves each member's optics (module docstring)
-DRIFT_FORECASTS = ("walk+trend", "walk", "hold")
-#: most points kept of a region (the hottest of a protected one, the coldest of a target)
-#: and of the surface (its hottest nodes), ranked under the plan at the nominal optics
-REGION_POINTS, SURFACE_POINTS = 8, 4
-
-
-@dataclass
-class Plan:
-    """The laser schedule of the forecast: ``power`` W during the ``pulses`` (s)."""
-
-    power: float  #: W while a pulse is on
-    pulses: tuple  #: ((start, end), ...) s, increasing and not overlapping
-
-    def __post_init__(self):
-        if isinstance(self.power, bool) or not (np.isfinite(self.power) and self.power >= 0):
-            raise ValueError(f"Plan.power must be a finite number >= 0 (W), got {self.power!r}")
-        try:
-            p = tuple((float(a), float(b)) for a, b in self.pulses)
-        except (TypeError, ValueError):
-            raise ValueError(f"Plan.pulses must be [(start, end), ...] in s, got "
-                             f"{self.pulses!r}") from None
-        for i, (a, b) in enumerate(p):
-            if not (np.isfinite(a) and np.isfinite(b) and 0 <= a < b):
-                raise ValueError(f"Plan.pulses[{i}] = {[a, b]} must have 0 <= start < end (s)")
-            if i and a < p[i - 1][1]:
-                raise ValueError(f"Plan.pulses[{i}] = {[a, b]} starts before the pulse "
-                                 f"before it ends ({p[i - 1][1]:g} s)")
-        self.power, self.pulses = float(self.power), p
-
-    @classmethod
-    def from_heat_simulation(cls, hs) -> Plan:
-        """The schedule of a :class:`mcmatlab_py.heat.HeatSimulation` (a number ``P``)."""
-        if callable(hs.P):
-            raise ValueError("a plan needs a constant power: HS.P is a function; give the "
-                             "plan's power")
-        period = hs.duration_on + hs.duration_off
-        return cls(float(hs.P), tuple((i * period, i * period + hs.duration_on)
-                                      for i in range(int(hs.n_pulses))))
-
-    @property
-    def end(self) -> float:
-        """s: when the last pulse ends (0 without pulses)."""
-        return self.pulses[-1][1] if self.pulses else 0.0
-
-    def on_time(self, t0: float, t1: float) -> float:
-        """s of ``[t0, t1)`` with a pulse on (the heated time the optics drift over)."""
-        return sum(max(0.0, min(t1, b) - max(t0, a)) for a, b in self.pulses) \
-            if self.power > 0 else 0.0
-
-    def mean_power(self, t0: float, t1: float) -> float:
-        """W averaged over ``[t0, t1)``: the energy the pulses deliver in it over its length."""
-        on = sum(max(0.0, min(t1, b) - max(t0, a)) for a, b in self.pulses)
-        return self.power * on / (t1 - t0)
-
-
-@dataclass
-class MemberAdvice:
-    """One filter's members at one reading: their times (s) and which risks they run."""
-
-    time: float  #: s, the reading
-    horizon_end: float  #: s, the forecast's end
-    target_time: np.ndarray  #: (N,) s, the target's Omega >= 1 under the plan (inf: not)
-    stop_time: np.ndarray  #: (N,) s, the earliest switch-off that still reaches it (inf)
-    risks: dict  #: {name in RISKS: (N,) bool}, the risks with a limit
-    wall_s: float  #: s spent on the forecast
-
-
-@dataclass
-class AdviceRow:
-    """The advice at one reading: the members' (weighted) distribution."""
-
-    time: float  #: s
-    target_time: tuple  #: s, (median, lower, upper quantile); inf: beyond the horizon
-    p_target: float  #: probability the target reaches Omega >= 1 under the plan
-    stop_time: tuple  #: s, (median, lower, upper quantile)
-    risks: dict  #: {name: probability}
-    wall_s: float  #: s, the forecast of every filter mixed here
-
-    def as_dict(self, quantiles) -> dict:
-        """Flat ``{column: value}`` (advice.csv's columns, times in s)."""
-        out = {"time_s": self.time}
-        for what, v in (("target_time", self.target_time), ("stop_time", self.stop_time)):
-            out[f"{what}_median_s"] = v[0]
-            for q, x in zip(quantiles, v[1:], strict=True):
-                out[f"{what}_q{100 * q:g}_s".replace(".", "p")] = x
-            if what == "target_time":
-                out["p_target"] = self.p_target
-        out.update({f"p_{k}": v for k, v in self.risks.items()})
-        out["advice_ms"] = 1e3 * self.wall_s
-        return out
+__all__ = ["Advisor", "online_ensembles"]
 
 
 @dataclass
@@ -235,7 +82,7 @@ class Advisor:
                  quantiles=(0.05, 0.95), min_weight: float = 0.01, engine: str = "auto",
                  drift: str = "walk+trend", trend_window: float = 1.0,
                  drift_step: float = 0.5, hold_below: float = 0.005, seed: int = 0):
-        from .forward import TissueForwardModel
+        from ..forward import TissueForwardModel
 
         if setup.parameters.kind != "random_walk":
             # coagulation: each member's optics follow its own damage, which the point
@@ -367,7 +214,7 @@ class Advisor:
     def trend(self, key) -> np.ndarray:
         """(N, n_estimate) 1/s of heating: the slope of each member's log optics in the
         filter ``key`` against heated time over its last ``trend_window`` s of heating
-        (:func:`~enkf.tissue.advice_drift.member_trends`)."""
+        (:func:`~enkf.tissue.advice.drift.member_trends`)."""
         n = len(self.setup.parameters.estimate)
         tr = self.tracks.get(key)
         return np.zeros(n) if tr is None else member_trends(tr.history, self.trend_window, n)
@@ -375,7 +222,7 @@ class Advisor:
     def optics_paths(self, key, theta, t0: float, K: int):
         """The members of filter ``key`` with optics ``theta`` at ``t0`` over the next
         ``K`` steps: ``(thetas (S, N, n), seg (K,))`` or None where they hold
-        (:func:`~enkf.tissue.advice_drift.optics_paths`)."""
+        (:func:`~enkf.tissue.advice.drift.optics_paths`)."""
         if self.drift == "hold":
             return None
         n = len(self.setup.parameters.estimate)
@@ -508,7 +355,6 @@ class Advisor:
     def mix(self, parts) -> AdviceRow:
         """One :class:`AdviceRow` from ``[(weight, MemberAdvice), ...]``: each filter's
         weight shared evenly by its members."""
-        from .drift import weighted_quantiles
 
         w = np.array([p[0] for p in parts], float)
         w = w / w.sum()
@@ -536,53 +382,3 @@ def online_ensembles(ident) -> list[tuple]:
     :class:`~enkf.tissue.OnlineIdentifier` after its last update
     (:meth:`~enkf.tissue.OnlineIdentifier.filter_ensembles`)."""
     return ident.filter_ensembles()
-
-
-def advice_summary(advisor: Advisor, rows: list) -> dict:
-    """summary.json's ``advice``: what was asked (the points, limits, plan), the last
-    reading's advice, the interval's width at the first and the last reading, and the
-    forecasts' wall time."""
-    q = advisor.quantiles
-    width = [r.target_time[2] - r.target_time[1] for r in rows]
-    ms = [1e3 * r.wall_s for r in rows]
-    return {
-        "points_cm": {k: v.tolist() for k, v in advisor.points.items()},
-        "limits": {"protected_T": advisor.protected_T, "protected_omega": advisor.protected_omega,
-                   "surface_T": advisor.surface_T},
-        "plan": {"power_W": advisor.plan.power, "pulses_s": [list(p) for p in advisor.plan.pulses]},
-        "quantiles": list(q), "step_s": advisor.step, "engine": advisor.engine,
-        "filters": "one filter" if set(advisor.tracks) <= {None} else
-        "the drift bank's filters, their members weighed by each filter's probability",
-        "final": rows[-1].as_dict(q) if rows else None,
-        "interval_width_s": {"first": width[0] if rows else None,
-                             "last": width[-1] if rows else None},
-        "wall_ms": {"median": float(np.median(ms)) if ms else None,
-                    "max": float(np.max(ms)) if ms else None}}
-
-
-def plot_advice(ax, rows: list) -> None:
-    """On ``ax``: after each reading, when the target is coagulated under the plan (median
-    and interval) and when to stop (median), with the risks under the plan on a second
-    axis (0 to 1)."""
-    t = np.array([r.time for r in rows])
-
-    def col(get):  # beyond the horizon: not drawn
-        v = np.array([get(r) for r in rows], float)
-        return np.where(np.isfinite(v), v, np.nan)
-
-    ax.fill_between(t, col(lambda r: r.target_time[1]), col(lambda r: r.target_time[2]),
-                    color="g", alpha=0.2, lw=0, label="target: interval")
-    ax.plot(t, col(lambda r: r.target_time[0]), "g-", lw=1.4, label="target: median")
-    ax.plot(t, col(lambda r: r.stop_time[0]), "k--", lw=1.0, label="stop: median")
-    ax.plot(t, t, color="0.6", lw=0.8, ls=":")
-    ax.set(title="advice: target coagulated at", xlabel="time [s]", ylabel="[s]")
-    ax.legend(fontsize=7, loc="upper left")
-    if rows and rows[0].risks:
-        ax2 = ax.twinx()
-        for k, c in (("protected_plan", "m"), ("surface_plan", "r")):
-            if k in rows[0].risks:
-                ax2.plot(t, [r.risks[k] for r in rows], color=c, lw=0.9,
-                         label=f"P({k.split('_')[0]} over its limit)")
-        ax2.set(ylim=(-0.03, 1.03), ylabel="probability under the plan")
-        ax2.legend(fontsize=7, loc="lower right")
-

@@ -15,7 +15,7 @@ readings, :func:`member_trends`), :math:`\sigma` the filter's walk std a step an
 1, a step with the laser off the walk's ``random_walk_when_off`` factor), drawn afresh at
 each reading. The optics act only through the load while the laser heats, so they are
 held piecewise constant over pieces of ``drift_step`` s of heating, at each piece's
-middle (:func:`optics_paths`); :func:`~enkf.tissue.advice_forecast.heat` sums the
+middle (:func:`optics_paths`); :func:`~enkf.tissue.advice.forecast.heat` sums the
 responses to the pieces' loads.
 """
 
