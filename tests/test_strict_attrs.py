@@ -61,7 +61,7 @@ def test_mcmatlab_methods_point_to_ours():
 
 @pytest.mark.parametrize("label, name", [
     ("MC", "interfaceNormals"),
-    ("HS", "useGPU"),
+    ("HS", "useAllCPUs"),
     ("Medium", "PY"),
     ("FMC", "CDFs"),
 ])
