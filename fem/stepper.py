@@ -172,12 +172,6 @@ class HeatStepper:
         self.dt, self.theta, self.boundary, self.lumped = dt_f, th, boundary, lumped
         self.npoints = n
 
-        self._m_lumped = lumped_mass(mesh, self.vhc) if lumped else None
-        self.M = (sp.diags_array(self._m_lumped, format="csr") if lumped
-                  else mass_matrix(mesh, self.vhc, lumped=False))
-        self.K = stiffness_matrix(mesh, self.tc)
-        self.R = robin_matrix(mesh, boundary, lumped=lumped)
-        self.g = robin_load(mesh, boundary)
         if operator not in ("p1", "kronecker"):
             raise ValueError(f"operator must be 'p1' or 'kronecker', got {operator!r}")
         self.operator = operator
@@ -186,14 +180,24 @@ class HeatStepper:
         if mass == "consistent" and operator != "kronecker":
             raise ValueError("mass='consistent' needs operator='kronecker' (with 'p1': "
                              "lumped=False)")
+        if mass == "averaged" and operator == "p1" and not lumped:
+            raise ValueError("mass='averaged' takes the place of lumped=False")
         self.mass = mass
-        if mass == "averaged" and operator == "p1":  # the mean of the lumped and consistent
-            if not lumped:
-                raise ValueError("mass='averaged' takes the place of lumped=False")
-            self.M = 0.5 * (self.M + mass_matrix(mesh, self.vhc, lumped=False))
-            self._m_lumped = None
         if operator == "kronecker":
+            # the tensor-product forms only: assembling the P1 matrices first would hold
+            # both at once (about 110 more bytes per node at the peak of a 10^6-node run)
+            self._m_lumped = None
             self._kronecker_operators()
+        else:
+            self._m_lumped = lumped_mass(mesh, self.vhc) if lumped else None
+            self.M = (sp.diags_array(self._m_lumped, format="csr") if lumped
+                      else mass_matrix(mesh, self.vhc, lumped=False))
+            self.K = stiffness_matrix(mesh, self.tc)
+            self.R = robin_matrix(mesh, boundary, lumped=lumped)
+            self.g = robin_load(mesh, boundary)
+            if mass == "averaged":  # the mean of the lumped and consistent
+                self.M = 0.5 * (self.M + mass_matrix(mesh, self.vhc, lumped=False))
+                self._m_lumped = None
 
         # fixed nodes: later faces in FACES order win on shared edges
         values = np.full(n, np.inf)
