@@ -56,14 +56,16 @@ from __future__ import annotations
 
 import numpy as np
 import scipy.linalg as sla
+import scipy.sparse as sp
 
 from . import _kernels
-from .bc import HeatBoundary
+from .bc import FACES, HeatBoundary
 from .fastdiag import MASS_KINDS, NotApplicable, _contract, _transpose, one_d_mass, one_d_operators
 from .mesh import BoxGrid
 from .threads import blas_threads, run_blocks
 
-__all__ = ["LayeredKroneckerSolver", "layer_coefficients", "layer_means", "layered_one_d"]
+__all__ = ["LayeredKroneckerSolver", "layer_coefficients", "layer_means", "layered_one_d",
+           "tensor_product_operators"]
 
 
 def layer_coefficients(grid: BoxGrid, coefficient: np.ndarray) -> np.ndarray | None:
@@ -281,3 +283,76 @@ class LayeredKroneckerSolver:
         with blas_threads(1):
             run_blocks(N, run, blocks)
         return out
+
+
+def tensor_product_operators(grid: BoxGrid, boundary, mass: str, vhc: float, tc: float,
+                             layers=None) -> dict:
+    """The heat matrices of the tensor-product operator on ``box_mesh(grid)``.
+
+    Parameters
+    ----------
+    grid : BoxGrid
+    boundary : fem.HeatBoundary
+        Convective faces add their face mass (times ``h``) to ``R`` and ``g``.
+    mass : {"lumped", "averaged", "consistent"}
+        The 1-D mass (:func:`fem.fastdiag.one_d_mass`).
+    vhc, tc : float
+        J cm^-3 K^-1 and W cm^-1 K^-1 of one medium (ignored with ``layers``).
+    layers : (vhc (nz,), tc (nz,)) or None
+        Per element layer: the z factors are then weighted layer by layer.
+
+    Returns
+    -------
+    dict
+        ``M``, ``K``, ``R`` (sparse, npoints x npoints), ``g`` (npoints,) W, ``m_lumped``
+        (the diagonal mass, or None) and ``m_tridiag`` (``(c, node_shape, diagonals,
+        off-diagonals)`` of the 1-D masses for the right-hand side's product, or None).
+    """
+    K1 = [one_d_operators(n, h)[1] for n, h in zip(grid.shape, grid.spacing, strict=True)]
+    M1 = [one_d_mass(n, h, mass) for n, h in zip(grid.shape, grid.spacing, strict=True)]
+    Ms = [sp.csr_array(m) for m in M1]
+    if layers is None:
+        c, k = float(vhc), float(tc)
+        K = (sp.kron(sp.kron(sp.csr_array(K1[0]), Ms[1]), Ms[2])
+             + sp.kron(sp.kron(Ms[0], sp.csr_array(K1[1])), Ms[2])
+             + sp.kron(sp.kron(Ms[0], Ms[1]), sp.csr_array(K1[2])))
+    else:  # z factors weighted layer by layer; c, k are then folded into them
+        c = k = 1.0
+        cd, co, _, _ = layered_one_d(grid.dz, layers[0], mass)
+        md, mo, kd, ko = layered_one_d(grid.dz, layers[1], mass)
+        Mzc = sp.csr_array(sp.diags_array([co, cd, co], offsets=[-1, 0, 1]))
+        Mzk = sp.csr_array(sp.diags_array([mo, md, mo], offsets=[-1, 0, 1]))
+        Kzk = sp.csr_array(sp.diags_array([ko, kd, ko], offsets=[-1, 0, 1]))
+        K = (sp.kron(sp.kron(sp.csr_array(K1[0]), Ms[1]), Mzk)
+             + sp.kron(sp.kron(Ms[0], sp.csr_array(K1[1])), Mzk)
+             + sp.kron(sp.kron(Ms[0], Ms[1]), Kzk))
+        M1c = [M1[0], M1[1], Mzc.toarray()]
+    R = sp.csr_array((K.shape[0], K.shape[0]))
+    g = np.zeros(K.shape[0])
+    for face in FACES:
+        bc = boundary[face]
+        if bc.kind != "convective":
+            continue
+        a = "xyz".index(face[0])
+        w = list(Ms)
+        e = np.zeros(grid.shape[a] + 1)
+        e[0 if face[1] == "-" else -1] = 1.0
+        w[a] = sp.csr_array(np.diag(e))
+        area = sp.kron(sp.kron(w[0], w[1]), w[2]).tocsr()  # face mass, cm^2
+        R = R + bc.h * area
+        g += bc.h * bc.temperature * np.asarray(area.sum(axis=1)).ravel()
+    if layers is not None:  # the mass carries the layers' VHC
+        M1, Ms = M1c, [Ms[0], Ms[1], Mzc]
+    out = {"K": sp.csr_matrix(k * K), "g": g, "m_tridiag": None}
+    if mass == "lumped":
+        out["m_lumped"] = c * np.einsum("i,j,k->ijk", *(np.diag(m) for m in M1)).ravel()
+        out["M"] = sp.diags_array(out["m_lumped"], format="csr")
+        out["R"] = sp.diags_array(R.diagonal(), format="csr")
+    else:
+        out["m_lumped"] = None
+        out["M"] = sp.csr_matrix(c * sp.kron(sp.kron(Ms[0], Ms[1]), Ms[2]))
+        out["R"] = sp.csr_matrix(R)
+        out["m_tridiag"] = (c, grid.node_shape, [np.ascontiguousarray(np.diagonal(m))
+                                                 for m in M1],
+                            [np.ascontiguousarray(np.diagonal(m, 1)) for m in M1])
+    return out

@@ -50,8 +50,13 @@ from .assembly import (
     stiffness_matrix,
 )
 from .bc import FACES, HeatBoundary, face_nodes
-from .fastdiag import MASS_KINDS, KroneckerSolver, NotApplicable, one_d_mass, one_d_operators
-from .layered import LayeredKroneckerSolver, layer_coefficients, layer_means, layered_one_d
+from .fastdiag import MASS_KINDS, KroneckerSolver, NotApplicable
+from .layered import (
+    LayeredKroneckerSolver,
+    layer_coefficients,
+    layer_means,
+    tensor_product_operators,
+)
 from .linsolve import BatchedPCG, DirectSolver
 from .mesh import element_volumes, structured_grid
 from .threads import run_blocks
@@ -230,57 +235,13 @@ class HeatStepper:
         if why is not None and layers is None:
             raise ValueError(f"operator='kronecker' is not applicable: {why}")
         self._layers = layers
-        grid = self._grid
-        K1 = [one_d_operators(n, h)[1] for n, h in zip(grid.shape, grid.spacing, strict=True)]
-        M1 = [one_d_mass(n, h, self.mass) for n, h in zip(grid.shape, grid.spacing, strict=True)]
-        Ms = [sp.csr_array(m) for m in M1]
-        if layers is None:
-            c, k = float(self.vhc[0]), float(self.tc[0])
-            K = (sp.kron(sp.kron(sp.csr_array(K1[0]), Ms[1]), Ms[2])
-                 + sp.kron(sp.kron(Ms[0], sp.csr_array(K1[1])), Ms[2])
-                 + sp.kron(sp.kron(Ms[0], Ms[1]), sp.csr_array(K1[2])))
-        else:  # z factors weighted layer by layer; c, k are then folded into them
-            c = k = 1.0
-            cd, co, _, _ = layered_one_d(grid.dz, layers[0], self.mass)
-            md, mo, kd, ko = layered_one_d(grid.dz, layers[1], self.mass)
-            Mzc = sp.csr_array(sp.diags_array([co, cd, co], offsets=[-1, 0, 1]))
-            Mzk = sp.csr_array(sp.diags_array([mo, md, mo], offsets=[-1, 0, 1]))
-            Kzk = sp.csr_array(sp.diags_array([ko, kd, ko], offsets=[-1, 0, 1]))
-            K = (sp.kron(sp.kron(sp.csr_array(K1[0]), Ms[1]), Mzk)
-                 + sp.kron(sp.kron(Ms[0], sp.csr_array(K1[1])), Mzk)
-                 + sp.kron(sp.kron(Ms[0], Ms[1]), Kzk))
-            M1c = [M1[0], M1[1], Mzc.toarray()]
-        R = sp.csr_array((K.shape[0], K.shape[0]))
-        g = np.zeros(K.shape[0])
-        for face in FACES:
-            bc = self.boundary[face]
-            if bc.kind != "convective":
-                continue
-            a = "xyz".index(face[0])
-            w = list(Ms)
-            e = np.zeros(grid.shape[a] + 1)
-            e[0 if face[1] == "-" else -1] = 1.0
-            w[a] = sp.csr_array(np.diag(e))
-            area = sp.kron(sp.kron(w[0], w[1]), w[2]).tocsr()  # face mass, cm^2
-            R = R + bc.h * area
-            g += bc.h * bc.temperature * np.asarray(area.sum(axis=1)).ravel()
-        if layers is not None:  # the mass carries the layers' VHC
-            M1, Ms = M1c, [Ms[0], Ms[1], Mzc]
-        if self.mass == "lumped":
-            mass = np.einsum("i,j,k->ijk", *(np.diag(m) for m in M1)).ravel()
-            self._m_lumped = c * mass
-            self.M = sp.diags_array(self._m_lumped, format="csr")
-            self.R = sp.diags_array(R.diagonal(), format="csr")
-        else:
-            self._m_lumped = None
-            self.M = sp.csr_matrix(c * sp.kron(sp.kron(Ms[0], Ms[1]), Ms[2]))
-            self.R = sp.csr_matrix(R)
+        ops = tensor_product_operators(self._grid, self.boundary, self.mass,
+                                       float(self.vhc[0]), float(self.tc[0]), layers)
+        self.M, self.K, self.R, self.g = ops["M"], ops["K"], ops["R"], ops["g"]
+        self._m_lumped = ops["m_lumped"]
+        if ops["m_tridiag"] is not None:
             # the right-hand side's mass product, axis by axis (numba), not the 27-point M
-            self._m_tridiag = (c, grid.node_shape, [np.ascontiguousarray(np.diagonal(m))
-                                                    for m in M1],
-                               [np.ascontiguousarray(np.diagonal(m, 1)) for m in M1])
-        self.K = sp.csr_matrix(k * K)
-        self.g = g
+            self._m_tridiag = ops["m_tridiag"]
 
     def _choose(self, method: str, direct_max_nodes: int, rtol: float) -> str:
         f = self.free
