@@ -1,7 +1,13 @@
 """The parallel driver of the Monte Carlo kernels: workers (one per thread) claim photon
 batches from a shared atomic counter and run them with the one-medium kernel
 (:mod:`mcmatlab_py.monte_carlo._uniform`) or the general one
-(:mod:`mcmatlab_py.monte_carlo._kernel`)."""
+(:mod:`mcmatlab_py.monte_carlo._kernel`).
+
+Numba keys the on-disk cache of :func:`run_batches` on this file's text alone, yet the
+cached code holds the kernels compiled in: a change to them (or to the helpers they
+inline) must change this file too, or a cache compiled before it goes on running.
+Kernels of 2026-11: the direction's reciprocals where they are used (issue 47).
+"""
 
 import numba
 import numpy as np

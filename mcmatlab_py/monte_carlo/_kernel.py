@@ -32,13 +32,14 @@ from ._steps import (
     _INF,
     _clamp,
     _cross_interface,
-    _cut_at_face,
+    _cut_at_face_r,
     _enter_top,
     _fresnel,
     _hg_cos,
     _interface_normal,
     _mirror,
-    _plane_distance,
+    _nearest_plane,
+    _reciprocals,
     _refract_face,
     _spin_cs,
 )
@@ -166,6 +167,7 @@ def transport_batch(
         inside = True
         alive = True
         rs = 0.0  # the packet's safety: how far it may move freely, 0 if unknown
+        rux = ruy = ruz = 0.0  # 1 / (ux, uy, uz), computed where needed once u changes
         pj = 0  # the deposit not yet added, and its voxel
         pdep = np.int64(0)
         mut = 0.0
@@ -175,6 +177,7 @@ def transport_batch(
                 O.path_point(paths, path_n, ip, px, py, pz, w / W_ONE)
         # ------------------------------------------------------------- hop loop
         while alive:
+            stale = True  # (rux, ruy, ruz) are not those of the new direction
             # the optical depth to the next interaction, by the ziggurat (no logarithm)
             s0, s1, s2, s3, tau = next_exponential(s0, s1, s2, s3)
             while True:  # move until tau is used up or the photon dies
@@ -202,13 +205,16 @@ def transport_batch(
                     qz = pz + s * uz
                     cut = not (0.0 <= qx <= Lx and 0.0 <= qy <= Ly and 0.0 <= qz <= Lz)
                     if cut:  # it leaves the cuboid: cut at the face, which is met below
-                        axis, s, ua, qx, qy, qz = _cut_at_face(px, py, pz, ux, uy, uz, Lx, Ly,
-                                                               Lz)
+                        stale, rux, ruy, ruz = _reciprocals(stale, ux, uy, uz, rux, ruy, ruz)
+                        axis, s, ua, qx, qy, qz = _cut_at_face_r(px, py, pz, ux, uy, uz, rux,
+                                                                 ruy, ruz, Lx, Ly, Lz)
                         hit = False
                     if track is not None:
                         if track[m]:
-                            track_walk(flu, w, fscale, px, py, pz, ux, uy, uz, s, ix, iy, iz,
-                                       nx, ny, nz, dx, dy, dz)
+                            stale, rux, ruy, ruz = _reciprocals(stale, ux, uy, uz, rux, ruy,
+                                                                ruz)
+                            track_walk(flu, w, fscale, px, py, pz, ux, uy, uz, rux, ruy, ruz,
+                                       s, ix, iy, iz, nx, ny, nz, dx, dy, dz)
                     if oi is not None:
                         t_opl += s * (1.0 if matched else npk)
                     px = qx
@@ -234,18 +240,9 @@ def transport_batch(
                         inew = iz + sgn
                 else:
                     # ------------------------------------ one voxel face at a time
-                    d0 = _plane_distance(px, ux, ix, nx, dx)
-                    d1 = _plane_distance(py, uy, iy, ny, dy)
-                    d2 = _plane_distance(pz, uz, iz, nz, dz)
-                    if d0 <= d1 and d0 <= d2:
-                        axis = 0
-                        dmin = d0
-                    elif d1 <= d2:
-                        axis = 1
-                        dmin = d1
-                    else:
-                        axis = 2
-                        dmin = d2
+                    stale, rux, ruy, ruz = _reciprocals(stale, ux, uy, uz, rux, ruy, ruz)
+                    axis, dmin = _nearest_plane(px, py, pz, ux, uy, uz, rux, ruy, ruz, ix, iy,
+                                                iz, nx, ny, nz, dx, dy, dz)
                     if tau < mut * dmin:  # interaction before the plane
                         s = tau / mut
                         if track is not None:
@@ -270,17 +267,18 @@ def transport_batch(
                     px += dmin * ux
                     py += dmin * uy
                     pz += dmin * uz
-                    # land exactly on the plane crossed and find the neighbour voxel
+                    # land exactly on the plane crossed and find the neighbour voxel (the side
+                    # from the reciprocal's sign: LLVM hoists that of u to every new direction)
                     if axis == 0:
-                        sgn = 1 if ux > 0.0 else -1
+                        sgn = 1 if rux > 0.0 else -1
                         px = (ix + 1) * dx if sgn > 0 else ix * dx
                         inew = ix + sgn
                     elif axis == 1:
-                        sgn = 1 if uy > 0.0 else -1
+                        sgn = 1 if ruy > 0.0 else -1
                         py = (iy + 1) * dy if sgn > 0 else iy * dy
                         inew = iy + sgn
                     else:
-                        sgn = 1 if uz > 0.0 else -1
+                        sgn = 1 if ruz > 0.0 else -1
                         pz = (iz + 1) * dz if sgn > 0 else iz * dz
                         inew = iz + sgn
                     if not inside:
@@ -343,6 +341,7 @@ def transport_batch(
                                 ux, uy, uz, npk, stays = _cross_interface(
                                     ux, uy, uz, smooth, gx, gy, gz, cin, cat, npk, nref[mnew],
                                     r1 < rf, axis, sgn)
+                                stale = True
                                 if stays:  # reflected back into its voxel
                                     continue
                         if axis == 0:
@@ -388,6 +387,7 @@ def transport_batch(
                         s0, s1, s2, s3, r1 = next_double(s0, s1, s2, s3)
                         if r1 < rf:
                             ux, uy, uz = _mirror(ux, uy, uz, axis)
+                            stale = True
                             if oi is not None:
                                 if record_path:
                                     O.path_point(paths, path_n, ip, px, py, pz, w / W_ONE)

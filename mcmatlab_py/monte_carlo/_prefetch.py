@@ -1,4 +1,5 @@
-"""A software prefetch for the numba kernels (LLVM's ``llvm.prefetch``).
+"""Code-generation hints for the numba kernels: a software prefetch (LLVM's ``llvm.prefetch``)
+and an opaque copy of a float that keeps a computation where it is written.
 
 On a grid larger than the core's cache, the general Monte Carlo kernel waits mostly on
 memory: the deposit's read-modify-write of ``acc[j]`` and the look-ups of the voxel's
@@ -6,6 +7,8 @@ medium and safety distance land on lines that are rarely cached. The kernel asks
 those lines one interaction ahead (:mod:`mcmatlab_py.monte_carlo._kernel`,
 :func:`deposit_late`), so that the wait overlaps the work of the next free path.
 """
+
+import platform
 
 import llvmlite
 import numba
@@ -50,3 +53,28 @@ def deposit_late(acc, M, safe, pj, pdep, j, dep):
     prefetch(M, j)
     prefetch(safe, j)
     return j, dep
+
+
+#: an inline-asm register constraint for a float: SSE on x86-64, SIMD on AArch64 (elsewhere
+#: a general-purpose register, which costs two moves)
+_FLOAT_REG = {"x86_64": "x", "AMD64": "x", "aarch64": "w", "arm64": "w"}.get(platform.machine(),
+                                                                            "r")
+
+
+@intrinsic
+def opaque(typingctx, x):
+    """``x`` (float64) unchanged, through an empty inline assembly statement that the
+    optimiser cannot see through, move or remove. What is computed from it stays in the
+    branch where it is written: LLVM would otherwise hoist a speculatable division by a
+    direction component (fast-math's reciprocal) out of the transport loop, to be paid at
+    every change of direction instead of where it is used
+    (:func:`mcmatlab_py.monte_carlo._steps._reciprocals`)."""
+    if x != types.float64:
+        return None
+    sig = types.float64(types.float64)
+
+    def codegen(context, builder, signature, args):
+        fnty = ir.FunctionType(ir.DoubleType(), [ir.DoubleType()])
+        return builder.asm(fnty, "", f"={_FLOAT_REG},0", [args[0]], side_effect=True)
+
+    return sig, codegen

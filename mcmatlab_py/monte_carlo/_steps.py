@@ -27,6 +27,8 @@ import math
 import numba
 import numpy as np
 
+from ._prefetch import opaque
+
 _INF = np.inf
 # fast-math without 'nnan'/'ninf': the kernel relies on inf distances
 _FASTMATH = {"nsz", "arcp", "contract", "afn", "reassoc"}
@@ -127,6 +129,54 @@ def _plane_distance(p, u, i, n, d):
             return _INF
         return max(0.0, (i * d - p) / u)
     return _INF
+
+
+@numba.njit(cache=True, inline="always", fastmath=_FASTMATH)
+def _reciprocals(stale, ux, uy, uz, rx, ry, rz):
+    """``(False, 1/ux, 1/uy, 1/uz)``, ``inf`` for a zero component, computed here and now
+    if ``stale`` (the direction changed), else ``(False, rx, ry, rz)``. The general kernel
+    needs them only where a packet walks face by face or leaves the cuboid, not after most
+    interactions; :func:`mcmatlab_py.monte_carlo._prefetch.opaque` keeps the divisions
+    from being hoisted to every change of direction."""
+    if stale:
+        ux = opaque(ux)
+        uy = opaque(uy)
+        uz = opaque(uz)
+        rx = 1.0 / ux if ux != 0.0 else _INF
+        ry = 1.0 / uy if uy != 0.0 else _INF
+        rz = 1.0 / uz if uz != 0.0 else _INF
+    return False, rx, ry, rz
+
+
+@numba.njit(cache=True, inline="always", fastmath=_FASTMATH)
+def _plane_distance_r(p, u, r, i, n, d):
+    """:func:`_plane_distance` with the reciprocal ``r = 1 / u`` given
+    (:func:`_reciprocals`): the same numbers, as fast-math's division is the product by
+    the reciprocal."""
+    if u > 0.0:
+        if i >= n:
+            return _INF
+        return max(0.0, ((i + 1) * d - p) * r)
+    if u < 0.0:
+        if i < 0:
+            return _INF
+        return max(0.0, (i * d - p) * r)
+    return _INF
+
+
+@numba.njit(cache=True, inline="always", fastmath=_FASTMATH)
+def _nearest_plane(px, py, pz, ux, uy, uz, rx, ry, rz, ix, iy, iz, nx, ny, nz, dx, dy, dz):
+    """``(axis, d)``: the axis of the first voxel plane met from ``(px, py, pz)`` in voxel
+    ``(ix, iy, iz)`` along ``u`` (reciprocals ``r``, :func:`_reciprocals`) and its distance
+    (cm); x before y before z on a tie."""
+    d0 = _plane_distance_r(px, ux, rx, ix, nx, dx)
+    d1 = _plane_distance_r(py, uy, ry, iy, ny, dy)
+    d2 = _plane_distance_r(pz, uz, rz, iz, nz, dz)
+    if d0 <= d1 and d0 <= d2:
+        return 0, d0
+    if d1 <= d2:
+        return 1, d1
+    return 2, d2
 
 
 @numba.njit(cache=True, inline="always")
@@ -263,9 +313,18 @@ def _cut_at_face(px, py, pz, ux, uy, uz, Lx, Ly, Lz):
     leaves it: ``(axis, d, ua, qx, qy, qz)``, the axis of the face crossed, the distance
     to it (>= 0), the direction's component along that axis and the exit point, landed
     exactly on the face (the one-medium kernels cut only such moves)."""
-    d0 = (Lx - px) / ux if ux > 0.0 else (-px / ux if ux < 0.0 else _INF)
-    d1 = (Ly - py) / uy if uy > 0.0 else (-py / uy if uy < 0.0 else _INF)
-    d2 = (Lz - pz) / uz if uz > 0.0 else (-pz / uz if uz < 0.0 else _INF)
+    rx = 1.0 / ux if ux != 0.0 else _INF
+    ry = 1.0 / uy if uy != 0.0 else _INF
+    rz = 1.0 / uz if uz != 0.0 else _INF
+    return _cut_at_face_r(px, py, pz, ux, uy, uz, rx, ry, rz, Lx, Ly, Lz)
+
+
+@numba.njit(cache=True, inline="always", fastmath=_FASTMATH)
+def _cut_at_face_r(px, py, pz, ux, uy, uz, rx, ry, rz, Lx, Ly, Lz):
+    """:func:`_cut_at_face` with the reciprocals of the direction given (:func:`_reciprocals`)."""
+    d0 = (Lx - px) * rx if ux > 0.0 else (-px * rx if ux < 0.0 else _INF)
+    d1 = (Ly - py) * ry if uy > 0.0 else (-py * ry if uy < 0.0 else _INF)
+    d2 = (Lz - pz) * rz if uz > 0.0 else (-pz * rz if uz < 0.0 else _INF)
     if d0 <= d1 and d0 <= d2:
         axis = 0
         d = d0
