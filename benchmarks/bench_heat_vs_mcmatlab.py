@@ -10,7 +10,9 @@ script (``--ex04-photons`` photons). MCmatlab's engine (its C MEX under GNU Octa
 first and its absorption map is kept; ours then heats with that same map, so that only the
 heat solvers differ:
 
-* ``accuracy``: our default steps (TR-BDF2 with error control, ``HS.rtol``);
+* ``accuracy``: our default steps (error-controlled, ``HS.rtol``; ``HS.integrator = "auto"``
+  picks explicit RKC or implicit TR-BDF2 by cost: RKC on Example 4, TR-BDF2 on run_heat);
+* ``implicit``: the same with ``HS.integrator = "implicit"`` (TR-BDF2 on Example 4 too);
 * ``stability``: MCmatlab's rule for the step (``HS.step_control = "stability"``);
 * the reference: ours on a mesh ``--refine`` times finer in each direction with a tight
   ``rtol`` (``--ref-rtol``), the voxels' absorbed power unchanged (the solution of the same
@@ -105,7 +107,7 @@ def ours(NA, refine: int = 1, **hs) -> dict:
     m.simulate_heat_distribution()
     wall = time.perf_counter() - t
     return {"wall_s": wall, "steps": steps + sum(HS.steps_taken), "rise_a": rise_1s,
-            "rise_b": HS.sensor_temps[-1] - T0}
+            "rise_b": HS.sensor_temps[-1] - T0, "integrator": HS.integrator_used}
 
 
 # ----------------------------------------------------------------------------- Example 4
@@ -172,7 +174,8 @@ def ours_ex04(NA, refine: int = 1, **hs) -> dict:
     m.simulate_heat_distribution()
     wall = time.perf_counter() - t
     a, b = _rises(HS.sensor_times, HS.sensor_temps)
-    return {"wall_s": wall, "steps": sum(HS.steps_taken), "rise_a": a, "rise_b": b}
+    return {"wall_s": wall, "steps": sum(HS.steps_taken), "rise_a": a, "rise_b": b,
+            "integrator": HS.integrator_used}
 
 
 def table(title: str, labels: tuple[str, str], rows: dict, ref: dict, ref_note: str) -> dict:
@@ -186,8 +189,9 @@ def table(title: str, labels: tuple[str, str], rows: dict, ref: dict, ref_note: 
         e1 = 100 * (r["rise_a"] - ref["rise_a"]) / ref["rise_a"]
         e2 = 100 * (r["rise_b"] - ref["rise_b"]) / ref["rise_b"]
         print(f"{name:18s} {r['wall_s']:7.2f} {r['steps']:6d}  {np.round(e1, 2)}  "
-              f"{np.round(e2, 2)}")
+              f"{np.round(e2, 2)}" + (f"  ({r['integrator']})" if r.get("integrator") else ""))
         out.append({"engine": name, "wall_s": r["wall_s"], "steps": r["steps"],
+                    "integrator": r.get("integrator"),
                     f"rise_{labels[0]}": r["rise_a"].tolist(),
                     f"rise_{labels[1]}": r["rise_b"].tolist(),
                     f"error_{labels[0]}_percent": e1.tolist(),
@@ -246,6 +250,7 @@ def main(argv=None) -> int:
         mcm = load_mcmatlab_ex04(npz)
         n = mcm["NA"].shape[0]
         rows = {"MCmatlab": mcm, "ours, accuracy": ours_ex04(mcm["NA"]),
+                "ours, implicit": ours_ex04(mcm["NA"], integrator="implicit"),
                 "ours, rtol 1e-2": ours_ex04(mcm["NA"], rtol=1e-2),
                 "ours, stability": ours_ex04(mcm["NA"], step_control="stability")}
         ref = ours_ex04(mcm["NA"], refine=a.refine, rtol=a.ref_rtol)

@@ -24,6 +24,7 @@ from ..monte_carlo.host import optical_arrays
 from ..monte_carlo.run import simulate, store_results
 from ..progress import Progress
 from .mesh import Setup, damage_parameters, voxels_to_nodes
+from .rkc import RKCSteps, choose_integrator, spectral_radius
 from .simulation import auto_dt
 from .state import heat_source, sensor_series, start_from_T, store_heat_results
 from .steps import ErrorControlledSteps
@@ -272,9 +273,19 @@ def run_heat(model) -> None:  # noqa: C901  (one loop with its callbacks)
                 return st.g, lambda X: st._m_lumped * X, st._mass_rows, st.fixed
             return st.g, lambda X: st.M @ X, st._mass_rows, st.fixed
 
-        controller = ErrorControlledSteps(
-            be_solve, apply_a, operator, laser_load, HS.rtol, dt_base, start_level=6,
-            spread=float(T0.max() - T0.min()), on_step=on_substep)
+        integrator = _integrator(HS, current(), T0, be_solve, laser_load)
+        if integrator == "rkc":
+            st = current()
+            rkc_version = [coupling.version]
+            # the first step as the implicit one's: MCmatlab's stability bound
+            controller = RKCSteps(st.K + st.R, st._m_lumped, st.g, st.fixed, laser_load,
+                                  HS.rtol, dt_base * 64, spread=float(T0.max() - T0.min()),
+                                  on_step=on_substep, h_min=dt_base,
+                                  fixed_values=st.fixed_values)
+        else:
+            controller = ErrorControlledSteps(
+                be_solve, apply_a, operator, laser_load, HS.rtol, dt_base, start_level=6,
+                spread=float(T0.max() - T0.min()), on_step=on_substep)
 
     def step(T, t0, t1):
         if adaptive:  # the steps land on the sensor times within [t0, t1]
@@ -283,6 +294,10 @@ def run_heat(model) -> None:  # noqa: C901  (one loop with its callbacks)
                 k = np.arange(math.floor(t0 / HS.sensor_interval + 1e-9) + 1,
                               math.ceil(t1 / HS.sensor_interval - 1e-9))
                 marks.extend(k * HS.sensor_interval)
+            if integrator == "rkc" and rkc_version[0] != coupling.version:  # re-binned media
+                st = current()
+                controller.set_operator(st.K + st.R, st._m_lumped, st.g)
+                rkc_version[0] = coupling.version
             for a, b in zip(marks, [*marks[1:], t1], strict=True):
                 T = controller.advance(T, a, b)
             return T
@@ -357,9 +372,11 @@ def run_heat(model) -> None:  # noqa: C901  (one loop with its callbacks)
     if adaptive:
         times, sensor = sensor_series(times[0], T0, readings, probes, HS.sensor_interval)
         HS.steps_taken = (controller.n_accepted, controller.n_rejected)
+        HS.integrator_used = integrator
         dt_taken.update(controller.lengths)
     else:
         HS.steps_taken = (n_substeps[0], 0)
+        HS.integrator_used = "implicit"
     store_heat_results(HS, S, T, Omega, times + t_offset, sensor, chained, coupling)
     HS.Omega_voxels = Omega_vox.reshape(M.shape)
     HS.dt_used = np.unique(np.fromiter(dt_taken, float))
@@ -370,6 +387,42 @@ def run_heat(model) -> None:  # noqa: C901  (one loop with its callbacks)
             warnings.warn(f"medium {m.name!r} gets hotter than {BOILING_WARNING_C:g} deg C "
                           f"({HS.max_media_temps[i]:.4g} deg C): water in it would boil, "
                           "which this heat model does not include", stacklevel=4)
+
+
+#: products with A that one solve costs, for the direct solvers (fast diagonalization,
+#: sparse LU): rough, they are cheap enough that RKC wins only on phases near its
+#: stability bound, where any of these figures gives the same choice
+_DIRECT_SOLVE_PRODUCTS = 8.0
+#: products with A that one application of PCG's layer-mean preconditioner costs
+#: (fem.stepper.JACOBI_BELOW's measurements: 2.5-4 Jacobi iterations)
+_LAYERED_PRECONDITIONER_PRODUCTS = 3.0
+
+
+def _integrator(HS, st, T0, be_solve, laser_load) -> str:
+    """``"rkc"`` or ``"implicit"`` for the error-controlled steps (``HS.integrator``).
+
+    RKC needs the diagonal (lumped) heat capacity; ``"auto"`` also keeps the implicit path
+    with ``HS.use_gpu`` (its solves on the device). The implicit step's cost, for
+    :func:`.rkc.choose_integrator`: two solves and two products (K and R); a PCG solve's
+    iterations are those of one trial solve at the first phase's scale of steps.
+    """
+    if HS.integrator == "implicit" or st._m_lumped is None:
+        return "implicit"
+    if HS.integrator == "rkc":
+        return "rkc"
+    if HS.use_gpu:
+        return "implicit"
+    phases = [length for _, length, _ in HS.phases()]
+    rho = spectral_radius(st.K + st.R, st._m_lumped, st.free)
+    h = phases[0] / 8
+    if st.method == "pcg":
+        be_solve(T0, h, laser_load(0.0, h))
+        pcg = st._solver
+        per = 1.0 if pcg.last_jacobi else 1.0 + _LAYERED_PRECONDITIONER_PRODUCTS
+        solve = pcg.last_iterations * per + 1.0
+    else:
+        solve = _DIRECT_SOLVE_PRODUCTS
+    return choose_integrator(rho, phases, 2.0 * solve + 2.0)
 
 
 def _monitor(model, M, S, chained, T0, t_offset):

@@ -146,6 +146,12 @@ class HeatSimulation(StrictAttributes):
     #: :mod:`mcmatlab_py.heat.steps`) or "stability" (MCmatlab's rule, :func:`auto_dt`)
     step_control: str = "accuracy"
     rtol: float = 1e-3  #: "accuracy": local error per step, of the run's temperature rise
+    #: "accuracy": the integrator of the error-controlled steps: "implicit" (TR-BDF2,
+    #: :mod:`mcmatlab_py.heat.steps`), "rkc" (explicit Runge-Kutta-Chebyshev,
+    #: :mod:`mcmatlab_py.heat.rkc`; needs ``mass = "lumped"``) or "auto" (RKC where a cost
+    #: model finds it cheaper: phases not much longer than the explicit stability bound,
+    #: short pulses; implicit otherwise, and with ``mass = "averaged"`` or ``use_gpu``)
+    integrator: str = "auto"
     #: s, "accuracy": sensor readings at the multiples of this (the steps land on them);
     #: None: at the end of every step, as MCmatlab's
     sensor_interval: float | None = None
@@ -216,6 +222,7 @@ class HeatSimulation(StrictAttributes):
     dt_used: np.ndarray | None = None  #: s, the distinct step lengths of the last run (sub-steps too)
     #: (accepted, rejected) steps of the last run (rejected: retaken shorter, "accuracy")
     steps_taken: tuple | None = None
+    integrator_used: str | None = None  #: "implicit" or "rkc": the last run's (``integrator``)
 
     _owner_label = "HS"
     _renamed = {"Tinitial": "T_initial", "sensorsTimeVector": "sensor_times",
@@ -240,8 +247,14 @@ class HeatSimulation(StrictAttributes):
             raise ValueError(f"HS.step_control must be 'accuracy' or 'stability', got "
                              f"{self.step_control!r}")
         self.rtol = check_number("HS.rtol", self.rtol, lo=1e-9, hi=0.5)
+        if self.integrator not in ("auto", "implicit", "rkc"):
+            raise ValueError(f"HS.integrator must be 'auto', 'implicit' or 'rkc', got "
+                             f"{self.integrator!r}")
         if self.mass not in ("lumped", "averaged"):
             raise ValueError(f"HS.mass must be 'lumped' or 'averaged', got {self.mass!r}")
+        if self.integrator == "rkc" and self.mass != "lumped":
+            raise ValueError("HS.integrator = 'rkc' needs HS.mass = 'lumped' (its stages divide "
+                             f"by a diagonal heat capacity), got HS.mass = {self.mass!r}")
         if not isinstance(self.use_gpu, bool | np.bool_):
             raise ValueError(f"HS.use_gpu must be True or False, got {self.use_gpu!r}")
         self.gpu_device = int(check_number("HS.gpu_device", self.gpu_device, integer=True, lo=0,
