@@ -46,6 +46,15 @@ def test_the_status_line_gives_the_stop_time_its_interval_and_the_risks():
     assert "2.50 s to beyond the horizon" in advice_text(header, row)
 
 
+def _poll_of(doc, source):
+    """Make the page on ``doc`` and return the callback it polls the run's files with."""
+    polls = []
+    add = doc.add_periodic_callback
+    doc.add_periodic_callback = lambda callback, period: polls.append(callback) or add(callback, period)
+    make_document(doc, source)
+    return polls[0]
+
+
 def test_the_page_shows_the_advice_as_it_is_written(tmp_path):
     from bokeh.document import Document
     from bokeh.models import ColumnDataSource, Div
@@ -54,8 +63,7 @@ def test_the_page_shows_the_advice_as_it_is_written(tmp_path):
     run = _run_dir(tmp_path, rows)
     source = RunSource(run)
     doc = Document()
-    make_document(doc, source)
-    poll = doc.session_callbacks[0].callback
+    poll = _poll_of(doc, source)
     poll()
     status = next(m for m in doc.select({"type": Div}) if m.name == "status")
     assert "readings: 2" in status.text
@@ -90,8 +98,7 @@ def test_a_run_without_advice_shows_none(tmp_path):
     run = _run_dir(tmp_path, [_row(0.1, (4.0, 3.0, 5.0), 0.3, 0.5)])
     (run / "advice.csv").unlink()
     doc = Document()
-    make_document(doc, RunSource(run))
-    doc.session_callbacks[0].callback()
+    _poll_of(doc, RunSource(run))()
     status = next(m for m in doc.select({"type": Div}) if m.name == "status")
     assert "readings: 1" in status.text and "stop the laser" not in status.text
 
