@@ -307,7 +307,7 @@ class RKCSteps:
 
 def choose_integrator(rho: float, phase_lengths, implicit_cost: float,
                       steps_per_phase: int = 8) -> str:
-    """``"rkc"`` or ``"implicit"``: the cheaper, in products with :math:`A`, over a run.
+    r"""``"rkc"`` or ``"implicit"``: the cheaper, in products with :math:`A`, over a run.
 
     The model: each phase (pulse, pause, cooling) of length :math:`L` is taken in
     ``steps_per_phase`` steps of :math:`L / 8` (the accuracy step's scale: the error-
