@@ -157,7 +157,11 @@ def check(model) -> dict:
             "what": "heat content gained / energy absorbed over both runs (insulating: 1)"},
         "chained_equals_one_run": {
             "value": np.abs(model.HS.T_voxels - single.HS.T_voxels).max() / rise,
-            "expected": 0.0, "tol": 1e-9,
+            # the same steps give the same field up to the solves' own tolerance: exact with
+            # the sparse LU of the quick run (5e-15), about 1e-8 of the rise with the PCG of
+            # the full-size mesh (relative residual 1e-9 per solve, started from other
+            # guesses in the chained run); a step taken differently would differ by 1e-3
+            "expected": 0.0, "tol": 1e-7,
             "what": "max |T chained - T one run with P(t)| over the largest rise (same steps)"},
     }
 
