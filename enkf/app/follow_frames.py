@@ -6,8 +6,8 @@ file that cannot be read yet is tried again while it grows (a writer at work), a
 skipped with a warning naming it once it has stayed the same for ``settle_s`` and still
 cannot be read. Files are taken in natural name order (``IR_2`` before ``IR_10``) as they
 appear; a frame whose time is not after the last one's is skipped with a warning. The
-stream stops at a file named ``END`` (any case, any suffix) or after ``idle_timeout_s``
-without a new file.
+stream stops at a file named ``END`` (any case, any suffix), once every frame written
+before it is read, or after ``idle_timeout_s`` without a new file.
 
 Times: a clock's (FLIR, TIFF tags) are made seconds since the first frame, which is the
 baseline at the laser's start and is not assimilated; files without times get
@@ -99,6 +99,10 @@ def follow_folder(path: str | Path, start: Callable, on_update: Callable, *,
         on_update(est, name)
 
     while True:
+        # END is looked for before the listing, never after: the frames that arrived while
+        # the filter worked on the last listing (and were written before END) are in this
+        # one, so the stream ends only once they are read
+        ended = _end_marker(folder)
         new = [f for f in frame_files(folder) if f.name not in done]
         progressed = False
         for f in new:
@@ -157,7 +161,7 @@ def follow_folder(path: str | Path, start: Callable, on_update: Callable, *,
                     assimilate(float(t), frame, f.name)
         if progressed or waiting:
             last = time.monotonic()
-        if not waiting and _end_marker(folder):
+        if ended and not waiting:
             break
         if time.monotonic() - last > idle_timeout_s:
             break
