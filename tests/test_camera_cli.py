@@ -152,3 +152,13 @@ def test_a_binned_camera_reads_super_pixels(tmp_path, cache, capsys):
     assert run("identify", cfg, "--data", tmp_path / "stack.tif", "--out", tmp_path / "bad",
                "--quiet", "--cache-dir", cache) == 2
     assert "sensors.camera.binning must divide the shape [8, 8]" in capsys.readouterr().err
+
+
+def test_a_flir_sequence_is_refused_on_the_command_line_with_exit_2(tmp_path, cache, capsys):
+    cfg = camera_config(tmp_path)
+    seq = tmp_path / "run.seq"
+    seq.write_bytes(b"FFF\x00" + bytes(64))
+    out = tmp_path / "o"
+    assert run("identify", cfg, "--data", seq, "--out", out, "--quiet") == 2
+    assert "FLIR sequences (.seq, .csq) are not read here" in capsys.readouterr().err
+    assert not out.exists()

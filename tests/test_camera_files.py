@@ -290,3 +290,12 @@ def test_a_fifo_is_refused_before_it_is_read(tmp_path):
     os.mkfifo(p)
     with pytest.raises(ValueError, match="pipe or FIFO"):
         read_frames(p, rate=1.0)
+
+
+@pytest.mark.parametrize("suffix", [".seq", ".csq", ".SEQ"])
+def test_a_flir_sequence_file_is_refused_with_the_way_to_export_it(tmp_path, suffix):
+    p = tmp_path / f"run{suffix}"
+    p.write_bytes(b"FFF\x00" + bytes(64))
+    with pytest.raises(ValueError, match=r"FLIR sequences .* not read here: export .* "
+                                         r"radiometric JPEGs or as a TIFF stack"):
+        read_frame_file(p)

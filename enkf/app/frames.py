@@ -57,6 +57,8 @@ TIFF_SUFFIXES = (".tif", ".tiff")
 HDF5_SUFFIXES = (".h5", ".hdf5", ".hdf")
 #: the files a folder of frames may hold (others are ignored)
 FRAME_SUFFIXES = FLIR_SUFFIXES + TIFF_SUFFIXES + HDF5_SUFFIXES + (".npz",)
+#: FLIR's raw frame sequences: refused with the way to export them
+FLIR_SEQUENCE_SUFFIXES = (".seq", ".csq")
 #: the largest single camera file read (a FLIR JPEG is a few MB; a stack is checked
 #: against the memory instead)
 MAX_JPEG_BYTES = 256 * 2**20
@@ -340,6 +342,12 @@ def read_frame_file(path: str | Path, emissivity: float | None = None) -> FrameS
 
         times, frames = load_frames(path, flat=False)
         return FrameSeries(times, frames, source=str(path))
+    if suffix in FLIR_SEQUENCE_SUFFIXES:
+        # flyr reads FLIR's radiometric JPEGs, not the raw frame sequences of its cameras
+        raise ValueError(f"{path}: FLIR sequences ({', '.join(FLIR_SEQUENCE_SUFFIXES)}) are "
+                         "not read here: export the sequence from FLIR's software (FLIR "
+                         "Tools, FLIR Thermal Studio) as radiometric JPEGs or as a TIFF stack "
+                         "of temperatures, and give those")
     raise ValueError(f"{path}: not a camera file this tool reads (suffixes "
                      f"{', '.join(FRAME_SUFFIXES)})")
 

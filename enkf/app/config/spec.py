@@ -78,10 +78,11 @@ class IdentifyConfig:
         Raises ValueError naming the file and the problem (see :func:`read_sensor_csv`
         and :func:`enkf.app.readers.load_frames`).
         """
-        from ..frames import FRAME_SUFFIXES
+        from ..frames import FLIR_SEQUENCE_SUFFIXES, FRAME_SUFFIXES
 
         data = self.data or DataSpec()
-        if Path(path).suffix.lower() in FRAME_SUFFIXES or Path(path).is_dir():
+        camera = FRAME_SUFFIXES + FLIR_SEQUENCE_SUFFIXES  # sequences: refused by the reader
+        if Path(path).suffix.lower() in camera or Path(path).is_dir():
             times, values = self._camera_data(path, data)
         else:
             times, values, _ = read_sensor_csv(path, self.n_obs, columns=data.columns,
