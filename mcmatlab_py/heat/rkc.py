@@ -192,7 +192,8 @@ class RKCSteps:
 
     def __init__(self, A, mass: np.ndarray, g: np.ndarray, fixed: np.ndarray, load: Callable,
                  rtol: float, h0: float, spread: float = 0.0, on_step: Callable | None = None,
-                 h_min: float | None = None, fixed_values: np.ndarray | None = None):
+                 h_min: float | None = None, fixed_values: np.ndarray | None = None,
+                 rho: float | None = None):
         if not (math.isfinite(rtol) and rtol > 0):
             raise ValueError(f"HS.rtol must be a finite number > 0, got {rtol!r}")
         if not (math.isfinite(h0) and h0 > 0):
@@ -203,7 +204,7 @@ class RKCSteps:
         self.fixed = np.asarray(fixed, dtype=np.int64)
         self.fixed_values = (np.full(self.fixed.size, np.nan) if fixed_values is None
                              else np.asarray(fixed_values, float))
-        self.set_operator(A, mass, g)
+        self.set_operator(A, mass, g, rho)
         self.load = load
         self.rtol, self.h = float(rtol), float(h0)
         self.h_min = self.h / 64 if h_min is None else float(h_min)
@@ -215,9 +216,9 @@ class RKCSteps:
         self.lengths: set = set()
         self._F = None  # (F at the current T, the load it was formed with, that T)
 
-    def set_operator(self, A, mass: np.ndarray, g: np.ndarray) -> None:
+    def set_operator(self, A, mass: np.ndarray, g: np.ndarray, rho: float | None = None) -> None:
         """New media (re-binned at an update): ``A`` W/K, ``mass`` J/K, ``g`` W; the held
-        nodes stay."""
+        nodes stay. ``rho``: :func:`spectral_radius` of these, if the caller has it."""
         A = sp.csr_array(A)
         A.sort_indices()
         self._csr = (A.indptr.astype(np.int64), A.indices.astype(np.int64),
@@ -225,7 +226,7 @@ class RKCSteps:
         self.w = 1.0 / np.asarray(mass, float)
         self.w[self.fixed] = 0.0
         free = np.setdiff1d(np.arange(A.shape[0]), self.fixed, assume_unique=True)
-        self.rho = spectral_radius(A, mass, free)
+        self.rho = spectral_radius(A, mass, free) if rho is None else float(rho)
         self.g = np.asarray(g, float)
         self._F = None
 

@@ -273,15 +273,16 @@ def run_heat(model) -> None:  # noqa: C901  (one loop with its callbacks)
                 return st.g, lambda X: st._m_lumped * X, st._mass_rows, st.fixed
             return st.g, lambda X: st.M @ X, st._mass_rows, st.fixed
 
-        integrator = _integrator(HS, current(), T0, be_solve, laser_load)
+        st = current()
+        A = st.K + st.R if st._m_lumped is not None and HS.integrator != "implicit" else None
+        integrator, rho = _integrator(HS, st, A, T0, be_solve, laser_load)
         if integrator == "rkc":
-            st = current()
             rkc_version = [coupling.version]
             # the first step as the implicit one's: MCmatlab's stability bound
-            controller = RKCSteps(st.K + st.R, st._m_lumped, st.g, st.fixed, laser_load,
+            controller = RKCSteps(A, st._m_lumped, st.g, st.fixed, laser_load,
                                   HS.rtol, dt_base * 64, spread=float(T0.max() - T0.min()),
                                   on_step=on_substep, h_min=dt_base,
-                                  fixed_values=st.fixed_values)
+                                  fixed_values=st.fixed_values, rho=rho)
         else:
             controller = ErrorControlledSteps(
                 be_solve, apply_a, operator, laser_load, HS.rtol, dt_base, start_level=6,
@@ -398,8 +399,10 @@ _DIRECT_SOLVE_PRODUCTS = 8.0
 _LAYERED_PRECONDITIONER_PRODUCTS = 3.0
 
 
-def _integrator(HS, st, T0, be_solve, laser_load) -> str:
-    """``"rkc"`` or ``"implicit"`` for the error-controlled steps (``HS.integrator``).
+def _integrator(HS, st, A, T0, be_solve, laser_load) -> tuple[str, float | None]:
+    """``"rkc"`` or ``"implicit"`` for the error-controlled steps (``HS.integrator``), and
+    the spectral radius of ``m^-1 A`` (``A = K + R`` of the stepper ``st``) where it was
+    computed (None elsewhere), so that RKC does not compute it again.
 
     RKC needs the diagonal (lumped) heat capacity; ``"auto"`` also keeps the implicit path
     with ``HS.use_gpu`` (its solves on the device). The implicit step's cost, for
@@ -407,13 +410,13 @@ def _integrator(HS, st, T0, be_solve, laser_load) -> str:
     iterations are those of one trial solve at the first phase's scale of steps.
     """
     if HS.integrator == "implicit" or st._m_lumped is None:
-        return "implicit"
+        return "implicit", None
     if HS.integrator == "rkc":
-        return "rkc"
+        return "rkc", None
     if HS.use_gpu:
-        return "implicit"
+        return "implicit", None
     phases = [length for _, length, _ in HS.phases()]
-    rho = spectral_radius(st.K + st.R, st._m_lumped, st.free)
+    rho = spectral_radius(A, st._m_lumped, st.free)
     h = phases[0] / 8
     if st.method == "pcg":
         be_solve(T0, h, laser_load(0.0, h))
@@ -422,7 +425,7 @@ def _integrator(HS, st, T0, be_solve, laser_load) -> str:
         solve = pcg.last_iterations * per + 1.0
     else:
         solve = _DIRECT_SOLVE_PRODUCTS
-    return choose_integrator(rho, phases, 2.0 * solve + 2.0)
+    return choose_integrator(rho, phases, 2.0 * solve + 2.0), rho
 
 
 def _monitor(model, M, S, chained, T0, t_offset):
