@@ -10,8 +10,8 @@ a vessel along y), a convective top, backward Euler, a Gaussian beam's heat load
 * CPU: :class:`fem.HeatStepper` as the heat front end makes it (``method="auto"``: on this
   mesh, batched PCG warm-started from the last step, preconditioned by the fast
   diagonalization of the averaged operator), with all of numba's threads;
-* GPU: the same stepper with its solves on the GPU (:func:`fem.gpu.attach`: Jacobi PCG on
-  the device, the same relative tolerance).
+* GPU: the same stepper with its solves on the GPU (``method="gpu"``, as ``HS.use_gpu``
+  asks for it: Jacobi PCG on the device, the same relative tolerance).
 
 Printed: the setup, the first step (the GPU's includes the kernels' JIT compile), the
 median of the other steps' wall times (right-hand side, transfers and solve: what the front
@@ -39,8 +39,9 @@ MEDIA = {"vhc": (3.7, 3.4, 3.617), "tc": (0.0052, 0.0037, 0.0052)}  # dermis, ep
 TOP = {"temperature": 20.0, "h": 0.001}  # convective top: ambient deg C, W cm^-2 K^-1
 
 
-def problem(grid_shape, dt: float):
-    """The stepper (CPU solver), the nodal load (W) and the start temperatures (deg C)."""
+def problem(grid_shape, dt: float, method: str = "auto"):
+    """The stepper (``method``: its solver), the nodal load (W) and the start temperatures
+    (deg C)."""
     from fem import BoxGrid, FaceBC, HeatBoundary, HeatStepper, element_voxel_index, voxel_load_matrix
 
     nx, ny, nz = grid_shape
@@ -52,7 +53,8 @@ def problem(grid_shape, dt: float):
     media[((xx**2 + (zz - 0.1) ** 2) < 0.03**2)[:, None, :].repeat(grid.ny, 1)] = 2
     vox = media.ravel()[element_voxel_index(mesh, grid)]
     stepper = HeatStepper(mesh, np.array(MEDIA["vhc"])[vox], np.array(MEDIA["tc"])[vox], dt,
-                          boundary=HeatBoundary({"z-": FaceBC("convective", **TOP)}))
+                          boundary=HeatBoundary({"z-": FaceBC("convective", **TOP)}),
+                          method=method)
     r2 = grid.x[:, None, None] ** 2 + grid.y[None, :, None] ** 2
     S = 100.0 * np.exp(-2 * r2 / 0.05**2) * np.exp(-10.0 * grid.z[None, None, :])  # W/cm^3
     load = voxel_load_matrix(mesh, grid) @ S.ravel()
@@ -79,7 +81,7 @@ def main(argv=None) -> int:
     p.add_argument("--dt", type=float, default=0.05, help="s")
     p.add_argument("--out", type=Path, default=None, help="write heat_gpu_vs_cpu.json there")
     a = p.parse_args(argv)
-    from fem.gpu import attach, device_name, gpu_available
+    from fem.gpu import device_name, gpu_available
 
     if not gpu_available():
         print("no CUDA GPU: skipped (numba-cuda or a GPU missing: "
@@ -93,9 +95,7 @@ def main(argv=None) -> int:
            "threads": numba.get_num_threads(), "cpu_count": os.cpu_count()}
     for side in ("cpu", "gpu"):
         t0 = time.perf_counter()
-        stepper, load, T0 = problem(shape, a.dt)
-        if side == "gpu":
-            attach(stepper)
+        stepper, load, T0 = problem(shape, a.dt, "gpu" if side == "gpu" else "auto")
         setup = time.perf_counter() - t0
         t0 = time.perf_counter()
         run = timed_run(stepper, load, T0, a.steps)

@@ -17,9 +17,10 @@ host for damage, maxima and probes), ``2 N`` scalars up, and ``N`` residual norm
 iteration for the stopping test. The dot products are reduced in a fixed order (no
 atomics): a solve repeats to the bit on the same device.
 
-:func:`make_solver` checks for a GPU and makes the solver; :func:`attach` puts one into an
-existing :class:`fem.HeatStepper`. ``numba.cuda`` is imported only by these, so ``import
-fem`` never needs numba-cuda (the ``gpu`` extra).
+:func:`make_solver` checks for a GPU and makes the solver; :class:`fem.HeatStepper` calls it
+for ``method="gpu"`` (the heat front end's ``HS.use_gpu``) on its free-node matrices.
+``numba.cuda`` is imported only by these, so ``import fem`` never needs numba-cuda (the
+``gpu`` extra).
 
 Tested on numba's CUDA simulator (``NUMBA_ENABLE_CUDASIM=1``, ``tests/test_fem_gpu.py``)
 against :class:`fem.linsolve.DirectSolver` and the CPU stepper. Not yet run or timed on a
@@ -34,7 +35,7 @@ import math
 import numpy as np
 import scipy.sparse as sp
 
-__all__ = ["DEFAULT_RTOL", "CudaPCG", "attach", "device_name", "gpu_available", "make_solver"]
+__all__ = ["DEFAULT_RTOL", "CudaPCG", "device_name", "gpu_available", "make_solver"]
 
 #: the relative residual tolerance of :class:`fem.HeatStepper`'s PCG path
 DEFAULT_RTOL = 1e-9
@@ -102,43 +103,6 @@ def make_solver(M, K, R, *, rtol: float = DEFAULT_RTOL, maxiter: int = 2000,
 
         cuda.select_device(int(device))
     return CudaPCG(M, K, R, rtol=rtol, maxiter=maxiter)
-
-
-def attach(stepper, *, rtol: float | None = None, maxiter: int = 2000, device: int = 0,
-           setting: str = "HS.use_gpu"):
-    """Solve ``stepper``'s steps on the GPU from now on; returns the stepper.
-
-    ``stepper`` is a :class:`fem.HeatStepper` of any method; its ``method`` becomes
-    ``"gpu"``. The sparse LU's or the PCG's free-node matrices are reused (no new
-    assembly); the fast diagonalization's are sliced from the stepper's. ``rtol`` defaults
-    to the stepper's PCG tolerance, else :data:`DEFAULT_RTOL`. Raises as :func:`make_solver`,
-    leaving the stepper as it was.
-
-    It sets the stepper's solver fields from outside the class (both in ``fem``), so that
-    the GPU path needs no change to :mod:`fem.stepper`; a ``method="gpu"`` there, calling
-    :func:`make_solver` on the free-node matrices, would take its place.
-    """
-    old = getattr(stepper, "_solver", None)
-    if stepper.method == "gpu":
-        return stepper
-    if stepper.method in ("direct", "pcg"):
-        M, K, R = old.M, old.K, old.R  # free nodes, in the stepper's order; R theta-weighted
-        if rtol is None:
-            rtol = getattr(old, "rtol", DEFAULT_RTOL)
-        order = stepper._order
-    elif stepper.method == "fast":  # the Kronecker solver orders its own unknowns
-        order = stepper.free
-        idx = np.ix_(order, order)
-        M, K, R = (sp.csr_matrix(A)[idx] for A in (stepper.M, stepper.K, stepper.R))
-        R = stepper.theta * R
-    else:
-        raise ValueError(f"attach: unknown stepper method {stepper.method!r}")
-    solver = make_solver(M, K, R, rtol=DEFAULT_RTOL if rtol is None else rtol,
-                         maxiter=maxiter, device=device, setting=setting)
-    stepper._solver, stepper._order = solver, order
-    stepper._identity_order = np.array_equal(order, np.arange(stepper.npoints))
-    stepper.method = "gpu"
-    return stepper
 
 
 class CudaPCG:

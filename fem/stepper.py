@@ -13,7 +13,7 @@ at their temperature (Dirichlet rows).  ``theta = 1`` is backward Euler
 (first order, monotone with lumped mass), ``theta = 0.5`` Crank-Nicolson
 (second order).  Per-member factors on VHC and TC multiply ``M`` and ``K``.
 
-Three solvers, chosen automatically (``method="auto"``):
+Three solvers, chosen automatically (``method="auto"``), and a fourth on request:
 
 ``"fast"``
     structured :func:`fem.mesh.box_mesh`, homogeneous VHC and TC, lumped
@@ -32,7 +32,15 @@ Three solvers, chosen automatically (``method="auto"``):
     layer the preconditioner is the direct solve of the operator of the layers' mean
     VHC and TC (:class:`fem.layered.LayeredKroneckerSolver`; one medium: the fast
     diagonalization of the volume-averaged operator), else Jacobi
-    (:data:`KRON_PRECONDITIONER_MAX_RATIO`).
+    (:data:`KRON_PRECONDITIONER_MAX_RATIO`);
+``"gpu"``
+    never chosen by ``"auto"``: Jacobi-preconditioned CG on an NVIDIA GPU
+    (:class:`fem.gpu.CudaPCG`, made by :func:`fem.gpu.make_solver`; the ``gpu`` extra),
+    warm-started from the last solution kept on the device.
+
+The operator, P1 or tensor-product, can be chosen the same way (``operator="auto"``):
+the tensor product where it is solved directly and P1 is not (media that vary only with
+depth; one medium with a mass that is not lumped).
 """
 
 from __future__ import annotations
@@ -63,7 +71,10 @@ from .threads import run_blocks
 
 __all__ = ["JACOBI_BELOW", "KRON_PRECONDITIONER_MAX_RATIO", "HeatStepper"]
 
-_METHODS = ("auto", "fast", "direct", "pcg")
+_METHODS = ("auto", "fast", "direct", "pcg", "gpu")
+_OPERATORS = ("p1", "kronecker", "auto")
+#: the faces whose convection keeps x and y from separating in a layered operator
+_SIDE_FACES = ("x-", "x+", "y-", "y+")
 #: largest max/min ratio of the elements' VHC and of their TC for which PCG is preconditioned
 #: by the fast diagonalization of the volume-averaged operator; beyond, Jacobi. One
 #: application costs about 3.5 Jacobi iterations (101^3 nodes), and its iterations grow with
@@ -99,7 +110,7 @@ class HeatStepper:
         Default: all faces insulating.
     lumped : bool
         Lumped (row-sum) mass (default) or consistent mass.
-    operator : {"p1", "kronecker"}
+    operator : {"p1", "kronecker", "auto"}
         ``"p1"`` (default): the exact P1 matrices of the mesh. ``"kronecker"``: on a
         structured box mesh with homogeneous VHC and TC, the tensor-product operators
         ``Mx⊗My⊗Mz`` and the Kronecker sum of 1-D stiffnesses (the vertex-centred
@@ -111,6 +122,11 @@ class HeatStepper:
         may also vary with depth only (constant over each element layer): the z factors
         are then weighted layer by layer (:mod:`fem.layered`), and with insulating or
         fixed x and y faces the solve is direct (:class:`fem.layered.LayeredKroneckerSolver`).
+        ``"auto"``: ``"kronecker"`` where it is solved directly and P1 is not, i.e. media
+        that conduct everywhere and vary only with depth on a box mesh with no convective
+        x or y face, or one conducting medium with a mass that is not lumped (P1 with
+        lumped mass has its own exact fast solver); else ``"p1"``. The choice is in the
+        ``operator`` attribute.
     mass : {"lumped", "averaged", "consistent"}
         With ``operator="kronecker"``: the 1-D mass matrices of the tensor product
         (:func:`fem.fastdiag.one_d_mass`). ``"averaged"`` (the mean of the lumped and
@@ -120,17 +136,28 @@ class HeatStepper:
         With ``operator="p1"``: ``"averaged"`` is the mean of the lumped and the
         consistent P1 mass (any mesh and media; solved by PCG, preconditioned by the
         Kronecker operator with the averaged mass on box meshes).
-    method : {"auto", "fast", "direct", "pcg"}
+    method : {"auto", "fast", "direct", "pcg", "gpu"}
+        ``"gpu"``: the solves on a CUDA GPU (:func:`fem.gpu.make_solver`); raises
+        RuntimeError where numba-cuda or a GPU is missing. Its error message names
+        ``HS.use_gpu``, the switch of the heat front end that asks for it.
     direct_max_nodes : int
         Largest mesh for the sparse LU path under ``"auto"``.
     rtol : float
         Relative residual tolerance of the PCG path (the right-hand side
-        includes ``M T / dt``, so 1e-9 is about 1e-9 of the temperatures).
+        includes ``M T / dt``, so 1e-9 is about 1e-9 of the temperatures); also the
+        GPU's.
+    gpu_device : int
+        The CUDA device of ``method="gpu"`` (``numba.cuda.select_device``).
 
     Attributes
     ----------
     method : str
         The solver in use.
+    operator : str
+        The operator in use, ``"p1"`` or ``"kronecker"`` (the choice of ``"auto"``).
+    layers : (array (nz,), array (nz,)) or None
+        J cm^-3 K^-1 and W cm^-1 K^-1: VHC and TC per element layer of a tensor-product
+        operator of media that vary only with depth; None otherwise.
     M : csr (npoints, npoints)
         J/K, mass matrix (VHC-weighted).
     K : csr (npoints, npoints)
@@ -157,7 +184,7 @@ class HeatStepper:
     def __init__(self, mesh, vhc, tc, dt: float, theta: float = 1.0,
                  boundary: HeatBoundary | None = None, lumped: bool = True,
                  method: str = "auto", direct_max_nodes: int = 30_000, rtol: float = 1e-9,
-                 operator: str = "p1", mass: str = "lumped"):
+                 operator: str = "p1", mass: str = "lumped", gpu_device: int = 0):
         self.mesh = mesh
         n = mesh.p.shape[1]
         self.vhc = element_coefficient(mesh, vhc, "vhc")
@@ -177,17 +204,20 @@ class HeatStepper:
         self.dt, self.theta, self.boundary, self.lumped = dt_f, th, boundary, lumped
         self.npoints = n
 
-        if operator not in ("p1", "kronecker"):
-            raise ValueError(f"operator must be 'p1' or 'kronecker', got {operator!r}")
-        self.operator = operator
+        if operator not in _OPERATORS:
+            raise ValueError(f"operator must be one of {_OPERATORS}, got {operator!r}")
         if mass not in MASS_KINDS:
             raise ValueError(f"mass must be one of {MASS_KINDS}, got {mass!r}")
+        self.mass = mass
+        self.layers = None
+        if operator == "auto":
+            operator = self._auto_operator()
+        self.operator = operator
         if mass == "consistent" and operator != "kronecker":
             raise ValueError("mass='consistent' needs operator='kronecker' (with 'p1': "
                              "lumped=False)")
         if mass == "averaged" and operator == "p1" and not lumped:
             raise ValueError("mass='averaged' takes the place of lumped=False")
-        self.mass = mass
         if operator == "kronecker":
             # the tensor-product forms only: assembling the P1 matrices first would hold
             # both at once (about 110 more bytes per node at the peak of a 10^6-node run)
@@ -221,20 +251,36 @@ class HeatStepper:
         # slicing the matrices of a 10^6-node mesh takes seconds: only when nodes are held
         self._A_fd = (self.M[f][:, d], self.K[f][:, d], self.R[f][:, d]) if d.size else None
 
-        self.method = self._choose(method, direct_max_nodes, rtol)
+        self.method = self._choose(method, direct_max_nodes, rtol, gpu_device)
 
     # -------------------------------------------------------------- set-up
+    def _auto_operator(self) -> str:
+        """``operator="auto"``'s choice (see the class); the layers it finds are kept in
+        ``self.layers``, so that the tensor-product operator does not look for them again."""
+        if self.mass == "consistent":
+            return "kronecker"  # the trilinear hexahedron's mass: the tensor product's only
+        if not self.tc.all():
+            return "p1"  # an insulator somewhere: no direct layered solve
+        if np.ptp(self.vhc) == 0 and np.ptp(self.tc) == 0:
+            if self.mass == "lumped":
+                return "p1"  # the P1 operator's exact fast diagonalization
+            return "kronecker" if structured_grid(self.mesh) is not None else "p1"
+        if any(self.boundary[face].kind == "convective" for face in _SIDE_FACES):
+            return "p1"  # x and y do not separate: LayeredKroneckerSolver does not apply
+        self.layers = self._layers_or_none()
+        return "p1" if self.layers is None else "kronecker"
+
     def _kronecker_operators(self) -> None:
         """Replace M, K, R, g by their tensor-product forms (``operator="kronecker"``)."""
         why = self._fast_unavailable()
         layers = None
         if why == _INHOMOGENEOUS:
-            layers = self._layers_or_none()
+            layers = self.layers if self.layers is not None else self._layers_or_none()
             if layers is None:
                 why = "VHC and TC must be homogeneous or vary only with depth z"
         if why is not None and layers is None:
             raise ValueError(f"operator='kronecker' is not applicable: {why}")
-        self._layers = layers
+        self.layers = layers
         ops = tensor_product_operators(self._grid, self.boundary, self.mass,
                                        float(self.vhc[0]), float(self.tc[0]), layers)
         self.M, self.K, self.R, self.g = ops["M"], ops["K"], ops["R"], ops["g"]
@@ -243,7 +289,8 @@ class HeatStepper:
             # the right-hand side's mass product, axis by axis (numba), not the 27-point M
             self._m_tridiag = ops["m_tridiag"]
 
-    def _choose(self, method: str, direct_max_nodes: int, rtol: float) -> str:
+    def _choose(self, method: str, direct_max_nodes: int, rtol: float,
+                gpu_device: int = 0) -> str:
         f = self.free
         if method in ("auto", "fast"):
             why = self._fast_unavailable()
@@ -260,7 +307,7 @@ class HeatStepper:
                     return "fast"
                 except NotApplicable as exc:
                     why = str(exc)
-            layers = getattr(self, "_layers", None)  # set by _kronecker_operators
+            layers = self.layers  # set by _kronecker_operators
             if why == _INHOMOGENEOUS and layers is not None:
                 try:
                     self._solver = LayeredKroneckerSolver(
@@ -281,6 +328,11 @@ class HeatStepper:
             Mf, Kf, Rf = self.M, self.K, self.theta * self.R
         else:
             Mf, Kf, Rf = self.M[f][:, f], self.K[f][:, f], self.theta * self.R[f][:, f]
+        if method == "gpu":
+            from .gpu import make_solver  # numba.cuda only where asked for
+
+            self._solver = make_solver(Mf, Kf, Rf, rtol=rtol, device=gpu_device)
+            return "gpu"
         if method == "direct" or (method == "auto" and self.npoints <= direct_max_nodes):
             self._solver = DirectSolver(Mf, Kf, Rf)
             return "direct"

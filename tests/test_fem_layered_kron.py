@@ -222,3 +222,35 @@ def test_harmonic_lateral_weight_would_be_first_order():
     rates = [-np.polyfit(np.log(nzs), np.log([err(n, hm) for n in nzs]), 1)[0]
              for hm in (False, True)]
     assert rates[0] > 1.9 and rates[1] < 1.2, rates
+
+
+SIDE_CONVECTIVE = fem.HeatBoundary({"x-": fem.FaceBC("convective", temperature=20.0, h=1e-2)})
+
+
+@pytest.mark.parametrize(("media", "boundary", "mass", "expected"), [
+    ("layers", fem.HeatBoundary(), "lumped", "kronecker"),
+    ("layers", fem.HeatBoundary(), "averaged", "kronecker"),
+    ("layers", SIDE_CONVECTIVE, "lumped", "p1"),  # x and y do not separate
+    ("one", fem.HeatBoundary(), "lumped", "p1"),  # P1's own exact fast solver
+    ("one", SIDE_CONVECTIVE, "averaged", "kronecker"),
+    ("insulator", fem.HeatBoundary(), "lumped", "p1"),
+])
+def test_auto_operator_takes_the_tensor_product_where_it_is_solved_directly(
+        mesh, media, boundary, mass, expected):
+    """``operator="auto"`` finds the layers once and steps as the operator it names."""
+    c, k = (per_element(GRID, v) for v in two_layers(GRID))
+    if media == "one":
+        c, k = 3.7, 5.2e-3
+    elif media == "insulator":
+        k = np.where(np.arange(k.size) < 6, 0.0, k)
+    kw = dict(boundary=boundary, mass=mass)
+    auto = fem.HeatStepper(mesh, c, k, 0.1, operator="auto", **kw)
+    named = fem.HeatStepper(mesh, c, k, 0.1, operator=expected, **kw)
+    assert auto.operator == expected
+    assert (auto.layers is not None) == (media == "layers" and expected == "kronecker")
+    if auto.layers is not None:
+        np.testing.assert_array_equal(auto.layers, two_layers(GRID))
+    assert auto.method == named.method
+    T = np.random.default_rng(0).uniform(30.0, 40.0, (2, mesh.p.shape[1]))
+    np.testing.assert_array_equal(auto.step(T, vhc_scale=[1.0, 1.2]),
+                                  named.step(T, vhc_scale=[1.0, 1.2]))

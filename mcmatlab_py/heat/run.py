@@ -121,30 +121,15 @@ def run_heat(model) -> None:  # noqa: C901  (one loop with its callbacks)
     single_thermal = len(media) == 1 and not coupling.thermal_dependent
     steppers: dict = {}
 
-    def layered(vhc, tc) -> bool:
-        """Media that vary only with depth on the voxel-corner box, no convective side face:
-        the tensor-product operator is solved directly (:class:`fem.LayeredKroneckerSolver`)."""
-        if np.ndim(vhc) != 1 or np.ndim(tc) != 1 or not np.all(np.asarray(tc) > 0):
-            return False
-        if any(boundary[f].kind == "convective" for f in ("x-", "x+", "y-", "y+")):
-            return False
-        grid = fem.structured_grid(mesh)
-        return (grid is not None and fem.layer_coefficients(grid, vhc) is not None
-                and fem.layer_coefficients(grid, tc) is not None)
-
-    def mass_options(vhc, tc):
-        homogeneous = (np.ndim(vhc) == 0 or np.ptp(vhc) == 0) and (np.ndim(tc) == 0
-                                                                   or np.ptp(tc) == 0)
-        if HS.mass == "lumped":
-            # layers in z: the tensor product of 1-D lumped P1 operators, the vertex-centred
-            # 7-point finite volumes (a maximum principle, as MCmatlab's), which differ from
-            # the P1 tetrahedra only on the box's edges and where an interface meets a side
-            # face (fem.layered); one medium keeps the P1 operator's exact fast solver
-            return {} if homogeneous or not layered(vhc, tc) else {"operator": "kronecker"}
-        # one medium or layers on the voxel-corner box: the tensor-product operator, exact and fast
-        if (homogeneous and np.all(np.asarray(tc) > 0)) or layered(vhc, tc):
-            return {"operator": "kronecker", "mass": "averaged"}
-        return {"mass": "averaged"}
+    # the operator: the stepper's choice (operator="auto"). Media that vary only with depth
+    # take the tensor product of 1-D operators, solved directly (fem.LayeredKroneckerSolver);
+    # with lumped mass it is the vertex-centred 7-point finite volumes (a maximum principle,
+    # as MCmatlab's), which differ from the P1 tetrahedra only on the box's edges and where an
+    # interface meets a side face (fem.layered). One medium keeps the P1 operator's exact fast
+    # solver with lumped mass, and takes the tensor product with the averaged mass.
+    # HS.use_gpu: the solves on the GPU (fem.gpu), CG warm-started on the device.
+    options = {"operator": "auto", "mass": HS.mass, "method": "gpu" if HS.use_gpu else "auto",
+               "gpu_device": HS.gpu_device}
 
     def stepper_for(dt, vhc, tc, theta=HS.theta):
         key = (round(dt, 15), coupling.version, theta)
@@ -155,11 +140,7 @@ def run_heat(model) -> None:  # noqa: C901  (one loop with its callbacks)
             for old in [k for k in steppers if k[1] != coupling.version]:
                 del steppers[old]
             steppers[key] = fem.HeatStepper(mesh, vhc, tc, dt, theta=theta,
-                                            boundary=boundary, **mass_options(vhc, tc))
-            if HS.use_gpu:  # its solves on the GPU (fem.gpu): CG warm-started on the device
-                from fem.gpu import attach
-
-                attach(steppers[key], device=HS.gpu_device)
+                                            boundary=boundary, **options)
         return steppers[key]
 
     probes = fem.probe_matrix(mesh, np.asarray(HS.temp_sensor_positions, float)
