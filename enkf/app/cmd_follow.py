@@ -67,9 +67,17 @@ def follow(args, cfg, absorption, seed, t_emu) -> int:
     # a camera writing frames into a folder (one not there yet: a name without a suffix)
     folder = Path(args.follow).is_dir() or (not Path(args.follow).exists()
                                             and not Path(args.follow).suffix)
-    if cfg.camera_registration is not None and not folder:
+    from .follow_file import CAMERA_SUFFIXES  # a camera file that grows (TIFF, HDF5)
+
+    camera_file = not folder and Path(args.follow).suffix.lower() in CAMERA_SUFFIXES
+    if (folder or camera_file) and ("image" not in cfg.setup_kw
+                                    or len(cfg.setup_kw["sensor_positions"])):
+        raise ValueError(f"{args.follow}: camera frames: the config needs [sensors.camera] and "
+                         "no point sensors (sensors.positions = [])")
+    if cfg.camera_registration is not None and not (folder or camera_file):
         raise ValueError("sensors.camera.spot_center = \"auto\" is estimated from frames: "
-                         "follow the camera's folder, or give spot_center = [column, row]")
+                         "follow the camera's folder or file, or give spot_center = "
+                         "[column, row]")
     setup = cfg.setup(absorption, seed=seed)
     fill_prior_points(setup)  # before the first reading, not while the stream waits
     ident = OnlineIdentifier(setup, param_bounds=cfg.param_bounds,
@@ -173,6 +181,12 @@ def follow(args, cfg, absorption, seed, t_emu) -> int:
             n = follow_folder(args.follow, start, on_update, idle_timeout_s=args.idle_timeout,
                               rate=cfg.rate, emissivity=cfg.camera_emissivity, skipped=skipped,
                               on_frame=None if recorder is None else recorder.frame)
+        elif camera_file:
+            from .follow_file import follow_file
+
+            n = follow_file(args.follow, start, on_update, idle_timeout_s=args.idle_timeout,
+                            rate=cfg.rate, skipped=skipped,
+                            on_frame=None if recorder is None else recorder.frame)
         else:
             n = follow_csv(args.follow, ident, on_update, idle_timeout_s=args.idle_timeout,
                            columns=None if cfg.data.columns is None

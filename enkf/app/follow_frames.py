@@ -29,11 +29,91 @@ import numpy as np
 from .frames import frame_files, read_frame_file
 from .readers import SHOWN_SKIPS
 
-__all__ = ["follow_folder"]
+__all__ = ["FrameFeed", "end_marker", "follow_folder", "frame_times"]
 
 
-def _end_marker(folder: Path) -> bool:
+def end_marker(folder: Path) -> bool:
+    """Whether ``folder`` holds the file that ends a stream: ``END``, any case, any suffix."""
     return any(e.name.split(".")[0].upper() == "END" for e in os.scandir(folder))
+
+
+class FrameFeed:
+    """The frames of a followed camera, in order, to the filter (``follow_folder`` and
+    :func:`enkf.app.follow_file.follow_file`).
+
+    Until ``start(times (k,) s, frames (k, ny, nx))`` returns the identifier the frames
+    are kept; it then assimilates them in order, and every later frame as it comes. A frame
+    whose time is not after the last one's is skipped (the baseline at t = 0 silently), as
+    is a frame whose every pixel is NaN. ``skip(name, reason)`` records a skipped frame.
+    """
+
+    def __init__(self, start: Callable, on_update: Callable, skip: Callable,
+                 on_frame: Callable | None = None):
+        self.start, self.on_update, self.skip, self.on_frame = start, on_update, skip, on_frame
+        self.identifier = None
+        self.count = 0  #: frames assimilated
+        self._times, self._frames = [], []  # kept until the filter starts
+
+    def _assimilate(self, t: float, frame: np.ndarray, name: str) -> None:
+        ident = self.identifier
+        if t <= ident.time:
+            if t > 0 or ident.history:
+                self.skip(name, f"time {t!r} s is not after the last frame's {ident.time!r} s")
+            return
+        est = ident.update(t, ident.setup.sensors.image.readings(frame))
+        self.count += 1
+        self.on_update(est, name)
+
+    def add(self, t: float, frame: np.ndarray, name: str) -> None:
+        """One frame (ny, nx) deg C at ``t`` s, read from ``name``."""
+        if not np.isfinite(frame).any():
+            self.skip(name, f"every pixel of the frame at {t:g} s is NaN")
+            return
+        if self.on_frame is not None:
+            self.on_frame(t, frame)
+        if self.identifier is not None:
+            self._assimilate(t, frame, name)
+            return
+        self._times.append(t)
+        self._frames.append(frame)
+        self.identifier = self.start(np.array(self._times), np.array(self._frames))
+        if self.identifier is not None:
+            self._flush(name)
+
+    def _flush(self, name: str) -> None:
+        for tb, fb in zip(self._times, self._frames, strict=True):
+            self._assimilate(tb, fb, name)
+        self._times, self._frames = [], []
+
+    def finish(self) -> int:
+        """The stream ended: a filter still waiting starts with the frames it has (``start``
+        with ``final=True``). Returns the number of frames assimilated."""
+        if self.identifier is None and self._times:
+            self.identifier = self.start(np.array(self._times), np.array(self._frames),
+                                         final=True)
+            self._flush("(the first frames)")
+        return self.count
+
+
+def frame_times(series, n_before: int, rate: float | None,
+                t_first: float | None) -> tuple[np.ndarray, float | None]:
+    """The times (n,) s of the frames of ``series`` (a :class:`enkf.app.frames.FrameSeries`)
+    that follow ``n_before`` frames of the stream, and the first frame's clock.
+
+    A clock's times are made seconds since the stream's first frame (``t_first``, set by
+    the first series that has one); frames without times get ``k / rate``.
+    """
+    n = series.frames.shape[0]
+    if series.times is None:
+        if rate is None:
+            raise ValueError(f"{series.source}: the frames carry no times: set sensors.rate "
+                             "(Hz) in the config")
+        return (n_before + np.arange(n)) / float(rate), t_first
+    if series.clock:
+        if t_first is None:
+            t_first = float(series.times[0])
+        return series.times - t_first, t_first
+    return series.times, t_first
 
 
 def follow_folder(path: str | Path, start: Callable, on_update: Callable, *,
@@ -76,10 +156,8 @@ def follow_folder(path: str | Path, start: Callable, on_update: Callable, *,
         raise ValueError(f"--follow: {folder} is not a folder")
     done: set[str] = set()
     waiting: dict[str, tuple] = {}  # name -> (size, mtime, since) of a file not read yet
-    identifier = None
-    buffered_t, buffered_f = [], []
     t_first = None  # the first frame's clock
-    count = n_frames = 0
+    n_frames = 0
     shape = None
     last = time.monotonic()
 
@@ -88,21 +166,13 @@ def follow_folder(path: str | Path, start: Callable, on_update: Callable, *,
         if len(skipped) <= SHOWN_SKIPS:
             warn(f"--follow: {folder / name}: {reason}: skipped")
 
-    def assimilate(t, frame, name):
-        nonlocal count
-        if t <= identifier.time:
-            if t > 0 or identifier.history:
-                skip(name, f"time {t!r} s is not after the last frame's {identifier.time!r} s")
-            return
-        est = identifier.update(t, identifier.setup.sensors.image.readings(frame))
-        count += 1
-        on_update(est, name)
+    feed = FrameFeed(start, on_update, skip, on_frame)
 
     while True:
         # END is looked for before the listing, never after: the frames that arrived while
         # the filter worked on the last listing (and were written before END) are in this
         # one, so the stream ends only once they are read
-        ended = _end_marker(folder)
+        ended = end_marker(folder)
         new = [f for f in frame_files(folder) if f.name not in done]
         progressed = False
         for f in new:
@@ -131,34 +201,10 @@ def follow_folder(path: str | Path, start: Callable, on_update: Callable, *,
                 skip(f.name, f"frames of {series.frames.shape[1:]} pixels, the first file's {shape}")
                 continue
             n = series.frames.shape[0]
-            if series.times is None:
-                if rate is None:
-                    raise ValueError(f"{f}: the frames carry no times: set sensors.rate (Hz) in "
-                                     "the config")
-                times = (n_frames + np.arange(n)) / float(rate)
-            elif series.clock:
-                if t_first is None:
-                    t_first = float(series.times[0])
-                times = series.times - t_first
-            else:
-                times = series.times
+            times, t_first = frame_times(series, n_frames, rate, t_first)
             n_frames += n
             for t, frame in zip(times, series.frames, strict=True):
-                if not np.isfinite(frame).any():
-                    skip(f.name, f"every pixel of the frame at {t:g} s is NaN")
-                    continue
-                if on_frame is not None:
-                    on_frame(float(t), frame)
-                if identifier is None:
-                    buffered_t.append(float(t))
-                    buffered_f.append(frame)
-                    identifier = start(np.array(buffered_t), np.array(buffered_f))
-                    if identifier is not None:
-                        for tb, fb in zip(buffered_t, buffered_f, strict=True):
-                            assimilate(tb, fb, f.name)
-                        buffered_t, buffered_f = [], []
-                else:
-                    assimilate(float(t), frame, f.name)
+                feed.add(float(t), frame, f.name)
         if progressed or waiting:
             last = time.monotonic()
         if ended and not waiting:
@@ -169,9 +215,4 @@ def follow_folder(path: str | Path, start: Callable, on_update: Callable, *,
             time.sleep(poll_s)
     for name in waiting:
         skip(name, "could not be read when the stream ended (a writer that stopped?)")
-    if identifier is None and buffered_t:
-        identifier = start(np.array(buffered_t), np.array(buffered_f), final=True)
-        for tb, fb in zip(buffered_t, buffered_f, strict=True):
-            assimilate(tb, fb, "(the first frames)")
-    return count
-
+    return feed.finish()

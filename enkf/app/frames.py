@@ -6,8 +6,9 @@ times, in this order):
 
 - FLIR radiometric JPEG (``.jpg``, ``.jpeg``), through ``flyr``: FLIR's own
   ``DateTimeOriginal`` (ms), else EXIF ``DateTimeOriginal`` with ``SubSecTimeOriginal``;
-- TIFF stack (``.tif``), through ``tifffile``: ``times`` in tifffile's JSON metadata,
-  ImageJ's ``finterval``, or each page's ``DateTime`` (and ``SubSecTime``);
+- TIFF stack (``.tif``), through ``tifffile``: ``times`` in tifffile's JSON metadata
+  (the stack's, or each page's in order when it was written a page at a time), ImageJ's
+  ``finterval``, or each page's ``DateTime`` (and ``SubSecTime``);
 - HDF5 (``.h5``, ``.hdf5``), through ``h5py``: dataset ``times``, or attribute ``rate``
   (Hz) of ``frames``;
 - NPZ (``.npz``), through numpy: array ``times`` (required);
@@ -227,7 +228,12 @@ def read_tiff(path: str | Path) -> FrameSeries:
                 _declared(path, shape, np.dtype(series[0].dtype).itemsize)
                 frames = series[0].asarray() if len(series) == 1 else np.stack(
                     [x.asarray() for x in series])
-                meta = (tf.shaped_metadata or [None])[0] or {}
+                metas = [m or {} for m in tf.shaped_metadata or ()]
+                meta = metas[0] if metas else {}
+                if 1 < len(series) == len(metas) and all("times" in m for m in metas):
+                    # written a page (a series) at a time, each with its own times
+                    meta = {"times": np.concatenate([np.asarray(m["times"], float).reshape(-1)
+                                                     for m in metas])}
                 ij = tf.imagej_metadata or {}
                 pages = [p for p in tf.pages if p is not None]
                 clocks = [_page_clock(p) for p in pages] if len(pages) > 1 else []
