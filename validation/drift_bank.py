@@ -1,8 +1,8 @@
 """One default config whether the optics hold still, drift, or the laser pulses.
 
 ``examples/own_data.toml`` as shipped (its default ``[filter.drift] mode = "auto"``: a
-still filter and drifting ones, their restarts through 2, 3 and 9 knots, weighed by their
-evidence, ``enkf.tissue.drift``), only the
+still filter and drifting ones, their restarts through 2 and 9 knots and along a
+logistic, weighed by their evidence, ``enkf.tissue.drift``), only the
 laser's schedule changed to the truth's, against the independent forward models of
 ``validation/independent_models.py`` (A: analog Monte Carlo and finite differences on
 the box; B: attenuation Monte Carlo and a finite-volume cylinder; C: B's light with a
@@ -40,8 +40,9 @@ ROOT = Path(__file__).parents[1]
 CONSTANT = ("constant", "pulse-train")
 
 
-def config_for(case: str, mode: str = "auto"):
-    """examples/own_data.toml with the laser of ``case`` (and ``[filter.drift] mode``)."""
+def config_for(case: str, mode: str = "auto", forms=None):
+    """examples/own_data.toml with the laser of ``case`` (and ``[filter.drift] mode``,
+    ``restart_knots = forms`` unless None)."""
     from enkf.app.config import identify_config_from_dict
     from mcmatlab_py.config import read_toml
 
@@ -51,6 +52,8 @@ def config_for(case: str, mode: str = "auto"):
     period = windows[1][0] - windows[0][0] if len(windows) > 1 else 15.0
     raw["HS"].update(duration_on=on, duration_off=period - on, n_pulses=len(windows))
     raw["filter"].setdefault("drift", {})["mode"] = mode
+    if forms is not None:
+        raw["filter"]["drift"]["restart_knots"] = list(forms)
     raw.pop("data", None)
     return identify_config_from_dict(raw)
 
@@ -61,10 +64,10 @@ _CFG: dict = {}
 def run_one(args) -> dict:
     from enkf.tissue import identify
 
-    model, case, seed, mode = args
-    key = (case, mode)
+    model, case, seed, mode, forms = args
+    key = (case, mode, forms)
     if key not in _CFG:
-        cfg = config_for(case, mode)
+        cfg = config_for(case, mode, forms)
         _CFG[key] = (cfg, cfg.emulator(progress=False))
     cfg, emulator = _CFG[key]
     truth = independent_truth(model, case)
@@ -82,6 +85,7 @@ def run_one(args) -> dict:
     band = [est.param_band(i) for i in range(2)]
     return {
         "model": model, "case": case, "seed": seed, "mode": mode, "diverged": est.diverged,
+        **({} if forms is None else {"restart_knots": list(forms)}),
         "final": est.param_mean[-1].tolist(), "final_sd": est.param_std[-1].tolist(),
         "final_truth": true_p[-1].tolist(),
         "band_final": [[float(lo[-1]), float(hi[-1])] for lo, hi in band],
@@ -147,6 +151,9 @@ def main(argv=None):
     ap.add_argument("--model", nargs="+", default=list(ALL_MODELS), choices=list(ALL_MODELS))
     ap.add_argument("--mode", default="auto", choices=("auto", "none"))
     ap.add_argument("--jobs", type=int, default=1)
+    ap.add_argument("--restart-knots", nargs="+", default=None, metavar="FORM",
+                    help="[filter.drift] restart_knots instead of the config's: counts of "
+                         "knots and/or 'logistic'")
     ap.add_argument("--out", default=str(ROOT / "validation" / "reports" / "drift_bank.md"))
     ap.add_argument("--from-json", nargs="+", default=None, metavar="FILE",
                     help="write the report from the per-run numbers of earlier runs (their "
@@ -161,7 +168,9 @@ def main(argv=None):
     for case in args.case:  # the truths and the emulator's points, once, before the workers
         for model in args.model:
             independent_truth(model, case)
-    tasks = [(m, c, s, args.mode) for c in args.case for m in args.model
+    forms = None if args.restart_knots is None else tuple(
+        v if v == "logistic" else int(v) for v in args.restart_knots)
+    tasks = [(m, c, s, args.mode, forms) for c in args.case for m in args.model
              for s in range(args.first_seed, args.first_seed + args.seeds)]
     rows = []
     t0 = time.perf_counter()

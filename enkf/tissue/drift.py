@@ -7,13 +7,14 @@ heated; finding out is one reason to measure. :class:`DriftBank` (the default of
 ``"still"``
     the setup as given: optics that hold still (its own small random walk, 0.002 log
     units per step by default);
-``"drifting-K"``, one for each ``K`` of :attr:`DriftBank.restart_knots`
+``"drifting-K"``, one for each form ``K`` of :attr:`DriftBank.restart_knots`
     the same setup with optics that drift while the laser heats: a random walk of
     :attr:`DriftBank.walk_std` log units per heated step (none while the laser is off,
     when nothing holds a walk back), restarted from the smoother after each pulse with
     optics piecewise linear in heated time through ``K`` knots (2: a straight line; 9: a
-    path that can turn, e.g. a step at the onset of coagulation, its knots an eighth of
-    the heated time apart), and relaxation of the
+    path that can turn, its knots an eighth of the heated time apart) or, for ``K =
+    "logistic"``, a logistic's segment (a ramp, a step at the onset of coagulation, a
+    rise that saturates: :mod:`enkf.tissue.paths`), and relaxation of the
     temperatures' spread to the prior's (:attr:`DriftBank.rtps`). Before its first
     restart each drifting filter is the same filter; the cooling readings after the
     restarts tell the forms of the drift apart.

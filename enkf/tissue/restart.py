@@ -100,10 +100,14 @@ def restart_ensemble(setup: TissueFilterSetup, pieces: FilterPieces, times, data
 def _redrawn(sm, rng: np.random.Generator):
     """The smoother's estimates ``sm`` with its members replaced by a log-normal draw of
     their moments (:func:`gaussian_ensemble`): of ``theta``, or with knots of their free
-    values (every knot of a drifting parameter, the first of a constant one), ``theta``
-    then their last knot."""
+    values (every knot of a drifting parameter, the first of a constant one; a parametric
+    form's unknowns, ``sm.params``), ``theta`` then their last knot."""
     if sm.knots is None:
         return replace(sm, theta=gaussian_ensemble(sm.theta, rng))
+    if sm.params is not None:  # a parametric form: its unknowns redrawn, then its path
+        U = np.log(gaussian_ensemble(np.exp(sm.params), rng))
+        V = sm.from_params(U)
+        return replace(sm, theta=np.ascontiguousarray(V[:, -1]), knots=V, params=U)
     V = sm.knots.copy()  # (N, K, n_par)
     drift = np.any(V != V[:, :1], axis=(0, 1))
     cols = [(k, i) for i in range(V.shape[2]) for k in (range(V.shape[1]) if drift[i] else (0,))]

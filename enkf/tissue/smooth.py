@@ -28,16 +28,25 @@ smoother and the filter then read the images with one error model.
 from __future__ import annotations
 
 import time
-import warnings
 from dataclasses import dataclass
 
 import numpy as np
 
 from ..checks import float_array
 from ..importance import amis, weighted_quantile
-from ..modes import find_modes
 from ..smoother import es_mda
+from .paths import (
+    LOGISTIC,
+    LOGISTIC_KNOTS,
+    check_form,
+    fit_logistic,
+    knot_values,
+    knots_of,
+    logistic_box,
+    logistic_knots,
+)
 from .pieces import assemble
+from .posterior import MODE_SEARCH, MODE_STARTS, log_posterior, residuals_of, search_modes
 from .setup import TissueFilterSetup
 
 __all__ = ["SmootherEstimates", "heated_time", "smooth_constant", "smooth_drifting"]
@@ -66,6 +75,10 @@ class SmootherEstimates:
     weights: np.ndarray | None = None
     ess: float | None = None
     n_modes: int | None = None
+    #: a parametric form's unknowns (N, n) in log units (:mod:`enkf.tissue.paths`), and
+    #: the map from them to ``knots``; None for knots
+    params: np.ndarray | None = None
+    from_params: object = None
 
     @property
     def mean(self) -> np.ndarray:
@@ -88,7 +101,7 @@ class SmootherEstimates:
         heated = np.atleast_1d(np.asarray(heated, float))
         if self.knots is None:
             return np.broadcast_to(self.theta, (heated.size, *self.theta.shape))
-        return _knot_values(self.knots, self.knot_times, heated)
+        return knot_values(self.knots, self.knot_times, heated)
 
     def knot_mean(self) -> np.ndarray:
         """(K, n_par) the mean of the knots' values (weighted with importance weights)."""
@@ -114,27 +127,6 @@ def heated_time(power, edges) -> np.ndarray:
     mid = 0.5 * (edges[:-1] + edges[1:])
     on = np.array([power(float(t)) > 0 for t in mid], dtype=float)
     return np.r_[0.0, np.cumsum(on * np.diff(edges))]
-
-
-def _knot_values(V: np.ndarray, tk: np.ndarray, tau: np.ndarray) -> np.ndarray:
-    """(M, N, n_par): the members' parameters at the heated times ``tau`` (M,), linear in
-    the values ``V`` (N, K, n_par) between the knots ``tk`` (K,)."""
-    n_knots = V.shape[1]
-    if n_knots == 1:
-        return np.broadcast_to(V[:, 0], (tau.size, *V[:, 0].shape))
-    j = np.clip(np.searchsorted(tk, tau, side="right") - 1, 0, n_knots - 2)
-    w = np.clip((tau - tk[j]) / (tk[j + 1] - tk[j]), 0.0, 1.0)[:, None, None]
-    return (1 - w) * V[:, j].transpose(1, 0, 2) + w * V[:, j + 1].transpose(1, 0, 2)
-
-
-def _knots_of(U: np.ndarray, drift: np.ndarray, n_knots: int) -> np.ndarray:
-    """(N, K, n_par) knot values from the logs ``U`` (N, n_const + K * n_drift): the
-    constant parameters' first, then the drifting ones' knot by knot."""
-    n_c = int((~drift).sum())
-    V = np.empty((U.shape[0], n_knots, drift.size))
-    V[:, :, ~drift] = np.exp(U[:, :n_c])[:, None, :]
-    V[:, :, drift] = np.exp(U[:, n_c:]).reshape(U.shape[0], n_knots, -1)
-    return V
 
 
 #: readings beyond which the discrepancy's dense covariance is refused (8 x this^2 bytes)
@@ -188,7 +180,7 @@ def smooth_constant(setup: TissueFilterSetup, times, data, *, n_iter: int = 4,
                    importance, importance_rounds, callback, mode_search)
 
 
-def smooth_drifting(setup: TissueFilterSetup, times, data, *, knots: int = 3,
+def smooth_drifting(setup: TissueFilterSetup, times, data, *, knots: int | str = 3,
                     n_iter: int = 8, seed: int | None = None, drift_log_std: float = 1.0,
                     drifting=("mua", "mus"), discrepancy: float = 0.0,
                     discrepancy_time: float = 2.0, importance: int = 0,
@@ -201,16 +193,17 @@ def smooth_drifting(setup: TissueFilterSetup, times, data, *, knots: int = 3,
     (:func:`heated_time`) through ``knots`` values spread evenly over the window's heated
     time (held while the laser is off, as the filter's default walk holds them). The
     first knot's prior is the filter's; each later knot's log is the previous one's plus a
-    normal step, their sum over the window of sd ``drift_log_std``. Other arguments as
-    :func:`smooth_constant`; ``n_iter`` 8 (more unknowns, a more curved map than for
-    constant optics).
+    normal step, their sum over the window of sd ``drift_log_std``. ``knots =
+    "logistic"``: a logistic's segment between a value before and one after the drift
+    (:mod:`enkf.tissue.paths`), the value after a normal step of sd ``drift_log_std`` from
+    the first; without importance sampling. Other arguments as :func:`smooth_constant`;
+    ``n_iter`` 8 (more unknowns, a more curved map than for constant optics).
 
     ``theta`` of the result holds the parameters at the end of the window and ``knots``
     the values at ``knot_times``. Measured against independent truths:
     ``validation/reports/smoother_drifting.md``.
     """
-    if not (isinstance(knots, (int, np.integer)) and knots >= 2):
-        raise ValueError(f"knots must be an integer >= 2 (1: smooth_constant), got {knots!r}")
+    knots = check_form(knots, "knots")
     if not (np.isfinite(drift_log_std) and drift_log_std > 0):
         raise ValueError(f"drift_log_std must be > 0 (log units), got {drift_log_std!r}")
     names = tuple(setup.parameters.names)
@@ -218,7 +211,7 @@ def smooth_drifting(setup: TissueFilterSetup, times, data, *, knots: int = 3,
     if unknown or not drifting:
         raise ValueError(f"drifting must name estimated parameters {names}, got "
                          f"{tuple(drifting)!r}")
-    return _smooth(setup, times, data, n_iter, seed, int(knots), float(drift_log_std),
+    return _smooth(setup, times, data, n_iter, seed, knots, float(drift_log_std),
                    discrepancy, discrepancy_time, tuple(drifting), importance,
                    importance_rounds, callback, mode_search)
 
@@ -264,18 +257,32 @@ def _smooth(setup, times, data, n_iter, seed, n_knots, drift_log_std, discrepanc
     drift = np.array([n in drifting for n in setup.parameters.names], dtype=bool)
     heated = heated_time(setup.power, edges)
     tau = 0.5 * (heated[:-1] + heated[1:])  # each step's optics: at its middle
-    tk = np.linspace(0.0, heated[-1], n_knots)
-    if n_knots > 1 and not tk[-1] > 0:
+    logistic = n_knots == LOGISTIC
+    if logistic and importance:
+        raise ValueError(f"importance sampling is built for knots, not the {LOGISTIC!r} form: "
+                         "set importance = 0")
+    tk = np.linspace(0.0, heated[-1], LOGISTIC_KNOTS if logistic else n_knots)
+    if tk.size > 1 and not tk[-1] > 0:
         raise ValueError("smooth_drifting needs readings while the laser heats (setup.power "
                          "> 0): no heated time in the window")
-    U0 = [np.log(theta0[:, ~drift]), np.log(theta0[:, drift])]
-    step = drift_log_std / np.sqrt(max(n_knots - 1, 1))
-    for _ in range(1, n_knots):
-        U0.append(U0[-1] + step * rng.standard_normal((theta0.shape[0], int(drift.sum()))))
-    U0 = np.concatenate(U0, axis=1)
+    if logistic:  # fitted by its modes (:func:`fit_logistic`), not ES-MDA
+        logs = np.log(theta0)
+        U0, step = np.hstack([logs[:, ~drift], logs[:, drift]]), None
+
+        def path(U: np.ndarray) -> np.ndarray:
+            return logistic_knots(U, drift, tk)
+    else:
+        U0 = [np.log(theta0[:, ~drift]), np.log(theta0[:, drift])]
+        step = drift_log_std / np.sqrt(max(n_knots - 1, 1))
+        for _ in range(1, n_knots):
+            U0.append(U0[-1] + step * rng.standard_normal((theta0.shape[0], int(drift.sum()))))
+        U0 = np.concatenate(U0, axis=1)
+
+        def path(U: np.ndarray) -> np.ndarray:
+            return knots_of(U, drift, n_knots)
 
     def simulate(U: np.ndarray) -> np.ndarray:
-        theta = _knot_values(_knots_of(U, drift, n_knots), tk, tau)
+        theta = knot_values(path(U), tk, tau)
         # every member starts from the known initial field (the importance sampler's
         # batches have their own sizes)
         T = np.tile(X0[0], (U.shape[0], 1))
@@ -328,8 +335,11 @@ def _smooth(setup, times, data, n_iter, seed, n_knots, drift_log_std, discrepanc
             callback((n_iter * U0.shape[0] + search + len(sample.U)) / work,
                      f"importance round {r + 1} of {importance_rounds}, ESS {sample.ess:.0f}")
 
-    U = es_mda(simulate, U0, y, R, rng, n_iter=n_iter, method=setup.method, callback=es_done,
-               whiten=whiten)
+    if logistic:
+        U = _fit_logistic(setup, simulate, y, R, whiten, U0, drift, drift_log_std, rng)
+    else:
+        U = es_mda(simulate, U0, y, R, rng, n_iter=n_iter, method=setup.method,
+                   callback=es_done, whiten=whiten)
     weights = ess = n_modes = None
     if importance and whiten is not None:  # the error at the smoother's mean prediction
         w = whiten(simulate(U))
@@ -340,11 +350,11 @@ def _smooth(setup, times, data, n_iter, seed, n_knots, drift_log_std, discrepanc
     if importance:
         lo, hi = (np.log(b) for b in setup.parameters.prior_bounds())
         lo, hi = np.r_[lo[~drift], lo[drift]], np.r_[hi[~drift], hi[drift]]
-        residuals = _residuals(simulate, y, R, lo.size, int(drift.sum()), n_knots, step)
-        log_post = _log_posterior(residuals, lo, hi)
+        residuals = residuals_of(simulate, y, R, lo.size, int(drift.sum()), n_knots, step)
+        log_post = log_posterior(residuals, lo, hi)
         found = None
         if mode_search:
-            found = _search_modes(residuals, U, lo, hi, int(drift.sum()), n_knots, step,
+            found = search_modes(residuals, U, lo, hi, int(drift.sum()), n_knots, step,
                                   mode_search, rng)
             n_modes = 0 if found is None else len(found[0])
             if callback is not None:
@@ -355,7 +365,7 @@ def _smooth(setup, times, data, n_iter, seed, n_knots, drift_log_std, discrepanc
         live = sample.weights > 0
         U, weights, ess = sample.U[live], sample.weights[live], sample.ess
     wall = time.perf_counter() - tic
-    V = _knots_of(U, drift, n_knots)
+    V = path(U)
     names = tuple(setup.parameters.names)
     if n_knots == 1:
         return SmootherEstimates(names, V[:, 0].copy(), int(n_iter), wall, weights=weights,
@@ -363,7 +373,28 @@ def _smooth(setup, times, data, n_iter, seed, n_knots, drift_log_std, discrepanc
     # the end of the window: the last knot
     return SmootherEstimates(names, np.ascontiguousarray(V[:, -1]), int(n_iter), wall,
                              knot_times=tk, knots=V, weights=weights, ess=ess,
-                             n_modes=n_modes)
+                             n_modes=n_modes, params=U if logistic else None,
+                             from_params=path if logistic else None)
+
+
+def _fit_logistic(setup, simulate, y, R, whiten, first, drift, drift_log_std, rng):
+    """A logistic path's members (:func:`enkf.tissue.paths.fit_logistic`): the prior of
+    the constant parameters and the first values the moments of the logs ``first``
+    (N, n_par) of the filter's prior ensemble; a camera's frames whitened at the prior's
+    mean prediction (a constant path)."""
+    lo, hi = logistic_box(*(np.log(b) for b in setup.parameters.prior_bounds()), drift,
+                          drift_log_std)
+    mean = first.mean(axis=0)
+    if whiten is not None:
+        flat = np.r_[mean, mean[-int(drift.sum()):], 0.5, 0.0][None, :]
+        w = whiten(simulate(flat))
+        raw, y = simulate, w(y[None, :])[0]
+
+        def simulate(U: np.ndarray) -> np.ndarray:
+            return w(raw(U))
+    data_residuals = residuals_of(simulate, y, R, first.shape[1], 0, 1, None)
+    return fit_logistic(data_residuals, mean, first.std(axis=0, ddof=1), drift_log_std, lo,
+                        hi, setup.n_members, rng)
 
 
 def frame_factors(obs_error, noise_var: np.ndarray, predicted: np.ndarray) -> list:
@@ -391,92 +422,3 @@ def whiten_frames(factors, Y: np.ndarray) -> np.ndarray:
         out[:, a:a + n] = solve_triangular(L, Y[:, a:a + n].T, lower=True).T
         a += n
     return out
-
-
-#: members re-run over the window at once by the importance sampler (memory: the window's
-#: predictions of this many members)
-IMPORTANCE_CHUNK = 250
-
-
-#: the prior's points screened for modes by default (with importance sampling)
-MODE_SEARCH = 256
-#: the screened points' best that start a local search, beside the ensemble's mean
-MODE_STARTS = 8
-#: modes of less Laplace mass than this share of the largest's are not sampled
-MIN_MODE_MASS = 1e-8
-
-
-def _search_modes(residuals, U, lo, hi, n_drift, n_knots, step, n_points, rng):
-    """Other modes of the posterior for the importance sampler (:mod:`enkf.modes`):
-    ``n_points`` quasi-random points of the prior box screened by their cost, the best
-    :data:`MODE_STARTS` and the ensemble's mean ``U`` started by Levenberg-Marquardt.
-    Returns ``(centres, covariances, masses)``: each mode's Laplace mass, its cost and the
-    uniform prior's ``sum(u)`` in the logs, relative to the largest; None if no start
-    gave finite residuals."""
-    from scipy.stats import qmc
-
-    n_box = lo.size
-    with warnings.catch_warnings():  # Sobol's balance wants a power of 2; any number will do
-        warnings.simplefilter("ignore", UserWarning)
-        first = lo + (hi - lo) * qmc.Sobol(n_box, seed=rng).random(int(n_points))
-    # drifting parameters start constant: their later knots at the first's
-    P = np.hstack([first] + [first[:, n_box - n_drift:]] * (n_knots - 1))
-    z = residuals(P)
-    best = P[np.argsort(np.sum(z * z, axis=1))[:MODE_STARTS]]
-    span_lo = np.r_[lo, np.tile(lo[n_box - n_drift:], n_knots - 1)]
-    span_hi = np.r_[hi, np.tile(hi[n_box - n_drift:], n_knots - 1)]
-    if n_knots > 1:  # later knots: the box widened by 3 sd of the walk
-        reach = np.r_[np.zeros(n_box), 3 * step * np.sqrt(np.repeat(np.arange(1, n_knots),
-                                                                     n_drift))]
-        span_lo, span_hi = span_lo - reach, span_hi + reach
-    modes = find_modes(residuals, np.vstack([U.mean(axis=0), best]), span_lo, span_hi)
-    if not len(modes.U):
-        return None
-    log_mass = (-modes.cost + modes.U[:, :n_box].sum(axis=1)
-                + 0.5 * np.linalg.slogdet(modes.cov)[1])
-    mass = np.exp(log_mass - log_mass.max())
-    keep = mass >= MIN_MODE_MASS
-    return modes.U[keep], modes.cov[keep], mass[keep]
-
-
-def _residuals(simulate, y, R, n_box, n_drift, n_knots, step):
-    """``residuals(U) -> (M, n)``: the smoother's whitened residuals of the logs ``U`` (its
-    layout: :func:`_knots_of`): the readings ``y`` against the members' predictions with
-    covariance ``R`` (p,) or (p, p), and each later knot's step from the previous (sd
-    ``step``) for drifting parameters. Minus half their squared sum is the log posterior
-    inside the box, but for the uniform prior's ``sum(U)`` (:func:`_log_posterior`)."""
-    dense = np.ndim(R) == 2
-    L = np.linalg.cholesky(R) if dense else None
-
-    def residuals(U: np.ndarray) -> np.ndarray:
-        out = []
-        for s in range(0, U.shape[0], IMPORTANCE_CHUNK):
-            r = y - simulate(U[s:s + IMPORTANCE_CHUNK])
-            out.append((np.linalg.solve(L, r.T) if dense else r.T / np.sqrt(R)[:, None]).T)
-        z = np.vstack(out)
-        if n_knots > 1:
-            walk = np.diff(U[:, n_box - n_drift:].reshape(U.shape[0], n_knots, n_drift), axis=1)
-            z = np.hstack([z, walk.reshape(U.shape[0], -1) / step])
-        return z
-
-    return residuals
-
-
-def _log_posterior(residuals, lo, hi):
-    """``log_post(U) -> (M,)``: the smoother's log posterior of the logs ``U`` up to a
-    constant. The prior: uniform in each parameter between ``lo`` and ``hi`` (logs; the
-    first knot's for drifting ones), so ``sum(U)`` in the logs inside the box and ``-inf``
-    outside; the rest from ``residuals`` (:func:`_residuals`)."""
-    n_box = lo.size
-
-    def log_post(U: np.ndarray) -> np.ndarray:
-        first = U[:, :n_box]
-        out = np.where(np.all((first >= lo) & (first <= hi), axis=1), first.sum(axis=1),
-                       -np.inf)
-        inside = np.flatnonzero(np.isfinite(out))
-        if inside.size:
-            z = residuals(U[inside])
-            out[inside] += -0.5 * np.sum(z * z, axis=1)
-        return out
-
-    return log_post

@@ -8,7 +8,7 @@ import numpy as np
 from fem.checks import check_number, shorten
 from mcmatlab_py.config import ConfigError
 
-__all__ = ["LIMITS", "num", "pair", "points"]
+__all__ = ["LIMITS", "drift_form", "num", "pair", "points"]
 
 
 #: upper limits of the config's numbers: far beyond any use, small enough that nothing
@@ -35,6 +35,16 @@ LIMITS = {"sensors.noise_var": 1e4, "sensors.camera.noise_var": 1e4,
            "filter.coagulation.E": 1e7, "filter.coagulation.A": 1e300,
            "filter.coagulation.nominal_factor": 1e3, "filter.coagulation.weight_exponent": 10.0,
            "filter.coagulation.mean_field_rel_std": 10.0}
+
+
+def drift_form(name: str, value, lo: int = 2):
+    """A form of the drift's path in the config: a count of knots (``lo`` to 50) or
+    ``"logistic"`` (:mod:`enkf.tissue.paths`)."""
+    if value == "logistic":
+        return "logistic"
+    if isinstance(value, str):
+        raise ConfigError(f"{name} must be a count of knots or \"logistic\", got {value!r}")
+    return int(num(name, value, integer=True, lo=lo, hi=50))
 
 
 def num(key, v, *, positive=False, integer=False, lo=None, hi=None):

@@ -21,7 +21,7 @@ from ...tissue.parameters import (
     default_prior,
     parameter_names,
 )
-from .numbers import num, pair
+from .numbers import drift_form, num, pair
 
 #: keys of [filter.coagulation] (enkf.tissue.coagulation.Coagulation)
 COAGULATION_KEYS = {"E", "A", "nominal_factor", "weight_exponent", "mean_field_rel_std"}
@@ -176,10 +176,9 @@ def drift_settings(flt: dict, setup_kw: dict) -> None:
     if "restart_knots" in table:
         k = table["restart_knots"]
         if not isinstance(k, list) or not k:
-            raise ConfigError(f"filter.drift.restart_knots must be a list of integers >= 2, got "
-                              f"{shorten(repr(k))}")
-        kw["restart_knots"] = tuple(int(num(f"filter.drift.restart_knots[{i}]", v,
-                                                  integer=True, lo=2, hi=50))
+            raise ConfigError(f"filter.drift.restart_knots must be a list of forms (integers "
+                              f">= 2, \"logistic\"), got {shorten(repr(k))}")
+        kw["restart_knots"] = tuple(drift_form(f"filter.drift.restart_knots[{i}]", v)
                                     for i, v in enumerate(k))
     if "image" in setup_kw:  # a camera: the restarts' smoother takes no discrepancy (its
         # dense covariance over every pixel and reading would not fit), as smoother_* does

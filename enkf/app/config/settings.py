@@ -8,7 +8,7 @@ from fem.checks import shorten
 from mcmatlab_py.config import ConfigError, check_keys
 
 from ...tissue.smooth import MODE_SEARCH
-from .numbers import num, pair
+from .numbers import drift_form, num, pair
 
 __all__ = ["ADAPTIVE_KEYS", "MIN_IMPORTANCE", "MIN_MODE_POINTS", "MODEL_ERROR_KEYS",
            "SMOOTHER_DEFAULTS", "model_error_settings", "restart_settings",
@@ -120,9 +120,8 @@ def restart_settings(flt: dict, setup_kw: dict, options: dict) -> None:
     if "smoother_restart_knots" in flt:  # a count, or several: a mixture of drift forms
         k = flt["smoother_restart_knots"]
         setup_kw["smoother_restart_knots"] = (
-            tuple(int(num(f"filter.smoother_restart_knots[{i}]", v, integer=True, lo=2))
-                  for i, v in enumerate(k)) if isinstance(k, list)
-            else int(num("filter.smoother_restart_knots", k, integer=True, lo=1)))
+            tuple(drift_form(f"filter.smoother_restart_knots[{i}]", v) for i, v in enumerate(k))
+            if isinstance(k, list) else drift_form("filter.smoother_restart_knots", k, lo=1))
     if "smoother_restart_delay" in flt:
         setup_kw["smoother_restart_delay"] = float(num("filter.smoother_restart_delay",
                                                         flt["smoother_restart_delay"], lo=0))

@@ -14,6 +14,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..paths import check_form, free_values
+
 __all__ = ["STILL", "DriftBank", "bank_weights", "prior_weights"]
 
 #: the name of the bank's filter with still optics (the drifting ones: ``"drifting-K"``)
@@ -52,16 +54,19 @@ class DriftBank:
     restart_delay : float
         s after each pulse's end at which the drifting filter restarts (some cooling
         readings tell the optics' final values).
-    restart_knots : tuple of int
-        The forms of the drift, one drifting filter each: the knots of its restarts'
-        piecewise-linear paths in heated time (each >= 2). A form with more free values
-        (every knot of every drifting parameter) than the ensemble has members is left
-        out (e.g. 6 knots of two media's four optics with 20 members). The default:
-        a line, a bend, and a path whose knots are an eighth of the heated time apart,
-        fine enough for a step of the optics over a tenth of it (the onset of
-        coagulation): with 6 knots, the step of ``validation/drift_bank.py`` left the
-        restarts' end values on the wrong side of the mua-mus ridge and both optics'
-        bands missed on 9 of 20 seeds (``validation/reports/drift_bank.md``).
+    restart_knots : tuple of int or "logistic"
+        The forms of the drift, one drifting filter each (:mod:`enkf.tissue.paths`): the
+        knots of its restarts' piecewise-linear paths in heated time (each >= 2), or
+        ``"logistic"``, a logistic's segment between a value before and one after the
+        drift. A form with more free values (every knot of every drifting parameter)
+        than the ensemble has members is left out (e.g. 6 knots of two media's four
+        optics with 20 members). The default: a line; a path whose knots are an eighth of
+        the heated time apart, fine enough for a step of the optics over a tenth of it
+        (with 6 knots, the step of ``validation/drift_bank.py`` left the restarts' end
+        values on the wrong side of the mua-mus ridge on 9 of 20 seeds); and the
+        logistic, which follows a ramp, a step or a saturating rise with four unknowns
+        where the 9 knots need 18: its bound on mus at the end is 1-2% of the value
+        against 14-28% (``validation/reports/drift_identifiability.md``).
     restart_discrepancy : float
         The restarts' model discrepancy (relative sd of the rise).
     rtps : float
@@ -74,7 +79,7 @@ class DriftBank:
     prior_weight: float = 0.5
     restart_weight: float = 0.05
     restart_delay: float = 2.5
-    restart_knots: tuple = (2, 3, 9)
+    restart_knots: tuple = (2, 9, "logistic")
     restart_discrepancy: float = 0.01
     rtps: float = 0.1
 
@@ -113,11 +118,11 @@ class DriftBank:
                 raise ValueError(f"DriftBank.{name} must be >= 0, got {v!r}")
         k = self.restart_knots
         k = tuple(k) if isinstance(k, (list, tuple)) else (k,)
-        if not k or not all(isinstance(v, (int, np.integer)) and not isinstance(v, bool)
-                            and v >= 2 for v in k) or len(set(k)) < len(k):
-            raise ValueError(f"DriftBank.restart_knots must be different integers >= 2, got "
-                             f"{self.restart_knots!r}")
-        self.restart_knots = tuple(int(v) for v in k)
+        k = tuple(check_form(v, "DriftBank.restart_knots") for v in k)
+        if not k or len(set(k)) < len(k):
+            raise ValueError(f"DriftBank.restart_knots must be different forms (integers >= 2, "
+                             f"'logistic'), got {self.restart_knots!r}")
+        self.restart_knots = k
 
     def components(self, setup) -> dict:
         """``{"still": setup, "drifting-K": setup, ...}``: the bank's filters' setups from
@@ -136,7 +141,7 @@ class DriftBank:
                   rtps=self.rtps)
         drifting = sum(n in _WALKED or walk[i] > 0 for i, n in enumerate(names))
         forms = [k for k in self.restart_knots if not setup.restarts.gaussian
-                 or setup.n_members > len(names) + (k - 1) * drifting]
+                 or setup.n_members > free_values(k, len(names), drifting)]
         # forms with more free values than members cannot be redrawn: left out (the
         # smallest is kept, restarted as the setup allows)
         for k in forms or self.restart_knots[:1]:

@@ -16,6 +16,7 @@ import fem
 
 from ...checks import fraction
 from ..parameters import tracked_points
+from ..paths import LOGISTIC, check_form
 
 __all__ = ["HeatModel", "ModelError", "Sensors", "SmootherRestarts"]
 
@@ -212,11 +213,13 @@ class SmootherRestarts:
         past the end of each pulse. Drifting optics (``knots >= 2``) need some cooling
         readings to tell their final values: 2.5 s after a 5 s pulse in
         ``docs/enkf.md``, "Restarts".
-    knots : int or tuple of int
+    knots : int, "logistic" or a tuple of them
         1 (default): constant optics (``smooth_constant``). 2 or more: optics drifting while
         heated, piecewise linear in heated time through that many values
         (``smooth_drifting``); the restart takes their value at its reading, and the
-        filter's walk goes on from there. Several counts, e.g. (2, 3): the restarted
+        filter's walk goes on from there. ``"logistic"``: a logistic's segment between a
+        value before the drift and one after it (:mod:`enkf.tissue.paths`). Several
+        forms, e.g. (2, 3): the restarted
         ensemble is an equal mixture of the smoothers of those forms of the drift, each
         giving a block of members (``docs/enkf.md``, "Which form of the drift").
     discrepancy : float
@@ -263,14 +266,14 @@ class SmootherRestarts:
             raise ValueError(f"SmootherRestarts.iterations must be an integer >= 1, got {n!r}")
         forms = self.knots
         forms = tuple(forms) if isinstance(forms, (list, tuple)) else (forms,)
-        if not forms or not all(isinstance(k, (int, np.integer)) and not isinstance(k, bool)
-                                and k >= 1 for k in forms):
-            raise ValueError(f"SmootherRestarts.knots must be an integer >= 1 or a list of "
-                             f"them, got {self.knots!r}")
-        if len(forms) > 1 and (min(forms) < 2 or len(set(forms)) < len(forms)):
+        if not forms:
+            raise ValueError("SmootherRestarts.knots must be an integer >= 1, 'logistic' or a "
+                             "list of them, got []")
+        forms = tuple(check_form(k, "SmootherRestarts.knots", lo=1) for k in forms)
+        if len(forms) > 1 and (1 in forms or len(set(forms)) < len(forms)):
             raise ValueError(f"SmootherRestarts.knots = {list(forms)}: a mixture of drift "
-                             "forms needs different counts of knots, each >= 2")
-        self.knots = int(forms[0]) if len(forms) == 1 else tuple(int(k) for k in forms)
+                             "forms needs different forms, each >= 2 knots or 'logistic'")
+        self.knots = forms[0] if len(forms) == 1 else forms
         if not isinstance(self.gaussian, (bool, np.bool_)):
             raise ValueError(f"SmootherRestarts.gaussian must be True or False, got "
                              f"{self.gaussian!r}")
@@ -287,9 +290,9 @@ class SmootherRestarts:
     def knot_forms(self) -> tuple:
         """The restarts' counts of knots, one per form of the drift (:attr:`knots`)."""
         k = self.knots
-        return tuple(k) if isinstance(k, tuple) else (int(k),)
+        return tuple(k) if isinstance(k, tuple) else (k,)
 
     @property
     def drifts(self) -> bool:
-        """Whether the restarts let the optics drift (knots >= 2)."""
-        return max(self.knot_forms) > 1
+        """Whether the restarts let the optics drift (knots >= 2 or a logistic)."""
+        return any(k == LOGISTIC or k > 1 for k in self.knot_forms)

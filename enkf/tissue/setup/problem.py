@@ -12,6 +12,7 @@ import fem
 
 from ...problem import DEFAULT_METHOD
 from ..absorption import Absorption
+from ..paths import free_values
 from .parameter_model import ParameterModel
 from .parts import HeatModel, ModelError, Sensors, SmootherRestarts
 
@@ -172,7 +173,7 @@ class TissueFilterSetup:
             raise ValueError(f"smoother_restart_knots = {rs.knots} is for drifting optics: no "
                              f"parameter walks (random_walk_std = {par.random_walk_std!r})")
         forms = rs.knot_forms
-        free = len(par.names) + (max(forms) - 1) * len(drifting)
+        free = max(free_values(k, len(par.names), len(drifting)) for k in forms)
         if rs.gaussian and self.n_members < 2 * len(forms):
             raise ValueError(f"a mixture of {len(forms)} drift forms needs at least 2 members "
                              f"per form, got n_members = {self.n_members}")
