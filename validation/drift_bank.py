@@ -143,6 +143,14 @@ def report(rows: list, path: Path, command: str) -> None:
     write_report(path, lines, rows)
 
 
+def _rows(path: Path) -> list:
+    """The per-run numbers of a results file (JSON) or of a run's partial file (JSON lines)."""
+    text = path.read_text()
+    if path.suffix == ".jsonl":
+        return [json.loads(line) for line in text.splitlines() if line.strip()]
+    return json.loads(text)
+
+
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--seeds", type=int, default=20)
@@ -157,12 +165,13 @@ def main(argv=None):
     ap.add_argument("--out", default=str(ROOT / "validation" / "reports" / "drift_bank.md"))
     ap.add_argument("--from-json", nargs="+", default=None, metavar="FILE",
                     help="write the report from the per-run numbers of earlier runs (their "
-                         "JSON files) instead of running")
+                         "JSON files, or an interrupted run's .partial.jsonl) instead of "
+                         "running")
     ap.add_argument("--command", default=None,
                     help="with --from-json: the command(s) that made the numbers, for the report")
     args = ap.parse_args(argv)
     if args.from_json:
-        rows = [r for f in args.from_json for r in json.loads(Path(f).read_text())]
+        rows = [r for f in args.from_json for r in _rows(Path(f))]
         report(rows, Path(args.out), args.command or "see the JSON files")
         return
     for case in args.case:  # the truths and the emulator's points, once, before the workers
@@ -174,9 +183,14 @@ def main(argv=None):
              for s in range(args.first_seed, args.first_seed + args.seeds)]
     rows = []
     t0 = time.perf_counter()
+    # each run's numbers as they come (one JSON line each): an interrupted study keeps them
+    partial = Path(args.out).with_suffix(".partial.jsonl")
+    partial.write_text("")
     with ProcessPoolExecutor(args.jobs) as pool:
         for r in pool.map(run_one, tasks):
             rows.append(r)
+            with partial.open("a") as fh:
+                fh.write(json.dumps(r) + "\n")
             o = passes(r)
             print(f"{r['model']} {r['case']:18s} seed {r['seed']:2d}: "
                   + " ".join(f"{k}={'ok' if v else 'FAIL'}" for k, v in o.items())
@@ -185,6 +199,7 @@ def main(argv=None):
                   f"{r['wall_s']:.1f} s", flush=True)
     command = "python validation/drift_bank.py " + " ".join(sys.argv[1:] if argv is None else argv)
     report(rows, Path(args.out), command)
+    partial.unlink()
     print(f"{len(rows)} runs in {time.perf_counter() - t0:.0f} s -> {args.out}")
 
 
