@@ -32,7 +32,7 @@ Three solvers, chosen automatically (``method="auto"``), and a fourth on request
     layer the preconditioner is the direct solve of the operator of the layers' mean
     VHC and TC (:class:`fem.layered.LayeredKroneckerSolver`; one medium: the fast
     diagonalization of the volume-averaged operator), else Jacobi
-    (:data:`KRON_PRECONDITIONER_MAX_RATIO`);
+    (:data:`fem.stepper_setup.KRON_PRECONDITIONER_MAX_RATIO`);
 ``"gpu"``
     never chosen by ``"auto"``: Jacobi-preconditioned CG on an NVIDIA GPU
     (:class:`fem.gpu.CudaPCG`, made by :func:`fem.gpu.make_solver`; the ``gpu`` extra),
@@ -40,7 +40,8 @@ Three solvers, chosen automatically (``method="auto"``), and a fourth on request
 
 The operator, P1 or tensor-product, can be chosen the same way (``operator="auto"``):
 the tensor product where it is solved directly and P1 is not (media that vary only with
-depth; one medium with a mass that is not lumped).
+depth; one medium with a mass that is not lumped). Both choices, and the building of the
+tensor-product operator and of the solver, are in :mod:`fem.stepper_setup`.
 """
 
 from __future__ import annotations
@@ -58,38 +59,20 @@ from .assembly import (
     stiffness_matrix,
 )
 from .bc import FACES, HeatBoundary, face_nodes
-from .fastdiag import MASS_KINDS, KroneckerSolver, NotApplicable
-from .layered import (
-    LayeredKroneckerSolver,
-    layer_coefficients,
-    layer_means,
-    tensor_product_operators,
+from .fastdiag import MASS_KINDS
+from .stepper_setup import (
+    JACOBI_BELOW,
+    KRON_PRECONDITIONER_MAX_RATIO,
+    auto_operator,
+    choose_solver,
+    kronecker_operators,
 )
-from .linsolve import BatchedPCG, DirectSolver
-from .mesh import element_volumes, structured_grid
 from .threads import run_blocks
 
 __all__ = ["JACOBI_BELOW", "KRON_PRECONDITIONER_MAX_RATIO", "HeatStepper"]
 
 _METHODS = ("auto", "fast", "direct", "pcg", "gpu")
 _OPERATORS = ("p1", "kronecker", "auto")
-#: the faces whose convection keeps x and y from separating in a layered operator
-_SIDE_FACES = ("x-", "x+", "y-", "y+")
-#: largest max/min ratio of the elements' VHC and of their TC for which PCG is preconditioned
-#: by the fast diagonalization of the volume-averaged operator; beyond, Jacobi. One
-#: application costs about 3.5 Jacobi iterations (101^3 nodes), and its iterations grow with
-#: the contrast: two layers at MCmatlab's large steps took 7 / 10 / 12 iterations against
-#: Jacobi's 23 / 21 / 20 at VHC ratios 2 / 4 / 8 (equal time at 2), 5 / 6 / 7 against 26 /
-#: 25 / 23 at TC ratios 2 / 4 / 8 (equal time near 4); MCmatlab's Example 14 (VHC ratio 477)
-#: 40 against 13, ten times slower.
-KRON_PRECONDITIONER_MAX_RATIO = {"vhc": 2.0, "tc": 4.0}
-#: with the layer-mean preconditioner, solves whose stiffness over mass on the diagonal
-#: (:class:`fem.linsolve.BatchedPCG`'s ``jacobi_below``) is below this use Jacobi: short steps,
-#: where the mass dominates. On MCmatlab's Example 4 (41^3 nodes, rtol 1e-9), at ratios 0.05 /
-#: 0.18 / 0.53 / 1.8 / 5.3 / 18, Jacobi took 3 / 5 / 8 / 14 / 24 / 47 iterations, the layer
-#: means 7 / 7 / 8 / 8 / 8 / 8 at about 2.5-4 times the cost each: equal time near 3-5.
-JACOBI_BELOW = 3.0
-_INHOMOGENEOUS = "VHC and TC must be homogeneous"
 
 
 class HeatStepper:
@@ -211,7 +194,7 @@ class HeatStepper:
         self.mass = mass
         self.layers = None
         if operator == "auto":
-            operator = self._auto_operator()
+            operator = auto_operator(self)
         self.operator = operator
         if mass == "consistent" and operator != "kronecker":
             raise ValueError("mass='consistent' needs operator='kronecker' (with 'p1': "
@@ -222,7 +205,7 @@ class HeatStepper:
             # the tensor-product forms only: assembling the P1 matrices first would hold
             # both at once (about 110 more bytes per node at the peak of a 10^6-node run)
             self._m_lumped = None
-            self._kronecker_operators()
+            kronecker_operators(self)
         else:
             self._m_lumped = lumped_mass(mesh, self.vhc) if lumped else None
             self.M = (sp.diags_array(self._m_lumped, format="csr") if lumped
@@ -251,185 +234,14 @@ class HeatStepper:
         # slicing the matrices of a 10^6-node mesh takes seconds: only when nodes are held
         self._A_fd = (self.M[f][:, d], self.K[f][:, d], self.R[f][:, d]) if d.size else None
 
-        self.method = self._choose(method, direct_max_nodes, rtol, gpu_device)
+        self.method = choose_solver(self, method, direct_max_nodes, rtol, gpu_device)
 
     # -------------------------------------------------------------- set-up
-    def _auto_operator(self) -> str:
-        """``operator="auto"``'s choice (see the class); the layers it finds are kept in
-        ``self.layers``, so that the tensor-product operator does not look for them again."""
-        if self.mass == "consistent":
-            return "kronecker"  # the trilinear hexahedron's mass: the tensor product's only
-        if not self.tc.all():
-            return "p1"  # an insulator somewhere: no direct layered solve
-        if np.ptp(self.vhc) == 0 and np.ptp(self.tc) == 0:
-            if self.mass == "lumped":
-                return "p1"  # the P1 operator's exact fast diagonalization
-            return "kronecker" if structured_grid(self.mesh) is not None else "p1"
-        if any(self.boundary[face].kind == "convective" for face in _SIDE_FACES):
-            return "p1"  # x and y do not separate: LayeredKroneckerSolver does not apply
-        self.layers = self._layers_or_none()
-        return "p1" if self.layers is None else "kronecker"
-
-    def _kronecker_operators(self) -> None:
-        """Replace M, K, R, g by their tensor-product forms (``operator="kronecker"``)."""
-        why = self._fast_unavailable()
-        layers = None
-        if why == _INHOMOGENEOUS:
-            layers = self.layers if self.layers is not None else self._layers_or_none()
-            if layers is None:
-                why = "VHC and TC must be homogeneous or vary only with depth z"
-        if why is not None and layers is None:
-            raise ValueError(f"operator='kronecker' is not applicable: {why}")
-        self.layers = layers
-        ops = tensor_product_operators(self._grid, self.boundary, self.mass,
-                                       float(self.vhc[0]), float(self.tc[0]), layers)
-        self.M, self.K, self.R, self.g = ops["M"], ops["K"], ops["R"], ops["g"]
-        self._m_lumped = ops["m_lumped"]
-        if ops["m_tridiag"] is not None:
-            # the right-hand side's mass product, axis by axis (numba), not the 27-point M
-            self._m_tridiag = ops["m_tridiag"]
-
-    def _choose(self, method: str, direct_max_nodes: int, rtol: float,
-                gpu_device: int = 0) -> str:
-        f = self.free
-        if method in ("auto", "fast"):
-            why = self._fast_unavailable()
-            if why is None:
-                try:
-                    exact = self.operator == "p1"
-                    self._solver = KroneckerSolver(
-                        self._grid, self.boundary, float(self.vhc[0]), float(self.tc[0]),
-                        self.dt, self.theta, self._m_lumped if exact else None,
-                        self.K if exact else None, self.R.diagonal() if exact else None,
-                        self._free_mask(), exact=exact, mass=self.mass)
-                    self._order = self._solver.free_nodes
-                    self._identity_order = np.array_equal(self._order, np.arange(self.npoints))
-                    return "fast"
-                except NotApplicable as exc:
-                    why = str(exc)
-            layers = self.layers  # set by _kronecker_operators
-            if why == _INHOMOGENEOUS and layers is not None:
-                try:
-                    self._solver = LayeredKroneckerSolver(
-                        self._grid, self.boundary, layers[0], layers[1], self.dt, self.theta,
-                        mass=self.mass)
-                    if not np.array_equal(np.sort(self._solver.free_nodes), f):
-                        raise NotApplicable("fixed nodes are not whole faces of the box")
-                    self._order = self._solver.free_nodes
-                    self._identity_order = np.array_equal(self._order, np.arange(self.npoints))
-                    return "fast"
-                except NotApplicable as exc:
-                    why = str(exc)
-            if method == "fast":
-                raise ValueError(f"method='fast' is not applicable: {why}")
-        self._order = f
-        self._identity_order = f.size == self.npoints
-        if self._identity_order:
-            Mf, Kf, Rf = self.M, self.K, self.theta * self.R
-        else:
-            Mf, Kf, Rf = self.M[f][:, f], self.K[f][:, f], self.theta * self.R[f][:, f]
-        if method == "gpu":
-            from .gpu import make_solver  # numba.cuda only where asked for
-
-            self._solver = make_solver(Mf, Kf, Rf, rtol=rtol, device=gpu_device)
-            return "gpu"
-        if method == "direct" or (method == "auto" and self.npoints <= direct_max_nodes):
-            self._solver = DirectSolver(Mf, Kf, Rf)
-            return "direct"
-        precond = self._kron_preconditioner()
-        self._solver = BatchedPCG(Mf, Kf, Rf, rtol=rtol, precond=precond,
-                                  jacobi_below=JACOBI_BELOW if self._layer_mean else 0.0)
-        return "pcg"
-
-    def _kron_preconditioner(self):
-        """A tensor-product solve close to the step matrix, on structured meshes whose VHC and
-        TC vary little where it does not follow them (:data:`KRON_PRECONDITIONER_MAX_RATIO`);
-        else None (Jacobi).
-
-        Media that vary in z: the layered operator of each element layer's mean VHC and TC
-        (:class:`fem.layered.LayeredKroneckerSolver`), so that only what crosses the layers
-        (a vessel in the dermis) is left to the iterations; the ratio is then taken within
-        each layer. One medium, a convective x or y face (the layers do not separate) or a
-        layer-mean solve that does not apply: the volume-averaged operator
-        (:class:`fem.fastdiag.KroneckerSolver`), the ratio over the whole mesh. On MCmatlab's
-        Example 4 (gel, epidermis, dermis and a vessel across the layers, 41^3 nodes, rtol
-        1e-9) the layer means took 7-8 iterations per solve where the volume mean took 9-12
-        (13.6-13.9 ms against 20.5-23.8 ms at steps of 1-10 ms, one thread). What is left is
-        mostly not the vessel but the P1 operator's departure from the tensor-product one on
-        the box's edges and where an interface meets a side face: the same preconditioner on
-        the 7-point finite-volume operator of the same media took 2 iterations at 1 ms and 6
-        at 10 ms. Short steps go to Jacobi (:data:`JACOBI_BELOW`).
-        """
-        self._layer_mean = False
-        averaged = self.mass == "averaged"  # P1's averaged mass: the Kronecker one's
-        if not (self.lumped or averaged) or self.theta == 0 or not self.tc.any():
-            return None
-        grid = getattr(self, "_grid", None) or structured_grid(self.mesh)
-        if grid is None:
-            return None
-        kind = "averaged" if averaged else "lumped"
-        solver = None
-        if np.ptp(self.vhc) != 0 or np.ptp(self.tc) != 0:
-            (c_layers, c_ratio), (k_layers, k_ratio) = (layer_means(grid, self.vhc),
-                                                        layer_means(grid, self.tc))
-            if (c_ratio <= KRON_PRECONDITIONER_MAX_RATIO["vhc"]
-                    and k_ratio <= KRON_PRECONDITIONER_MAX_RATIO["tc"]):
-                try:
-                    solver = LayeredKroneckerSolver(grid, self.boundary, c_layers, k_layers,
-                                                    self.dt, self.theta, mass=kind)
-                except NotApplicable:
-                    solver = None
-        if solver is None:
-            for name, coefficient in (("vhc", self.vhc), ("tc", self.tc)):
-                if coefficient.max() > KRON_PRECONDITIONER_MAX_RATIO[name] * coefficient.min():
-                    return None
-            vol = element_volumes(self.mesh)
-            c_mean = float(vol @ self.vhc / vol.sum())
-            k_mean = float(vol @ self.tc / vol.sum())
-            try:
-                solver = KroneckerSolver(grid, self.boundary, c_mean, k_mean, self.dt,
-                                         self.theta, None, None, None, self._free_mask(),
-                                         exact=False, mass=kind)
-            except NotApplicable:
-                return None
-        if not np.array_equal(solver.free_nodes, self.free):
-            return None
-        self._layer_mean = isinstance(solver, LayeredKroneckerSolver)
-        dt = self.dt
-
-        def precond(Rr, a, b):
-            return solver.solve(np.ascontiguousarray(Rr.T), a * dt, b / self.theta).T
-
-        return precond
-
     def _free_mask(self) -> np.ndarray:
+        """bool array (npoints,): True on the nodes not held by fixed faces."""
         mask = np.zeros(self.npoints, dtype=bool)
         mask[self.free] = True
         return mask
-
-    def _layers_or_none(self):
-        """(vhc, tc) per element layer ((nz,) each) on a box mesh whose media vary only
-        with z and conduct somewhere, with a Kronecker-product mass; else None."""
-        if not self.lumped and self.mass == "lumped" or not self.tc.any():
-            return None
-        grid = getattr(self, "_grid", None) or structured_grid(self.mesh)
-        if grid is None:
-            return None
-        self._grid = grid
-        c, k = layer_coefficients(grid, self.vhc), layer_coefficients(grid, self.tc)
-        return None if c is None or k is None else (c, k)
-
-    def _fast_unavailable(self) -> str | None:
-        if not self.lumped and self.mass == "lumped":
-            return "consistent mass is not a Kronecker product"
-        if np.ptp(self.vhc) != 0 or np.ptp(self.tc) != 0:
-            return _INHOMOGENEOUS
-        if not self.tc.any():
-            return "TC = 0 (no conduction: the step is a diagonal solve)"
-        self._grid = structured_grid(self.mesh)
-        if self._grid is None:
-            return "the mesh is not a fem.mesh.box_mesh"
-        return None
 
     # ---------------------------------------------------------------- step
     def _scales(self, scale, N: int, name: str) -> np.ndarray:
