@@ -146,3 +146,39 @@ def test_the_online_identifiers_filters_for_the_advice(tissue):
     assert sum(p[1] for p in parts) == pytest.approx(1.0)
     lead = max(parts, key=lambda p: p[1])
     assert bank.param_ensemble is lead[3] and bank.state_ensemble is lead[2]
+
+
+def test_drifting_loads_in_single_precision_agree_with_double(tissue):
+    # the drifting optics' S x N load responses take the product over the nodes in float32
+    # (Advisor.drift_dtype): each response within float32's rounding of that sum and of
+    # its inputs, lambda sqrt(n) u |Q| |B| |q| with lambda = 2 (u = 2^-24; the probabilistic
+    # bound of Higham & Mary 2019, SIAM J. Sci. Comput. 41; measured up to 0.8 of it at
+    # lambda = 1)
+    adv = Advisor(hot_setup(tissue, random_walk_std=list(WALK)), drift="walk", **LIMITS)
+    assert adv.drift_dtype == np.float32
+    X, theta = members(adv, n=20, seed=4)
+    X = np.minimum(X, 40.0)  # every member needs the laser
+    t0, K = 0.4, adv.K - 4
+    thetas, _ = adv.optics_paths(None, theta, t0, K)
+    flat = thetas.reshape(-1, theta.shape[1])
+    G32 = adv.forecast.load_responses(flat, K, np.float32)
+    G64 = adv.forecast.load_responses(flat, K)
+    assert G32.dtype == np.float64
+    (Q, B), q = adv.forecast.W, adv.model.loads(flat, 1.0)
+    bound = 2 * np.sqrt(B.shape[1]) * 2.0 ** -24 * (np.abs(Q[:K * G64.shape[2]])
+                                               @ (np.abs(B) @ np.abs(q).T)).T.reshape(G64.shape)
+    np.testing.assert_array_less(np.abs(G32 - G64), bound)
+    # the advice: the same walk drawn (seeded by the reading), times within 1e-4 s (7e-7 s
+    # measured), the risks the same; the members' own spread of the target time (the
+    # walk's Monte Carlo, 0.5 s) is more than 4 orders larger
+    tr = adv._track("x", t0, X, 0, theta)
+    single = adv.member_advice(tr, X, theta)
+    adv.drift_dtype = np.float64
+    double = adv.member_advice(tr, X, theta)
+    assert np.isfinite(double.target_time).all()
+    dt = np.abs(single.target_time - double.target_time).max()
+    np.testing.assert_allclose(single.target_time, double.target_time, rtol=0, atol=1e-4)
+    np.testing.assert_allclose(single.stop_time, double.stop_time, rtol=0, atol=1e-4)
+    assert np.std(double.target_time) > 1e4 * dt
+    for k in double.risks:
+        np.testing.assert_array_equal(single.risks[k], double.risks[k])

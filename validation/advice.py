@@ -266,7 +266,8 @@ def findings(runs: list) -> list:
                  + (f", not at {', '.join(missed)}" if missed else "")
                  + f"; {tab[-1][2] / tab[-1][1]:.0%} of every reading before the target. The "
                  f"interval's median width: {fmt(w['0.5 s'])} at 0.5 s, {fmt(w['1 s'])} at "
-                 f"1 s, narrowing to {fmt(min(w[label] for label, _ in per))}.")
+                 f"1 s" + (f", narrowing to {fmt(min(w[label] for label, _ in per))}" if per
+                           else " (fewer than 10 runs a reading: no share scored)") + ".")
     L += ["", "With drifting optics the drifting filters' members carry their walk and their "
           "own recent trend into the forecast (before this, each member's optics were held "
           "at their present values: the truth inside the interval at 0.5 s on 15% of the "

@@ -171,6 +171,12 @@ class Advisor:
         self.forecast = PointForecast(self.model, P, self.step, self.K, self.engine)
         self.P = self.forecast.P
         self.tracks: dict = {}
+        #: the drifting optics' load responses (S pieces x N members of them a reading)
+        #: with their product over the nodes in single precision
+        #: (:meth:`PointForecast.load_responses`): about 1e-6 of the largest response,
+        #: the target and stop times within 1e-6 s of double precision's, where the
+        #: walk spreads them over tenths of a second (``tests/test_advice_drift.py``)
+        self.drift_dtype = np.float32
 
     def _track(self, key, t: float, X, step: int | None, theta=None) -> _Track:
         """Follow a filter's members to ``t`` (s) with the ensemble ``X`` (N, n) deg C
@@ -244,15 +250,20 @@ class Advisor:
         t0, h = tr.time, self.step
         end = min(max(self.plan.end, t0) + self.tail, t0 + self.max_horizon)
         K = int(min(self.K, max(1, math.ceil((end - t0) / h - 1e-9))))
-        H, G = self.forecast.responses(X, theta, K)
         seg = None
+        P = np.array([self.plan.mean_power(t0 + j * h, t0 + (j + 1) * h) for j in range(K)])
         paths = self.optics_paths(key, theta, t0, K)
+        # the responses to the laser only where the plan still heats: after its last
+        # pulse they would be multiplied by 0 W
+        H, G = self.forecast.responses(X, theta, K, loads=paths is None and P.any())
         if paths is not None:  # the drifting optics' loads, piece by piece
             thetas, seg = paths
             S, N0, n_est = thetas.shape
-            G = self.forecast.load_responses(thetas.reshape(S * N0, n_est), K)
+            G = self.forecast.load_responses(thetas.reshape(S * N0, n_est), K,
+                                             self.drift_dtype)
             G = G.reshape(S, N0, K, -1).transpose(1, 0, 2, 3)
-        P = np.array([self.plan.mean_power(t0 + j * h, t0 + (j + 1) * h) for j in range(K)])
+        elif G is None:
+            G = np.zeros((X.shape[0], K, H.shape[2]))
         N, tg = X.shape[0], self.slices["target"]
         plan = heat(H, G, P, np.full(N, K), seg)
         _, path = damage(self.E, self.A, h, tr.omega[:, tg], plan[..., tg], path=True)

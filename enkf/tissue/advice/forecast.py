@@ -30,6 +30,8 @@ import numpy as np
 import fem
 from fem.threads import blas_threads
 
+from ._kernels import superpose
+
 __all__ = ["PointForecast", "damage", "first_crossing", "heat", "low_rank", "nominal_peak",
            "region_points"]
 
@@ -46,6 +48,7 @@ class PointForecast:
         self.model, self.P = model, P.tocsr()
         self.dt, self.K, self.engine = float(dt), int(K), engine
         self.n_est = len(model.setup.parameters.estimate)
+        self._BW32 = None  # the loads' right factor in float32 (made on first use)
         if engine == "adjoint":
             R, W = self._adjoint_rows(model.stepper(self.dt))
             p, n = self.P.shape
@@ -89,11 +92,13 @@ class PointForecast:
             out[:, m + 1] = (self.P @ T.T).T
         return out
 
-    def responses(self, X, theta, K: int | None = None) -> tuple[np.ndarray, np.ndarray]:
+    def responses(self, X, theta, K: int | None = None, loads: bool = True
+                  ) -> tuple[np.ndarray, np.ndarray | None]:
         """``H`` (N, K+1, p): the members' point temperatures (deg C) with the laser off,
         now and after each step; ``G`` (N, K, p): their response to 1 W over the first
-        step, after steps 1..K. Under ``P_j`` W over step ``j`` the point temperatures are
-        ``H_k + sum_(j<k) P_j G_(k-1-j)`` (:func:`heat`).
+        step, after steps 1..K (None without ``loads``: drifting optics have their own,
+        :meth:`load_responses`). Under ``P_j`` W over step ``j`` the point temperatures
+        are ``H_k + sum_(j<k) P_j G_(k-1-j)`` (:func:`heat`).
 
         ``X`` (N, n_nodes) deg C; ``theta`` (N, >= n_estimate): the members' parameters,
         ``setup.parameters.estimate`` first."""
@@ -102,27 +107,35 @@ class PointForecast:
         theta = np.asarray(theta, float)[:, :self.n_est]
         N, p = X.shape[0], self.P.shape[0]
         if self.engine == "adjoint":
-            (QR, BR), (QW, BW) = self.R, self.W
-            q = self.model.loads(theta, 1.0)
+            QR, BR = self.R
             with blas_threads(1):  # small products: threads only wait on a busy machine
                 H = (QR[:(K + 1) * p] @ (BR @ X.T)).T.reshape(N, K + 1, p) + self.a[:K + 1]
-                G = (QW[:K * p] @ (BW @ q.T)).T.reshape(N, K, p)
-            return H, G
+            return H, self.load_responses(theta, K) if loads else None
         H = self._series(X, theta, 0.0, K)
-        return H, self.load_responses(theta, K)
+        return H, self.load_responses(theta, K) if loads else None
 
-    def load_responses(self, theta, K: int | None = None) -> np.ndarray:
+    def load_responses(self, theta, K: int | None = None, dtype=np.float64) -> np.ndarray:
         """``G`` (N, K, p): the point temperatures' response to 1 W over one step with the
         optics ``theta`` (N, >= n_estimate), 1..K steps after it (:meth:`responses`'s
-        ``G`` alone: the drifting optics' later loads)."""
+        ``G`` alone: the drifting optics' later loads).
+
+        ``dtype`` ``np.float32``: the adjoint engine's product of the loads with the
+        stored rows' right factor (the large one, over the nodes) in single precision,
+        twice as fast on the many loads of drifting optics; each response then within
+        float32's rounding of that sum (about 1e-6 of the largest response,
+        ``tests/test_advice_drift.py``)."""
         K = self.K if K is None else K
         theta = np.asarray(theta, float)[:, :self.n_est]
         N, p = theta.shape[0], self.P.shape[0]
         if self.engine == "adjoint":
             QW, BW = self.W
-            q = self.model.loads(theta, 1.0)
+            if dtype == np.float32:
+                if self._BW32 is None:
+                    self._BW32 = BW.astype(np.float32)
+                BW = self._BW32
+            q = self.model.loads(theta, 1.0).astype(BW.dtype, copy=False)
             with blas_threads(1):
-                return (QW[:K * p] @ (BW @ q.T)).T.reshape(N, K, p)
+                return (QW[:K * p] @ (BW @ q.T).astype(float, copy=False)).T.reshape(N, K, p)
         n = self.P.shape[1]
         zero = self._series(np.zeros((N, n)), theta, 0.0, K)
         return (self._series(np.zeros((N, n)), theta, 1.0, K) - zero)[:, 1:]
@@ -157,17 +170,15 @@ def heat(H, G, P, c, seg=None) -> np.ndarray:
 
     ``G`` (N, K, p) holds for every step; with drifting optics it is (N, S, K, p), the
     responses of S sets of optics, and ``seg`` (K,) names the set of each step ``j``:
-    ``Y_k = H_k + sum_(j < min(k, c)) P_j G_(seg_j, k-1-j)``."""
+    ``Y_k = H_k + sum_(j < min(k, c)) P_j G_(seg_j, k-1-j)`` (the numba kernel
+    :func:`~enkf.tissue.advice._kernels.superpose`)."""
     if seg is None:
-        G, seg = G[:, None], np.zeros(G.shape[1], int)
-    K = G.shape[2]
-    c = np.broadcast_to(np.asarray(c), (H.shape[0],))
+        G, seg = G[:, None], np.zeros(G.shape[1], np.int64)
+    # the steps j < c each member heats, as a count (c may be inf or fractional)
+    c = np.ceil(np.minimum(np.broadcast_to(np.asarray(c, float), (H.shape[0],)), G.shape[2]))
     Y = np.array(H, float)
-    for j in range(K):  # each step's pulse spreads to the samples after it
-        if P[j] == 0.0:
-            continue
-        on = (j < c)[:, None, None]
-        Y[:, j + 1:] += np.where(on, P[j] * G[:, seg[j], :K - j], 0.0)
+    superpose(Y, np.asarray(G, float), np.asarray(P, float), c.astype(np.int64),
+              np.asarray(seg, np.int64))
     return Y
 
 
