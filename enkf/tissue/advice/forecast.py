@@ -170,8 +170,8 @@ def heat(H, G, P, c, seg=None) -> np.ndarray:
 
     ``G`` (N, K, p) holds for every step; with drifting optics it is (N, S, K, p), the
     responses of S sets of optics, and ``seg`` (K,) names the set of each step ``j``:
-    ``Y_k = H_k + sum_(j < min(k, c)) P_j G_(seg_j, k-1-j)`` (the numba kernel
-    :func:`~enkf.tissue.advice._kernels.superpose`)."""
+    ``Y_k = H_k + sum_(j < min(k, c)) P_j G_(seg_j, k-1-j)`` (summed by a numba
+    kernel, ``_kernels.superpose``)."""
     if seg is None:
         G, seg = G[:, None], np.zeros(G.shape[1], np.int64)
     # the steps j < c each member heats, as a count (c may be inf or fractional)
