@@ -149,7 +149,9 @@ def main(argv=None):
               f"the advice after each filter update (identify --follow): median "
               f"{np.median(a):.1f} ms, 95th percentile {np.percentile(a, 95):.1f} ms, max "
               f"{a.max():.1f} ms, within 100 ms at {np.mean(a < 100):.0%} of "
-              f"{len(a)} readings (the filter's update median {np.median(f):.0f} ms)")
+              f"{len(a)} readings (the filter's update median {np.median(f):.0f} ms); the "
+              f"slowest, reading {a.argmax() + 1} (t = {readings[a.argmax()].time:.1f} s), "
+              f"takes {best[a.argmax()]:.1f} ms on its kept members")
         print(f"  the advice alone on the kept members, each reading's best of {args.repeat}: "
               f"median {np.median(best):.1f} ms, 95th percentile "
               f"{np.percentile(best, 95):.1f} ms, max {best.max():.1f} ms; their worst: 95th "

@@ -177,6 +177,23 @@ class Advisor:
         #: the target and stop times within 1e-6 s of double precision's, where the
         #: walk spreads them over tenths of a second (``tests/test_advice_drift.py``)
         self.drift_dtype = np.float32
+        self._warm_kernels()
+
+    def _warm_kernels(self) -> None:
+        """Compile (or load from numba's cache) the kernels a reading calls: two members
+        at the start temperature and the nominal optics followed over one step and
+        forecast as each filter's (held and drifting optics: each layout of the
+        responses), then forgotten. The first reading's advice then costs what the next
+        ones do (a fresh install compiles here, about 0.4 s, not within a reading)."""
+        s = self.setup
+        theta = np.tile([s.parameters.nominal[k] for k in s.parameters.estimate], (2, 1))
+        X = np.full((2, self.model.mesh.p.shape[1]), float(s.T_initial))
+        key = object()  # a track of no filter
+        self._track(key, 0.0, X, 0, theta)
+        tr = self._track(key, self.step, X, 1, theta)
+        for name in self.walks:
+            self.member_advice(tr, X, theta, name)
+        del self.tracks[key]
 
     def _track(self, key, t: float, X, step: int | None, theta=None) -> _Track:
         """Follow a filter's members to ``t`` (s) with the ensemble ``X`` (N, n) deg C
