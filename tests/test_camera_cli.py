@@ -54,6 +54,18 @@ def cache(tmp_path_factory):
     return str(tmp_path_factory.mktemp("emulator-cache"))
 
 
+def follow_while_writing(writer, cfg, follow, out, cache) -> None:
+    """``identify --follow FOLLOW`` while ``writer()`` writes the camera's output in a
+    thread (it ends the stream itself, with ``END``); exit 0."""
+    th = threading.Thread(target=writer)
+    th.start()
+    try:
+        assert run("identify", cfg, "--follow", follow, "--out", out, "--quiet", "--cache-dir",
+                   cache, "--idle-timeout", "5") == 0
+    finally:
+        th.join()
+
+
 def run(*argv):
     return main([str(a) for a in argv])
 
@@ -106,14 +118,8 @@ def test_follow_a_folder_as_the_camera_writes_it(tmp_path, cache, capsys):
             time.sleep(0.05)
         (live / "END").write_text("")
 
-    th = threading.Thread(target=writer)
-    th.start()
     out = tmp_path / "follow"
-    try:
-        assert run("identify", cfg, "--follow", live, "--out", out, "--quiet", "--cache-dir",
-                   cache, "--idle-timeout", "5") == 0
-    finally:
-        th.join()
+    follow_while_writing(writer, cfg, live, out, cache)
     rows = (out / "estimates.csv").read_text().splitlines()
     assert len(rows) == 1 + 13  # frame 0 is the baseline
     times = [float(r.split(",")[0]) for r in rows[1:]]

@@ -11,7 +11,7 @@ import time
 
 import numpy as np
 import pytest
-from test_camera_cli import EX, SPOT, camera_config, frames, run
+from test_camera_cli import EX, SPOT, camera_config, follow_while_writing, frames, run
 from test_follow_frames import SlowIdentifier
 
 from enkf.app.follow_file import follow_file
@@ -231,14 +231,8 @@ def test_identify_follows_a_growing_tiff_stack(tmp_path, cache):
                 time.sleep(0.03)
         (path.parent / "END").write_text("")
 
-    th = threading.Thread(target=writer)
-    th.start()
     out = tmp_path / "follow"
-    try:
-        assert run("identify", cfg, "--follow", path, "--out", out, "--quiet", "--cache-dir",
-                   cache, "--idle-timeout", "5") == 0
-    finally:
-        th.join()
+    follow_while_writing(writer, cfg, path, out, cache)
     rows = (out / "estimates.csv").read_text().splitlines()
     times = [float(r.split(",")[0]) for r in rows[1:]]
     np.testing.assert_allclose(times, 0.1 * np.arange(1, 14), atol=1e-9)
