@@ -32,8 +32,6 @@ is the public face (its docstring describes the choices).
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING
-
 import numpy as np
 
 from .fastdiag import KroneckerSolver, NotApplicable
@@ -45,9 +43,6 @@ from .layered import (
 )
 from .linsolve import BatchedPCG, DirectSolver
 from .mesh import element_volumes, structured_grid
-
-if TYPE_CHECKING:
-    from .stepper import HeatStepper
 
 __all__ = [
     "JACOBI_BELOW",
@@ -80,7 +75,7 @@ _INHOMOGENEOUS = "VHC and TC must be homogeneous"
 
 
 # ------------------------------------------------------------------ where it applies
-def fast_unavailable(st: HeatStepper) -> str | None:
+def fast_unavailable(st) -> str | None:
     """Why the fast diagonalization of one medium does not apply, or None where it does.
 
     Sets ``st._grid`` (the :class:`fem.mesh.BoxGrid` of the mesh, or None) when only the
@@ -104,7 +99,7 @@ def fast_unavailable(st: HeatStepper) -> str | None:
     return None
 
 
-def layers_or_none(st: HeatStepper):
+def layers_or_none(st):
     """VHC and TC per element layer, or None.
 
     Returns
@@ -125,7 +120,7 @@ def layers_or_none(st: HeatStepper):
 
 
 # ------------------------------------------------------------------------ operator
-def auto_operator(st: HeatStepper) -> str:
+def auto_operator(st) -> str:
     """``operator="auto"``'s choice, ``"p1"`` or ``"kronecker"`` (see the stepper).
 
     The layers it finds are kept in ``st.layers``, so that the tensor-product operator
@@ -145,7 +140,7 @@ def auto_operator(st: HeatStepper) -> str:
     return "p1" if st.layers is None else "kronecker"
 
 
-def kronecker_operators(st: HeatStepper) -> None:
+def kronecker_operators(st) -> None:
     """Set ``st``'s M, K, R (csr (npoints, npoints): J/K, W/K, W/K) and g ((npoints,), W)
     to their tensor-product forms (``operator="kronecker"``), with ``st.layers`` and the
     mass of the right-hand side (``_m_lumped`` or ``_m_tridiag``).
@@ -175,7 +170,7 @@ def kronecker_operators(st: HeatStepper) -> None:
 
 
 # -------------------------------------------------------------------------- solver
-def choose_solver(st: HeatStepper, method: str, direct_max_nodes: int, rtol: float,
+def choose_solver(st, method: str, direct_max_nodes: int, rtol: float,
                   gpu_device: int = 0) -> str:
     """Build the stepper's solver (``st._solver``, with ``st._order`` and
     ``st._identity_order``) for ``method`` and return the method in use.
@@ -254,7 +249,7 @@ def choose_solver(st: HeatStepper, method: str, direct_max_nodes: int, rtol: flo
     return "pcg"
 
 
-def kron_preconditioner(st: HeatStepper):
+def kron_preconditioner(st):
     """A tensor-product solve close to the step matrix, on structured meshes whose VHC and
     TC vary little where it does not follow them (:data:`KRON_PRECONDITIONER_MAX_RATIO`);
     else None (Jacobi). Sets ``st._layer_mean``: whether it is the layer-mean one.
