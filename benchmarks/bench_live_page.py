@@ -15,7 +15,7 @@ blocks (default 4: 16 x 16 readings of a 64 x 64 frame; 1 reads every pixel, who
 4096 x 4096 model-error covariance takes seconds a step).
 
     python benchmarks/bench_live_page.py [--frames 100] [--rate 10] [--repeat 2] [--pixels 64]
-                                         [--binning 4]
+                                         [--binning 4] [--modes none page]
 """
 
 from __future__ import annotations
@@ -61,8 +61,48 @@ def frames(n: int, rate: float, pixels: int) -> np.ndarray:
     return (amp[:, None, None] * shape + noise).astype("f4")
 
 
-def one_run(work: Path, cfg: Path, f: np.ndarray, rate: float, serve: bool, cache: str) -> dict:
+def _cpu_s(pids) -> float:
+    """CPU seconds (user + system) of the living processes ``pids`` (Linux ``/proc``)."""
+    tick, total = os.sysconf("SC_CLK_TCK"), 0.0
+    for pid in pids:
+        try:
+            fields = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()
+        except OSError:
+            continue
+        total += (int(fields[11]) + int(fields[12])) / tick
+    return total
+
+
+def _descendants(pid: int) -> list[int]:
+    """The living processes below ``pid`` (its children, theirs, ...)."""
+    children: dict[int, list[int]] = {}
+    for d in Path("/proc").iterdir():
+        if d.name.isdigit():
+            try:
+                ppid = int((d / "stat").read_text().rsplit(")", 1)[1].split()[1])
+            except (OSError, IndexError, ValueError):
+                continue
+            children.setdefault(ppid, []).append(int(d.name))
+    out, todo = [], [pid]
+    while todo:
+        kids = children.get(todo.pop(), [])
+        out += kids
+        todo += kids
+    return out
+
+
+def _cpu_parts(filter_pid: int) -> dict:
+    """CPU seconds so far: the filter, its page server (its children), the browser (the
+    other descendants of this process)."""
+    server = _descendants(filter_pid)
+    browser = [p for p in _descendants(os.getpid()) if p != filter_pid and p not in server]
+    return {"filter": _cpu_s([filter_pid]), "server": _cpu_s(server), "browser": _cpu_s(browser)}
+
+
+def one_run(work: Path, cfg: Path, f: np.ndarray, rate: float, mode: str, cache: str) -> dict:
     import tifffile
+
+    serve = mode != "none"
 
     live, out = work / "camera", work / "run"
     for p in (live, out):
@@ -75,7 +115,9 @@ def one_run(work: Path, cfg: Path, f: np.ndarray, rate: float, serve: bool, cach
     proc = subprocess.Popen(cmd, stdout=subprocess.PIPE if serve else subprocess.DEVNULL, text=True,
                             env=dict(os.environ, PYTHONUNBUFFERED="1"))
     browser = pw = None
-    if serve:
+    if mode == "server":
+        next(line for line in proc.stdout if line.startswith("live page: "))
+    if mode == "page":
         url = next(line.split("live page: ")[1].strip() for line in proc.stdout
                    if line.startswith("live page: "))
         from playwright.sync_api import sync_playwright
@@ -88,7 +130,7 @@ def one_run(work: Path, cfg: Path, f: np.ndarray, rate: float, serve: bool, cach
         page.locator("text=waiting for the first reading").first.wait_for(timeout=60_000)
     else:
         time.sleep(3.0)  # the filter's setup, as the page's start gives it in the other run
-    tic = time.monotonic()
+    cpu0, tic = _cpu_parts(proc.pid), time.monotonic()
     for k, frame in enumerate(f):
         tmp = live / f".f{k}.tmp"
         tifffile.imwrite(tmp, frame, photometric="minisblack")
@@ -107,13 +149,16 @@ def one_run(work: Path, cfg: Path, f: np.ndarray, rate: float, serve: bool, cach
             break
         time.sleep(0.2)
     lag = time.monotonic() - tic - written
-    if serve:
+    cpu = _cpu_parts(proc.pid)
+    if browser is not None:
         browser.close()
         pw.stop()
+    if serve:
         proc.send_signal(2)
     proc.wait(timeout=60)
     return {"readings": info.get("readings"), "step_mean": info["step_s"]["mean"],
-            "step_p95": info["step_s"]["p95"], "written_s": written, "done_after_s": lag}
+            "step_p95": info["step_s"]["p95"], "written_s": written, "done_after_s": lag,
+            "cpu_s": {k: round(cpu[k] - cpu0[k], 2) for k in cpu}}
 
 
 def main(argv=None):
@@ -125,6 +170,9 @@ def main(argv=None):
     ap.add_argument("--binning", type=int, default=4,
                     help="sensors.camera.binning: the filter reads the means of BINNING x BINNING "
                          "blocks (1: every pixel)")
+    ap.add_argument("--modes", nargs="+", default=["none", "page"],
+                    choices=["none", "server", "page"],
+                    help="the runs of each repeat: no page, the server with no browser, the page")
     args = ap.parse_args(argv)
     work = Path(tempfile.mkdtemp(prefix="bench_live_"))
     text = (ROOT / "examples" / "tiny.toml").read_text()
@@ -137,17 +185,19 @@ def main(argv=None):
     f = frames(args.frames, args.rate, args.pixels)
     rows = []
     for rep in range(args.repeat):
-        for serve in (False, True):
-            r = one_run(work, cfg, f, args.rate, serve, cache)
-            rows.append((serve, r))
-            print(f"repeat {rep} {'page' if serve else 'no page'}: {r}", flush=True)
-    for serve in (False, True):
-        rs = [r for s, r in rows if s == serve]
-        print(f"{'with the page' if serve else 'without it'}: readings "
+        for mode in args.modes:
+            r = one_run(work, cfg, f, args.rate, mode, cache)
+            rows.append((mode, r))
+            print(f"repeat {rep} {mode}: {r}", flush=True)
+    for mode in args.modes:
+        rs = [r for m, r in rows if m == mode]
+        cpu = {k: np.mean([r["cpu_s"][k] for r in rs]) for k in rs[0]["cpu_s"]}
+        print(f"{mode}: readings "
               f"{[r['readings'] for r in rs]} of {args.frames - 1}, step mean "
               f"{1e3 * np.mean([r['step_mean'] for r in rs]):.1f} ms, p95 "
               f"{1e3 * np.mean([r['step_p95'] for r in rs]):.1f} ms, done "
-              f"{np.mean([r['done_after_s'] for r in rs]):.2f} s after the last frame")
+              f"{np.mean([r['done_after_s'] for r in rs]):.2f} s after the last frame; CPU s "
+              + ", ".join(f"{k} {v:.1f}" for k, v in cpu.items()))
     shutil.rmtree(work, ignore_errors=True)
 
 

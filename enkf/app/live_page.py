@@ -16,8 +16,14 @@ recorded run at its own pace (``tissue-enkf replay RUN_DIR``). The page has:
 - a status line: the time, the readings, the latest estimate, the latest advice, and
   ``finished`` once ``run.json`` says the run ended.
 
-The page polls the files every 100 ms and sends only what is new (bokeh's ``stream``):
-it keeps up with 10 Hz readings without taking anything from the filter's process.
+The server looks every 20 ms whether the filter wrote a reading (the sizes of
+``estimates.csv`` and ``advice.csv``) and then sends at once only what is new: the rows in
+one ``stream`` of one data source for all the curves, the frame when a new one came (float32).
+So the browser draws after the filter's step, while the filter waits for the next frame,
+and the page shows a reading within 20 ms of its line; without readings it sends what
+changed at least every 150 ms (the frames before the first reading, the risk map, the
+run's end). Started by the filter (``--parent``), the server lowers its own priority
+(``nice`` 10): the filter comes first.
 """
 
 from __future__ import annotations
@@ -25,11 +31,12 @@ from __future__ import annotations
 import argparse
 import os
 import sys
+import time
 from pathlib import Path
 
 import numpy as np
 
-from .live_source import BAND, POLL_MS, UNITS, RunSource, advice_columns, advice_text
+from .live_source import BAND, POLL_MS, UNITS, WATCH_MS, RunSource, advice_columns, advice_text
 
 __all__ = ["RunSource", "advice_columns", "advice_text", "make_document", "serve"]
 
@@ -68,17 +75,18 @@ def make_document(doc, source: RunSource, parent: int | None = None) -> None:
     f_risk.image(image="image", x=rext[0], y=rext[2], dw=rext[1] - rext[0], dh=rext[3] - rext[2],
                  color_mapper=risk_map, source=risk_src)
     f_risk.add_layout(ColorBar(color_mapper=risk_map, width=10), "right")
-    # the optics and the temperatures: filled once the header is known
+    # the optics and the temperatures: filled once the header is known; their curves share
+    # one data source, so that a reading is one stream (one message, one change in the browser)
+    series = ColumnDataSource({"t": []})
     sources: dict = {}
     figs = {}
 
     def band_figure(key, title, names, labels, y_label, width=360):
         f = figure(title=title, width=width, height=260, x_axis_label="time (s)",
                    y_axis_label=y_label, toolbar_location=None)
-        cols = {"t": []}
         for n in names:
-            cols.update({f"{n}_m": [], f"{n}_lo": [], f"{n}_hi": []})
-        src = ColumnDataSource(cols)
+            series.data.update({f"{n}_m": [], f"{n}_lo": [], f"{n}_hi": []})
+        src = series
         colours = Category10[10]
         for j, (n, lab) in enumerate(zip(names, labels, strict=True)):
             c = colours[j % 10]
@@ -93,7 +101,8 @@ def make_document(doc, source: RunSource, parent: int | None = None) -> None:
     advice_figs = column(Div(text=""))  # with advice.csv: when to stop, and the risks
     doc.add_root(column(title, status, row(f_frame, f_risk), plots, advice_figs))
     doc.title = f"tissue-enkf: {source.dir.name}"
-    state = {"last": None, "n": 0, "built": False, "done": False, "advice": None}
+    state = {"last": None, "n": 0, "built": False, "done": False, "advice": None,
+             "polled": -np.inf}
 
     def build_advice():
         cols = advice_columns(source.advice_header)
@@ -147,7 +156,8 @@ def make_document(doc, source: RunSource, parent: int | None = None) -> None:
         if cols["drift"]:
             f = figure(title="P(optics drift while heated)", width=360, height=260,
                        y_range=(0, 1), x_axis_label="time (s)", toolbar_location=None)
-            src = ColumnDataSource({"t": [], "w": []})
+            series.data["w"] = []
+            src = series
             f.line(x="t", y="w", source=src, line_width=2)
             sources["drift"], figs["drift"] = src, f
             children.append(f)
@@ -158,18 +168,13 @@ def make_document(doc, source: RunSource, parent: int | None = None) -> None:
         h = source.header
         idx = {c: i for i, c in enumerate(h)}
         a = np.array(rows, dtype=float)
-        t = a[:, idx["time_s"]]
-        for p in source.cols["params"]:
-            m, s = a[:, idx[f"{p}_mean"]], a[:, idx[f"{p}_std"]]
-            sources[p].stream({"t": t, f"{p}_m": m, f"{p}_lo": m - BAND * s,
-                               f"{p}_hi": m + BAND * s})
-        upd = {"t": t}
-        for n in source.cols["temps"]:
+        upd = {"t": a[:, idx["time_s"]]}
+        for n in source.cols["params"] + source.cols["temps"]:
             m, s = a[:, idx[f"{n}_mean"]], a[:, idx[f"{n}_std"]]
             upd.update({f"{n}_m": m, f"{n}_lo": m - BAND * s, f"{n}_hi": m + BAND * s})
-        sources["T"].stream(upd)
         if source.cols["drift"]:
-            sources["drift"].stream({"t": t, "w": a[:, idx["drift_weight"]]})
+            upd["w"] = a[:, idx["drift_weight"]]
+        series.stream(upd)
         state["last"], state["n"] = a[-1], state["n"] + len(rows)
 
     def status_text(done: bool) -> str:
@@ -207,7 +212,7 @@ def make_document(doc, source: RunSource, parent: int | None = None) -> None:
             stream_advice(adv)
         fr = source.frame()
         if fr is not None:
-            frame_src.data = {"image": [np.asarray(fr, float)]}
+            frame_src.data = {"image": [np.asarray(fr, np.float32)]}  # as recorded
             finite = fr[np.isfinite(fr)]
             if finite.size:
                 frame_map.low, frame_map.high = float(finite.min()), float(finite.max())
@@ -219,7 +224,15 @@ def make_document(doc, source: RunSource, parent: int | None = None) -> None:
             status.text = status_text(done)
             state["done"] = done
 
-    doc.add_periodic_callback(poll, POLL_MS)
+    def watch():
+        """Right after a reading (the browser then draws while the filter waits for the next
+        frame), else at least every POLL_MS."""
+        now = time.monotonic()
+        if source.grew() or now - state["polled"] >= POLL_MS / 1e3:
+            state["polled"] = now
+            poll()
+
+    doc.add_periodic_callback(watch, WATCH_MS)
 
 
 def serve(run_dir: str | Path, port: int = 5006, replay_speed: float | None = None,
@@ -258,6 +271,8 @@ def main(argv=None) -> int:
     ap.add_argument("--replay", type=float, default=None, metavar="SPEED")
     ap.add_argument("--parent", type=int, default=None)
     args = ap.parse_args(argv)
+    if args.parent is not None:  # the filter's page: the filter's steps come first
+        os.nice(10)
 
     def announce(url):
         print(url, flush=True)

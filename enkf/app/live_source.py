@@ -13,12 +13,17 @@ from pathlib import Path
 
 import numpy as np
 
-__all__ = ["BAND", "POLL_MS", "UNITS", "RunSource", "advice_columns", "advice_text", "load_array"]
+__all__ = ["BAND", "POLL_MS", "UNITS", "WATCH_MS", "RunSource", "advice_columns", "advice_text",
+           "load_array"]
 
 BAND = 2.0  #: the bands are mean +- 2 sd
 UNITS = {"mua": "1/cm", "mus": "1/cm", "VHC": "J/(cm^3 K)", "TC": "W/(cm K)",
           "beam_radius": "cm"}
-POLL_MS = 100
+#: ms: how often the page's server looks whether a reading came (two ``stat`` calls)
+WATCH_MS = 20
+#: ms: the longest wait between two updates of the page when no reading comes (the frames
+#: before the first reading, a filter behind the camera, the risk map, the run's end)
+POLL_MS = 150
 
 
 def _columns(header: list[str]) -> dict:
@@ -113,6 +118,7 @@ class RunSource:
         self.shown = 0
         self.t0 = time.monotonic()
         self._stamp = {}
+        self._sizes = None  # of estimates.csv and advice.csv, at the last grew()
         self.frames = None  # replay: (times, frames)
         self._advice = _CsvTail(self.dir / "advice.csv")
         self.advice_rows: list[list[float]] = []  # replay: every row, revealed by the clock
@@ -184,6 +190,20 @@ class RunSource:
             k += 1
         out, self.advice_shown = self.advice_rows[self.advice_shown:k], k
         return out
+
+    def grew(self) -> bool:
+        """Whether a reading came since the last call: estimates.csv or advice.csv changed
+        size (replay: the clock passed the next row's time)."""
+        if self.speed is not None:
+            return self.shown < len(self.rows) and self.rows[self.shown][0] <= self.now()
+        sizes = []
+        for name in ("estimates.csv", "advice.csv"):
+            try:
+                sizes.append(os.stat(self.dir / name).st_size)
+            except OSError:
+                sizes.append(-1)
+        grew, self._sizes = sizes != self._sizes, sizes
+        return grew
 
     def _load_recorded(self) -> None:
         self.rows = self._read_new()
