@@ -221,6 +221,42 @@ def test_identify_with_a_drift_bank_mixes_its_filters_by_weight(tissue):
     assert sum(w for _, w, _, _ in online_ensembles(ident)) == pytest.approx(1.0)
 
 
+def test_the_advice_of_drifting_filters_that_resume_one_run(tissue):
+    """The bank's later drifting filters resume the first one's run at its first restart
+    (enkf.tissue.identify.RunHead): after it their advice is, number for number, that of
+    filters run from the first reading, and before it the table takes the first one's
+    (the same members)."""
+    from enkf.tissue.drift import identify_bank
+    from enkf.tissue.identify import identify_single
+
+    s = hot_setup(tissue, drift=DriftBank(restart_delay=0.3, restart_weight=0.0), n_members=12)
+    times, data = tissue.twin_data(s, 1.2, 90.0, times=0.1 * np.arange(1, 41))
+
+    def from_the_start(*args, head=None, on_head=None, **kw):
+        return identify_single(*args, **kw)
+
+    runs = []
+    for run in (identify_single, from_the_start):
+        adv = Advisor(s, **LIMITS)
+        runs.append((identify_bank(s, times, data + 37.0, run, callback=adv), adv))
+    (est, adv), (alone, adv_alone) = runs
+    assert alone.component_forks is None
+    (name, (source, first)), = est.component_forks.items()
+    assert source == "drifting-2" and 0 < first < len(times)
+    own, whole = adv.tracks[name].advice, adv_alone.tracks[name].advice
+    assert sorted(own) == list(range(first + 1, len(times) + 1))
+    for k in range(len(times) + 1):
+        ref = whole[k] if k > first else adv_alone.tracks[source].advice[k]
+        np.testing.assert_array_equal((own if k > first else adv.tracks[source].advice)[k]
+                                      .target_time, ref.target_time)
+    # the table: the same as the whole runs' where the resumed filter's early steps are
+    # its source's (identical members, pooled once)
+    alone.component_forks = est.component_forks
+    for a, b in zip(adv.table(est), adv_alone.table(alone), strict=True):
+        np.testing.assert_array_equal(a.target_time, b.target_time)
+        assert a.risks == b.risks
+
+
 def test_bad_arguments_are_refused(tissue):
     s = hot_setup(tissue)
     for kw, match in ((dict(target=[[0, 0, 0.5]]), "target points must lie in the tissue"),

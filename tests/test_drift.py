@@ -191,6 +191,40 @@ def test_the_banks_still_filter_is_the_plain_filter(runs):
     np.testing.assert_allclose(est.param_mean[-1], mixed, rtol=1e-12)
 
 
+def test_the_drifting_filters_share_their_run_up_to_the_first_restart(runs):
+    """The drifting filters are one filter until their first restart: the later forms
+    resume the first one's run there (identify_bank's RunHead) and give, number for
+    number, what each gives run from the first reading."""
+    from enkf.tissue.drift import identify_bank
+    from enkf.tissue.identify import identify_single
+
+    s, times, r = runs
+    data, est = r["drifting"]
+
+    def from_the_start(*args, head=None, on_head=None, **kw):
+        return identify_single(*args, **kw)
+
+    alone = identify_bank(s, times, data, from_the_start)
+    first = est.components["drifting-2"].restarts[0]["readings"]
+    assert est.component_forks == {"drifting-9": ("drifting-2", first),
+                                   "drifting-logistic": ("drifting-2", first)}
+    assert alone.component_forks is None
+    for name, e in est.components.items():
+        a = alone.components[name]
+        for key in ("param_mean", "param_std", "tracked_mean", "tracked_std", "param_members",
+                    "innovation_loglik"):
+            np.testing.assert_array_equal(getattr(e, key), getattr(a, key), err_msg=f"{name} {key}")
+        assert [x["readings"] for x in e.restarts] == [x["readings"] for x in a.restarts]
+    np.testing.assert_array_equal(est.param_mean, alone.param_mean)
+    np.testing.assert_array_equal(est.drift_weight, alone.drift_weight)
+    # the resumed filters' steps before their restart are not counted again
+    forked = est.components["drifting-9"].step_latency_s[:first].sum()
+    assert forked > 0
+    assert est.step_latency_s.sum() == pytest.approx(
+        sum(e.step_latency_s.sum() for e in est.components.values())
+        - 2 * forked, rel=1e-9)
+
+
 def test_online_bank(runs):
     """One reading at a time: each estimate carries the drift's probability, and it ends
     on the side the batch run ends (the random numbers differ: see OnlineIdentifier)."""

@@ -287,5 +287,13 @@ class CoagulationForwardModel:
     def clamp_report(self) -> dict | None:
         return self.base.clamp_report()
 
+    @property
+    def clamp_counts(self) -> dict:
+        return self.base.clamp_counts
+
+    @clamp_counts.setter
+    def clamp_counts(self, value: dict) -> None:
+        self.base.clamp_counts = value
+
     def table_ranges(self) -> dict:
         return self.base.table_ranges()

@@ -16,8 +16,10 @@ heated; finding out is one reason to measure. :class:`DriftBank` (the default of
     "logistic"``, a logistic's segment (a ramp, a step at the onset of coagulation, a
     rise that saturates: :mod:`enkf.tissue.paths`), and relaxation of the
     temperatures' spread to the prior's (:attr:`DriftBank.rtps`). Before its first
-    restart each drifting filter is the same filter; the cooling readings after the
-    restarts tell the forms of the drift apart.
+    restart each drifting filter is the same filter, run once: the later forms resume
+    the first one's run there (:class:`~enkf.tissue.identify.RunHead`,
+    ``component_forks``); the cooling readings after the restarts tell the forms of
+    the drift apart.
 
 Each reading's density under each filter's forecast,
 :math:`\ell_{k,j} = \log p(y_k \mid y_{1:k-1}, \text{model } j)`
@@ -53,11 +55,6 @@ from .setup.drift_bank import STILL, DriftBank, bank_weights, prior_weights
 
 __all__ = ["STILL", "DriftBank", "bank_weights", "identify_bank", "mixture_estimates",
            "weighted_quantiles"]
-
-
-
-
-
 
 
 def weighted_quantiles(values: Sequence[np.ndarray], weights: Sequence[float],
@@ -98,10 +95,13 @@ def _component_loglik(est, M: int) -> np.ndarray:
 
 
 def mixture_estimates(parts: dict, weights: np.ndarray, predicted: np.ndarray,
-                      loglik_mix: np.ndarray, wall_s: float):
+                      loglik_mix: np.ndarray, wall_s: float, forks: dict | None = None):
     """One :class:`~enkf.tissue.TissueEstimates` from the bank's filters ``parts``
     (``{name: TissueEstimates}``, the still filter first, each with ``param_members``)
-    under ``weights`` (M + 1, K) (:func:`bank_weights`)."""
+    under ``weights`` (M + 1, K) (:func:`bank_weights`); ``forks`` ``{name: (source,
+    readings)}``: filter ``name`` resumed ``source``'s run after that many readings
+    (:class:`~enkf.tissue.identify.RunHead`), whose steps it did not compute again."""
+    forks = forks or {}
     names = list(parts)
     ests = [parts[n] for n in names]
     M = weights.shape[0] - 1
@@ -154,8 +154,10 @@ def mixture_estimates(parts: dict, weights: np.ndarray, predicted: np.ndarray,
     final = int(np.argmax(w_rows[-1]))
     alive_to_end = [e for e in ests if not e.diverged]
     latency = np.zeros(k_end - 1)
-    for e in {id(e): e for e in ests}.values():  # a filter that stands for several: once
-        latency[:len(e.step_latency_s)] += e.step_latency_s[:k_end - 1]
+    for name, e in {id(e): (n, e) for n, e in zip(names, ests, strict=True)}.values():
+        # a filter that stands for several: once; a resumed one from where it resumed
+        first = forks[name][1] if name in forks else 0
+        latency[first:len(e.step_latency_s)] += e.step_latency_s[first:k_end - 1]
     still = names.index(STILL)
     return TissueEstimates(
         times=times, names=ests[0].names, param_mean=p_mean, param_std=p_std,
@@ -170,7 +172,8 @@ def mixture_estimates(parts: dict, weights: np.ndarray, predicted: np.ndarray,
         restarts=tuple({**r, "component": names[j]} for j, e in enumerate(ests)
                        for r in e.restarts),
         drift_weight=1.0 - w_rows[:, still], components=dict(parts),
-        component_weights={n: w_rows[:, j] for j, n in enumerate(names)})
+        component_weights={n: w_rows[:, j] for j, n in enumerate(names)},
+        component_forks=dict(forks) or None)
 
 
 def identify_bank(setup, times: np.ndarray, data: np.ndarray, run_single: Callable, *,
@@ -197,12 +200,16 @@ def identify_bank(setup, times: np.ndarray, data: np.ndarray, run_single: Callab
 
     heated = np.array([setup.mean_power(float(a), float(b)) > 0
                        for a, b in zip(np.r_[0.0, times[:-1]], times, strict=True)], bool)
+    heads = []  # the first drifting filter's run up to its first restart
     for j, name in enumerate(names):
         if j > 1 and not parts[names[1]].restarts:
             # the drifting filters differ only in their restarts' form: with none, each is
             # the first one (the same seeds and settings, the same gates' decisions)
             parts[name], lls = parts[names[1]], [*lls, lls[1]]
             continue
+        # with restarts, each resumes the first one's run at its first restart
+        shared = dict(head=heads[0]) if j > 1 and heads else \
+            dict(on_head=heads.append) if j == 1 else {}
         gate = None
         if j:
             pair = prior[[0, j]] / prior[[0, j]].sum()
@@ -216,12 +223,14 @@ def identify_bank(setup, times: np.ndarray, data: np.ndarray, run_single: Callab
         with warnings.catch_warnings(record=True) as rec:
             warnings.simplefilter("always")
             est = run_single(setups[name], times, data, callback=tagged(name),
-                                   param_bounds=param_bounds, restart_gate=gate)
+                             param_bounds=param_bounds, restart_gate=gate, **shared)
         caught.append((name, rec))
         parts[name] = est
         lls.append(_component_loglik(est, M))
     w, pred, mix = bank_weights(np.column_stack(lls), prior, bank.switch_prob, heated)
-    est = mixture_estimates(parts, w, pred, mix, time.perf_counter() - tic)
+    forks = {n: (names[1], heads[0].readings) for n in names[2:]
+             if heads and parts[n] is not parts[names[1]]}
+    est = mixture_estimates(parts, w, pred, mix, time.perf_counter() - tic, forks)
     est.clamped = _bank_clamps(parts, est.component_weights)
     _reissue(caught, est)
     return est

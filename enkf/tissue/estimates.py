@@ -83,6 +83,10 @@ class TissueEstimates:
     #: with ``setup.parameters.drift``: ``{name: (M+1,)}``, each filter's probability after each
     #: reading (their sum is 1); else None
     component_weights: dict | None = None
+    #: with ``setup.parameters.drift``: ``{name: (source, readings)}``, the drifting filters
+    #: that resumed ``source``'s run after ``readings`` readings (its first restart): their
+    #: steps up to there are ``source``'s; None where none did
+    component_forks: dict | None = None
 
     @property
     def leading_component(self) -> str | None:

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import copy
 import math
 import warnings
 
@@ -125,6 +126,16 @@ class TissueForwardModel:
                 "above_table": {k: float(v) for k, v in c["hi"].items()},
                 "table": {k: list(v) for k, v in rng.items()},
                 "advice": "; ".join(advice) or "widen filter.emulator's ranges"}
+
+    @property
+    def clamp_counts(self) -> dict:
+        """The clamps counted so far (:meth:`clamp_report`'s raw numbers), a copy; set it to
+        carry another run's counts on (a run resumed from a :class:`~enkf.tissue.identify.RunHead`)."""
+        return copy.deepcopy(self._clamp)
+
+    @clamp_counts.setter
+    def clamp_counts(self, value: dict) -> None:
+        self._clamp = copy.deepcopy(value)
 
     def _count_clamps(self, optics: dict) -> None:
         self._clamp["calls"] += 1

@@ -2,10 +2,11 @@
 
 from __future__ import annotations
 
+import copy
 import time
 import warnings
 from collections.abc import Callable
-from dataclasses import replace
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -21,7 +22,27 @@ from .pieces import assemble
 from .restart import restart_ensemble, restart_points, restarted
 from .setup import TissueFilterSetup
 
-__all__ = ["identify", "identify_single"]
+__all__ = ["RunHead", "identify", "identify_single"]
+
+
+@dataclass
+class RunHead:
+    """A filter's run up to its first restart from the smoother, before the restart: the
+    forms of a drift bank's drifting filters (the same filter until then) share it
+    (:func:`enkf.tissue.drift.identify_bank`), each resuming from it with its own restart."""
+
+    #: the index of the segment whose restart comes next (len(segments): after the last)
+    segment: int
+    #: readings read before the restart
+    readings: int
+    #: the results of the segments before it (:class:`~enkf.problem.FilterResult`)
+    parts: list
+    #: the recorded rows (the tracked temperatures, bands, members), copies
+    rows: dict
+    #: the adaptive inflation's running estimate (a copy), or None
+    inflation: object
+    #: the emulator's clamp counts so far
+    clamp_counts: dict
 
 
 def _join(parts: list[FilterResult]) -> FilterResult:
@@ -80,11 +101,18 @@ def identify(setup: TissueFilterSetup, times: np.ndarray, data: np.ndarray, *,
 def identify_single(setup: TissueFilterSetup, times: np.ndarray, data: np.ndarray, *,
                      callback: Callable[[StepReport], None] | None = None,
                      param_bounds: np.ndarray | None = None,
-                     restart_gate: Callable[[int, np.ndarray], bool] | None = None
-                     ) -> TissueEstimates:
+                     restart_gate: Callable[[int, np.ndarray], bool] | None = None,
+                     head: RunHead | None = None,
+                     on_head: Callable[[RunHead], None] | None = None) -> TissueEstimates:
     """:func:`identify` with one filter. ``restart_gate(a, loglik)``, if given, is asked
     before each restart (after reading ``a``, with the filter's log-densities of readings
-    1..a): False skips that restart, and the filter goes on with its members."""
+    1..a): False skips that restart, and the filter goes on with its members.
+
+    ``on_head(head)``, if given, receives the run up to its first restart (a
+    :class:`RunHead`, just before the smoother runs); ``head`` resumes a run from there
+    (another setup's whose filter is the same up to its restarts: the restart, and every
+    step after it, are this setup's; the callback sees the restart's replay and the steps
+    after it)."""
     pieces = assemble(setup, param_bounds, float(times[0]) if len(times) else None)
     P_track, n = pieces.P_track, pieces.n
     n_off = setup.sensors.n_offsets
@@ -98,6 +126,9 @@ def identify_single(setup: TissueFilterSetup, times: np.ndarray, data: np.ndarra
     eff_mean = np.full((M + 1, 2), np.nan) if coag else None
     eff_std = np.full((M + 1, 2), np.nan) if coag else None
     frac = np.full(M + 1, np.nan) if coag else None
+
+    rows = dict(tr_mean=tr_mean, tr_std=tr_std, q_lo=q_lo, q_hi=q_hi, members=members,
+                eff_mean=eff_mean, eff_std=eff_std, frac=frac)
 
     def record(rep: StepReport, outside: bool = True):
         tr_mean[rep.step], tr_std[rep.step] = pieces.tracked(rep)
@@ -133,10 +164,27 @@ def identify_single(setup: TissueFilterSetup, times: np.ndarray, data: np.ndarra
     # the filter's dense products are small (50 x 5000): threaded BLAS only spins, and
     # on a busy machine it is 20-30 times slower (measured); numba kernels keep the cores
     keep_freed_memory()  # ensemble-sized temporaries: reuse, not fresh page faults
+    start = 0
+    if head is not None:  # resume another run's start (the same filter up to here)
+        start, parts = head.segment, list(head.parts)
+        for key, arr in head.rows.items():
+            if arr is not None:
+                np.copyto(rows[key], arr)
+        inflation = copy.deepcopy(head.inflation)
+        pieces.model.clamp_counts = head.clamp_counts
+
+    def keep_head(j, a):
+        if on_head is not None and not restarts and (head is None or j > start):
+            on_head(RunHead(j, a, list(parts), {k: None if v is None else v.copy()
+                                                  for k, v in rows.items()},
+                            copy.deepcopy(inflation), pieces.model.clamp_counts))
+
     for j, (a, b) in enumerate(zip(edges[:-1], edges[1:], strict=True)):
+        if j < start:
+            continue
         if not j:
             problem = pieces.problem(times[:b], data[:b])
-        elif restart_gate is not None and not restart_gate(a, np.concatenate(
+        elif j > start and restart_gate is not None and not restart_gate(a, np.concatenate(
                 [p.innovation_loglik for p in parts])):
             # no restart here: the filter goes on with its members
             last = parts[-1]
@@ -144,6 +192,7 @@ def identify_single(setup: TissueFilterSetup, times: np.ndarray, data: np.ndarra
                                      prior=lambda rng, N, X=last.state_ensemble,
                                      th=last.param_ensemble: (X.copy(), th.copy()))
         else:
+            keep_head(j, a)
             X, theta, w = restart_ensemble(setup, pieces, times[:a], data[:a], on_step)
             restarts.append({"time_s": float(times[a - 1]), "readings": a, "wall_s": w})
             problem = pieces.problem(times[a:b], data[a:b], t0=float(times[a - 1]),
@@ -171,9 +220,11 @@ def identify_single(setup: TissueFilterSetup, times: np.ndarray, data: np.ndarra
                                    f"{times[a - 1]:g} s, reading {a})" if j else "")
             break
         parts.append(res)
-    if diverged is None and M in cuts and (restart_gate is None or restart_gate(
-            M, np.concatenate([p.innovation_loglik for p in parts]))):
+    if diverged is None and M in cuts and (start == len(edges) - 1 or restart_gate is None
+                                           or restart_gate(M, np.concatenate(
+                                               [p.innovation_loglik for p in parts]))):
         # a restart after the last reading: the final ensemble
+        keep_head(len(edges) - 1, M)
         X, theta, w = restart_ensemble(setup, pieces, times, data, on_step)
         restarts.append({"time_s": float(times[-1]), "readings": M, "wall_s": w})
         parts.append(restarted(parts[-1], X, theta))

@@ -349,16 +349,19 @@ class Advisor:
         # a bank runs the drifting filters once when none restarts: the others share it
         same = {n: next((k for k in keys if k in comps and comps[k] is comps[n]), n)
                 for n in weights}
+        # one that resumed another's run at its first restart: that one's steps before it
+        forks = getattr(est, "component_forks", None) or {}
         steps = sorted({s for k in keys for s in self.tracks[k].advice})
         rows = []
         for s in steps:
             parts = {}
             for n, w in weights.items():
-                tr = self.tracks.get(same[n])
+                src = forks[n][0] if n in forks and s <= forks[n][1] else same[n]
+                tr = self.tracks.get(src)
                 adv = None if tr is None else tr.advice.get(s)
                 wk = 1.0 if w is None else float(w[min(s, len(w) - 1)])
                 if adv is not None and wk > 0:
-                    parts[same[n]] = (parts.get(same[n], (0.0,))[0] + wk, adv)
+                    parts[src] = (parts.get(src, (0.0,))[0] + wk, adv)
             if parts:
                 rows.append(self.mix(list(parts.values())))
         return rows
