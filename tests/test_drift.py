@@ -239,6 +239,30 @@ def test_online_bank(runs):
     np.testing.assert_allclose(ident.restart_times, [2.3])
 
 
+def test_online_drifting_filters_run_once_up_to_the_first_restart(runs):
+    """One reading at a time the later drifting filters follow the first one (run once)
+    up to its first restart, where each branches off with its own restart: the same
+    estimates, weights and members as when each runs from the first reading."""
+    s, times, r = runs
+    shared, alone = OnlineIdentifier(s), OnlineIdentifier(s)
+    assert shared._followers == [2, 3]
+    alone._followers = []  # each filter runs every reading
+    for t, y in zip(times, r["drifting"][0], strict=True):
+        a, b = shared.update(t, y), alone.update(t, y)
+        np.testing.assert_array_equal(a.param_mean, b.param_mean)
+        np.testing.assert_array_equal(a.tracked_std, b.tracked_std)
+        assert a.drift_weight == b.drift_weight
+        if not shared.restart_times:
+            assert shared._followers == [2, 3]
+    assert shared._followers == [] and shared.restart_times == alone.restart_times
+    np.testing.assert_allclose(shared.restart_times, [2.3])
+    for (na, wa, Xa, ta), (nb, wb, Xb, tb) in zip(shared.filter_ensembles(),
+                                                  alone.filter_ensembles(), strict=True):
+        assert na == nb and wa == wb
+        np.testing.assert_array_equal(Xa, Xb)
+        np.testing.assert_array_equal(ta, tb)
+
+
 def test_setup_refuses_a_bank_it_cannot_run(tissue):
     with pytest.raises(ValueError, match="needs kind = .random_walk."):
         tissue.setup(drift=DriftBank(), parameter_model="trend")

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import copy
 import time
 import warnings
 from dataclasses import dataclass, replace
@@ -78,9 +79,14 @@ class OnlineIdentifier:
             self.time, self.history, self.restart_times = 0.0, [], []
             self.names, self.n_obs = first.names, first.n_obs
             self._pieces = first._pieces
-            for j, comp in enumerate(self._bank.values()):
+            comps = list(self._bank.values())
+            for j, comp in enumerate(comps):
                 if j:  # a drifting filter restarts where the data support it
                     comp._restart_gate = lambda t, ll, j=j: self._drift_supported(t, ll, j)
+            #: the drifting filters after the first: the same filter as the first until its
+            #: first restart, which they follow (run once) until then
+            self._followers = list(range(2, len(comps))) if len(comps) > 2 and \
+                comps[1].setup.restarts.times else []
             return
         self._restart_gate = None
         self._pieces = assemble(setup, param_bounds, dt_hint)
@@ -126,8 +132,8 @@ class OnlineIdentifier:
         """(N, n_nodes) deg C: the members' temperatures after the last reading (with a
         drift bank, those of the filter the data support most)."""
         if self._bank is not None:
-            comps = list(self._bank.values())
-            return comps[int(np.argmax(np.where(self._alive, self._weights, -1.0)))].state_ensemble
+            return self._member_filter(int(np.argmax(np.where(self._alive, self._weights,
+                                                               -1.0)))).state_ensemble
         return self._X
 
     @property
@@ -135,9 +141,14 @@ class OnlineIdentifier:
         """(N, n_par) the members' parameters after the last reading, ``names`` first
         (with a drift bank, those of the filter the data support most)."""
         if self._bank is not None:
-            comps = list(self._bank.values())
-            return comps[int(np.argmax(np.where(self._alive, self._weights, -1.0)))].param_ensemble
+            return self._member_filter(int(np.argmax(np.where(self._alive, self._weights,
+                                                               -1.0)))).param_ensemble
         return self._theta
+
+    def _member_filter(self, j: int) -> OnlineIdentifier:
+        """The bank's filter whose members filter ``j`` has (a follower: the first
+        drifting filter's)."""
+        return list(self._bank.values())[1 if j in self._followers else j]
 
     def filter_ensembles(self) -> list[tuple]:
         """``[(name, weight, X (N, n_nodes) deg C, theta (N, n_par)), ...]``: each filter's
@@ -149,8 +160,8 @@ class OnlineIdentifier:
             return [(None, 1.0, self._X, self._theta)]
         w = np.where(self._alive, self._weights, 0.0)
         w = w / w.sum()
-        return [(name, float(w[j]), c._X, c._theta) for j, (name, c) in
-                enumerate(self._bank.items()) if self._alive[j]]
+        return [(name, float(w[j]), self._member_filter(j)._X, self._member_filter(j)._theta)
+                for j, name in enumerate(self._bank) if self._alive[j]]
 
     def innovation_persistence(self, laser: str = "off") -> tuple[float, int]:
         """Lag-1 correlation of the normalized innovations of the readings so far, while
@@ -171,6 +182,11 @@ class OnlineIdentifier:
                              f"got {y.size}")
         if self._bank is not None:
             return self._update_bank(t, y)
+        return self._finish(t, y, *self._step(t, y))
+
+    def _step(self, t: float, y: np.ndarray):
+        """The filter's forecast to ``t`` and its analysis of ``y``: the members change,
+        nothing else does (:meth:`_finish` keeps the reading, restarts, reports)."""
         X, theta = self._X, self._theta
         problem = self._pieces.problem(np.array([t]), y[None, :],
                                        prior=lambda rng, N: (X, theta), t0=self.time,
@@ -188,6 +204,11 @@ class OnlineIdentifier:
             # with OpenBLAS's threads on 2 busy cores a 256-pixel one took 0.2 s, not 3 ms
             T_mean, T_std = self._pieces.tracked(last[-1])
         self._X, self._theta = res.state_ensemble, res.param_ensemble
+        return res, last, T_mean, T_std, tic
+
+    def _finish(self, t: float, y: np.ndarray, res, last, T_mean, T_std, tic) -> OnlineEstimate:
+        """After :meth:`_step`: keep the reading, restart from the smoother where it is
+        due, and report the estimate."""
         p_mean, p_std = res.param_mean[-1], res.param_std[-1]
         if self.setup.restarts.times:  # keep the readings for the smoother's restarts
             self._readings.append((t, y.copy()))
@@ -236,16 +257,52 @@ class OnlineIdentifier:
                                   np.ones(2, bool))
         return bool(w[1] > self.setup.parameters.drift.restart_weight)
 
+    def _update_followed(self, comp: OnlineIdentifier, t: float, y: np.ndarray):
+        """The first drifting filter's update while the others follow it: at a reading
+        where a restart is due, each follower takes the members, readings, model error and
+        inflation it had before the restart and restarts in its own form (the same numbers
+        as each run from the first reading); where none restarted they follow on. Returns
+        its estimate and ``{j: estimate}`` of the followers that branched off here."""
+        step = comp._step(t, y)
+        if not comp.setup.restart_after(comp.time, t):
+            return comp._finish(t, y, *step), {}
+        before = (comp._X, comp._theta, list(comp._readings), copy.deepcopy(comp._noise),
+                  copy.deepcopy(comp._inflation), list(comp.history), comp.time,
+                  comp._pieces.model.clamp_counts)
+        e = comp._finish(t, y, *step)
+        comps, out = list(self._bank.values()), {}
+        res, last, T_mean, T_std, tic = step
+        for j in self._followers:
+            f = comps[j]
+            X, theta, readings, noise, inflation, history, t_before, clamps = before
+            f._X, f._theta, f._readings = X.copy(), theta.copy(), list(readings)
+            f._noise, f._inflation = copy.deepcopy(noise), copy.deepcopy(inflation)
+            f.history, f.time, f._pieces.model.clamp_counts = list(history), t_before, clamps
+            out[j] = f._finish(t, y, res, list(last), T_mean, T_std, tic)
+        if not comp.restart_times and not any(comps[j].restart_times for j in self._followers):
+            return e, {}  # no restart went ahead: the followers still follow
+        self._followers = []
+        return e, out
+
     def _update_bank(self, t: float, y: np.ndarray) -> OnlineEstimate:
         from ..problem import FilterDivergence
 
         tic = time.perf_counter()
         ests, lls, errors = [], [], []
+        forked = {}  # the followers' estimates at the first drifting filter's restart
         for j, comp in enumerate(self._bank.values()):
             e = None
-            if self._alive[j]:
+            if j in self._followers:
+                e = ests[1]  # the first drifting filter's: the same filter so far
+                self._alive[j] = self._alive[1]
+            elif j in forked:
+                e = forked[j]
+            elif self._alive[j]:
                 try:
-                    e = comp.update(t, y)
+                    if j == 1 and self._followers:
+                        e, forked = self._update_followed(comp, t, y)
+                    else:
+                        e = comp.update(t, y)
                 except FilterDivergence as err:
                     self._alive[j] = False
                     errors.append(err)
