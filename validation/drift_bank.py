@@ -131,7 +131,8 @@ def report(rows: list, path: Path, command: str) -> None:
              "runs in which a drifting filter restarted from the smoother (where none did, "
              "the restart forms never ran and the row holds for any). The shipped default's "
              f"restart forms are {forms_of({})}; rows of other forms are alternatives "
-             "measured on the same seeds and data. The wall times were measured with two "
+             "measured on the same seeds and data (a row of n seeds holds seeds 0 to n - 1, "
+             "the first n of the 20). The wall times were measured with two "
              "or three runs sharing the two cores.", "",
              "| truth | case | seeds | estimates | parameter bands | T bands >= 0.9 | "
              "T coverage z = 0, 0.1, 0.2 | mua, mus at 15 s (median) | truth | P(drift) | "
