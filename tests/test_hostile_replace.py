@@ -174,7 +174,17 @@ def test_ctrl_c_while_the_old_run_is_removed_keeps_the_new_one(tmp_path, capsys,
     assert [p.name for p in tmp_path.iterdir()] == ["out"]  # the rest of the old run removed
 
 
-def test_a_signal_while_the_run_is_put_in_place_waits_for_it(tmp_path, monkeypatch):
+@pytest.fixture
+def ctrl_c_raises():
+    """Ctrl-C raises KeyboardInterrupt, as in a terminal, also where the tests were started
+    as a background job (whose SIGINT is ignored)."""
+    previous = signal.signal(signal.SIGINT, signal.default_int_handler)
+    yield
+    signal.signal(signal.SIGINT, previous)
+
+
+def test_a_signal_while_the_run_is_put_in_place_waits_for_it(tmp_path, monkeypatch,
+                                                             ctrl_c_raises):
     (tmp_path / "out").mkdir()
     write_run(tmp_path / "out", "old")
     real = rundir._exchange
@@ -191,3 +201,16 @@ def test_a_signal_while_the_run_is_put_in_place_waits_for_it(tmp_path, monkeypat
     assert which_run(tmp_path / "out") == "new"
     assert [p.name for p in tmp_path.iterdir()] == ["out"]
     assert signal.getsignal(signal.SIGINT) is signal.default_int_handler
+
+
+def test_a_signal_the_process_ignores_stays_ignored():
+    """A run started with Ctrl-C ignored (a background job, nohup for SIGHUP) keeps it
+    ignored while its output is put in place: nothing is held back or delivered later."""
+    previous = signal.signal(signal.SIGINT, signal.SIG_IGN)
+    try:
+        with rundir.signals_deferred():
+            assert signal.getsignal(signal.SIGINT) is signal.SIG_IGN
+            os.kill(os.getpid(), signal.SIGINT)
+        assert signal.getsignal(signal.SIGINT) is signal.SIG_IGN
+    finally:
+        signal.signal(signal.SIGINT, previous)

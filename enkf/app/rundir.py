@@ -150,6 +150,8 @@ def signals_deferred():
     old = {}
     try:
         for s in _SIGNALS:
+            if signal.getsignal(s) is signal.SIG_IGN:
+                continue  # ignored by the process (nohup, a background job): stays so
             old[s] = signal.signal(s, lambda signum, frame: got.append(signum))
         yield
     finally:
