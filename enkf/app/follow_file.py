@@ -104,6 +104,10 @@ def _tifffile_quiet():
         log.setLevel(level)
 
 
+class _NotWhole(Exception):
+    """A page of a growing file not written whole yet: read again at the next change."""
+
+
 class _TiffPages:
     """The pages of a growing TIFF file, each read once."""
 
@@ -114,15 +118,18 @@ class _TiffPages:
         self.timing = None  # where the times come from, fixed by the first page
         self.finterval = None  # s, ImageJ's
         self.pending: list[float] = []  # tifffile metadata's times not given to a page yet
+        self.settle_s = 1.0  # s, follow_file's settle_s
+        self.retried: dict[int, float] = {}  # page: when it was first read without its time
 
     def reset(self) -> None:
         """Follow the chain from its start again (a file replaced)."""
         self.ptr = None  # offset of the pointer to the next page's IFD
         self.walked = 0  # pages passed in this file's chain
 
-    def read(self, first: int, hold_newest: bool) -> tuple[list, bool]:
+    def read(self, first: int, hold_newest: bool, whole: bool = True) -> tuple[list, bool]:
         """The pages from ``first`` on as ``(k, time or None, frame or _BadFrame)``, and
-        whether the newest was held back."""
+        whether the newest was held back; ``whole`` False: the file changed within
+        ``settle_s``, and a page without its time is read again later, not skipped."""
         out, held = [], False
         try:
             with _tifffile_quiet(), open_regular(self.path, "camera file") as fh, \
@@ -155,7 +162,7 @@ class _TiffPages:
                             break
                         handle.seek(offset)
                         page = self.tifffile.TiffPage(tf, index=self.walked)
-                        out.append(self._frame(page, self.walked))
+                        out.append(self._frame(page, self.walked, whole=whole))
                     elif self.timing == "metadata":  # read before (a file replaced): its
                         handle.seek(offset)  # time is passed over, the later ones kept
                         self._metadata_time(self.tifffile.TiffPage(tf, index=self.walked))
@@ -171,18 +178,37 @@ class _TiffPages:
             raise _Unreadable("no image in this TIFF file")
         return out, held
 
-    def _frame(self, page, k: int) -> tuple:
+    def _frame(self, page, k: int, whole: bool = True) -> tuple:
+        """``(k, time, frame or _BadFrame)`` of ``page``; while the file still grows
+        (``whole`` False) a page whose time is not written yet raises (read again at the
+        next change) instead of being skipped."""
         path = self.path
         t = None
         try:
             if page.shape is None or len(page.shape) != 2:
                 raise _BadFrame(f"a page of shape {page.shape}, not one frame (ny, nx)")
-            _declared(path, (1, *page.shape), np.dtype(page.dtype).itemsize)
-            frame = _frames_array(path, page.asarray())[0]
+            try:
+                _declared(path, (1, *page.shape), np.dtype(page.dtype).itemsize)
+            except ValueError as err:
+                raise _BadFrame(str(err).removeprefix(f"{path}: ")) from None
+            # tifffile's errors (they may name the file too) mean a page not whole yet:
+            # they reach read(), which reads the page again at the file's next change
+            raw = page.asarray()
+            try:
+                frame = _frames_array(path, raw)[0]
+            except ValueError as err:
+                raise _BadFrame(str(err).removeprefix(f"{path}: ")) from None
             if self.timing is None:  # the first page says where the times are
                 self.timing = ("metadata" if self._metadata_times(page) is not None
                                else "imagej" if self.finterval
                                else "clock" if _page_clock(page) is not None else "none")
+            if self.timing == "metadata" and self._metadata_times(page) is None \
+                    and not self.pending and not whole:
+                # a page whose description comes after it: read again while the file
+                # grows, for settle_s at most (then a page without a time is skipped)
+                first_try = self.retried.setdefault(k, time.monotonic())
+                if time.monotonic() - first_try <= self.settle_s:
+                    raise _NotWhole("its time is not in the file yet")
             if self.timing == "metadata":
                 t = self._metadata_time(page)
             elif self.timing == "imagej":
@@ -193,10 +219,6 @@ class _TiffPages:
                     raise _BadFrame("no DateTime tag, unlike the first page")
         except _BadFrame as err:
             return k, t, err
-        except ValueError as err:
-            if str(path) not in str(err):  # tifffile's: the page is not whole yet
-                raise
-            return k, t, _BadFrame(str(err).removeprefix(f"{path}: "))
         return k, t, frame
 
     @staticmethod
@@ -243,7 +265,7 @@ class _Hdf5Rows:
         except OSError:
             return h5py.File(self.path, "r", locking=False)
 
-    def read(self, first: int, hold_newest: bool) -> tuple[list, bool]:
+    def read(self, first: int, hold_newest: bool, whole: bool = True) -> tuple[list, bool]:
         """The rows from ``first`` on as ``(k, time or None, frame or _BadFrame)``, and
         whether the newest was held back."""
         path, h5py = self.path, self.h5py
@@ -332,6 +354,7 @@ def follow_file(path: str | Path, start: Callable, on_update: Callable, *,
             raise ValueError(f"--follow: {path} did not appear within {wait_for_file_s:g} s")
         time.sleep(poll_s)
     source = (_TiffPages if suffix in TIFF_SUFFIXES else _Hdf5Rows)(path)
+    source.settle_s = settle_s
 
     def skip(name, reason):
         skipped.append((name, reason))
@@ -370,7 +393,8 @@ def follow_file(path: str | Path, start: Callable, on_update: Callable, *,
         if sig is not None and (sig != read_at or (held and quiet)):
             read_at = sig
             try:
-                got, held = source.read(n_read, hold_newest=not quiet)
+                got, held = source.read(n_read, hold_newest=not quiet,
+                                        whole=time.monotonic() - last > settle_s)
                 failing = None
             except _Unreadable as err:
                 held = False
