@@ -111,14 +111,14 @@ class _NotWhole(Exception):
 class _TiffPages:
     """The pages of a growing TIFF file, each read once."""
 
-    def __init__(self, path: Path):
+    def __init__(self, path: Path, settle_s: float = 1.0):
         self.path = path
         self.tifffile = require("tifffile", f"the TIFF file {str(path)!r}")
         self.reset()
         self.timing = None  # where the times come from, fixed by the first page
         self.finterval = None  # s, ImageJ's
         self.pending: list[float] = []  # tifffile metadata's times not given to a page yet
-        self.settle_s = 1.0  # s, follow_file's settle_s
+        self.settle_s = settle_s  # s: how long a page without its time is read again
         self.retried: dict[int, float] = {}  # page: when it was first read without its time
 
     def reset(self) -> None:
@@ -267,7 +267,8 @@ class _Hdf5Rows:
 
     def read(self, first: int, hold_newest: bool, whole: bool = True) -> tuple[list, bool]:
         """The rows from ``first`` on as ``(k, time or None, frame or _BadFrame)``, and
-        whether the newest was held back."""
+        whether the newest was held back (``whole``: as for TIFF pages; a row is whole
+        once the dataset is resized to hold it)."""
         path, h5py = self.path, self.h5py
         try:
             with self._open() as f:
@@ -353,8 +354,7 @@ def follow_file(path: str | Path, start: Callable, on_update: Callable, *,
         if time.monotonic() > deadline:
             raise ValueError(f"--follow: {path} did not appear within {wait_for_file_s:g} s")
         time.sleep(poll_s)
-    source = (_TiffPages if suffix in TIFF_SUFFIXES else _Hdf5Rows)(path)
-    source.settle_s = settle_s
+    source = _TiffPages(path, settle_s) if suffix in TIFF_SUFFIXES else _Hdf5Rows(path)
 
     def skip(name, reason):
         skipped.append((name, reason))
