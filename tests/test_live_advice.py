@@ -109,3 +109,43 @@ def test_replay_reveals_the_advice_with_its_readings(tmp_path):
     source = RunSource(run, replay_speed=1.0)
     assert len(source.new_advice()) == 1  # the second row's time has not come
     assert source.advice_header[0] == "time_s"
+
+
+def test_the_axes_widen_in_steps_and_hold_every_curve(tmp_path):
+    """The curves' ranges are set by the server: they hold all the data drawn (bands
+    included) and change only when a reading leaves them, so that the browser does not
+    relabel the axes at every reading."""
+    from bokeh.document import Document
+    from bokeh.models import Plot, Range1d
+
+    from enkf.app.live_page import SPARE, TIME_SPAN_S
+
+    run = _run_dir(tmp_path, [_row(0.1, (4.0, 3.0, 5.0), 0.3, 0.5)])
+    (run / "advice.csv").unlink()
+    source = RunSource(run)
+    doc = Document()
+    poll = _poll_of(doc, source)
+    poll()
+
+    def ranges():
+        figs = [f for f in doc.select({"type": Plot}) if f.title is not None]
+        return {f.title.text: (f.x_range.start, f.x_range.end, f.y_range.start, f.y_range.end)
+                for f in figs if isinstance(f.y_range, Range1d)}
+
+    first = ranges()
+    mua = next(v for k, v in first.items() if k.startswith("mua"))
+    assert mua[:2] == (0.0, TIME_SPAN_S)
+    assert mua[2] < 1.5 - 0.2 and mua[3] > 1.5 + 0.2  # the band, mean +- 2 sd
+    temps = next(v for k, v in first.items() if k.startswith("temperatures"))
+    assert temps[2] < 40 - 1.0 and temps[3] > 40 + 1.0
+    with open(run / "estimates.csv", "a", encoding="utf-8") as fh:  # inside: nothing moves
+        fh.write("0.2,1.52,0.1,121,10,40.2,0.5\n")
+    poll()
+    assert ranges() == first
+    with open(run / "estimates.csv", "a", encoding="utf-8") as fh:  # above, and later
+        fh.write("6.1,2.5,0.1,121,10,40.2,0.5\n")
+    poll()
+    mua = next(v for k, v in ranges().items() if k.startswith("mua"))
+    assert mua[:2] == (0.0, 2 * TIME_SPAN_S)
+    assert mua[3] >= 2.7 and mua[2] == first[next(k for k in first if k.startswith("mua"))][2]
+    assert mua[3] == pytest.approx(2.7 + SPARE * (2.7 - mua[2]))

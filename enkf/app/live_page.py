@@ -29,6 +29,7 @@ run's end). Started by the filter (``--parent``), the server lowers its own prio
 from __future__ import annotations
 
 import argparse
+import math
 import os
 import sys
 import time
@@ -40,10 +41,13 @@ from .live_source import BAND, POLL_MS, UNITS, WATCH_MS, RunSource, advice_colum
 
 __all__ = ["RunSource", "advice_columns", "advice_text", "make_document", "serve"]
 
+TIME_SPAN_S = 5.0  #: the time axes reach the next multiple of this (s)
+SPARE = 0.2  #: a range widens by this share of its span beyond the data
+
 def make_document(doc, source: RunSource, parent: int | None = None) -> None:
     """Lay out the page in the bokeh document ``doc`` and poll ``source``."""
     from bokeh.layouts import column, row
-    from bokeh.models import ColorBar, ColumnDataSource, Div, LinearColorMapper
+    from bokeh.models import ColorBar, ColumnDataSource, Div, LinearColorMapper, Range1d
     from bokeh.palettes import Category10, Inferno256, Viridis256
     from bokeh.plotting import figure
 
@@ -80,26 +84,44 @@ def make_document(doc, source: RunSource, parent: int | None = None) -> None:
     series = ColumnDataSource({"t": []})
     sources: dict = {}
     figs = {}
+    # the curves' axes: ranges the server widens in steps (Range1d), not ranges the browser
+    # fits to the data at every reading (DataRange1d relabels the axes and lays the page out
+    # again each time: most of the browser's work at 10 Hz)
+    t_range = Range1d(0.0, TIME_SPAN_S)
+    y_ranges: dict = {}  # figure key -> (Range1d, the columns it spans)
+    fitted: set = set()  # the ids of the y ranges fitted to data at least once
 
     def band_figure(key, title, names, labels, y_label, width=360):
+        y_range = Range1d(0.0, 1.0)
         f = figure(title=title, width=width, height=260, x_axis_label="time (s)",
-                   y_axis_label=y_label, toolbar_location=None)
+                   y_axis_label=y_label, toolbar_location=None, x_range=t_range,
+                   y_range=y_range)
         for n in names:
             series.data.update({f"{n}_m": [], f"{n}_lo": [], f"{n}_hi": []})
+        y_ranges[key] = (y_range, [f"{n}_{k}" for n in names for k in ("lo", "hi")])
         src = series
         colours = Category10[10]
-        for j, (n, lab) in enumerate(zip(names, labels, strict=True)):
+        for j, n in enumerate(names):
             c = colours[j % 10]
             f.varea(x="t", y1=f"{n}_lo", y2=f"{n}_hi", source=src, fill_color=c, fill_alpha=0.25)
-            f.line(x="t", y=f"{n}_m", source=src, line_color=c, line_width=2, legend_label=lab)
-        f.legend.location = "top_left"
-        f.legend.background_fill_alpha = 0.5
+            f.line(x="t", y=f"{n}_m", source=src, line_color=c, line_width=2)
         sources[key], figs[key] = src, f
-        return f
+        if len(names) == 1:  # the title names the one curve
+            return f
+        # several curves: their names once, in the page (a legend in the plot is drawn again
+        # at every reading)
+        key_text = " &nbsp; ".join(
+            f"<span style='color:{colours[j % 10]}'>&#9644; {lab}</span>"
+            for j, lab in enumerate(labels))
+        return column(f, Div(text=key_text, width=width, styles={"font-size": "13px"}))
 
     plots = column(Div(text=""))
     advice_figs = column(Div(text=""))  # with advice.csv: when to stop, and the risks
-    doc.add_root(column(title, status, row(f_frame, f_risk), plots, advice_figs))
+    # the title and the status line are roots of their own: the status line's new text at
+    # every reading then lays out only itself, not the plots
+    doc.add_root(title)
+    doc.add_root(status)
+    doc.add_root(column(row(f_frame, f_risk), plots, advice_figs))
     doc.title = f"tissue-enkf: {source.dir.name}"
     state = {"last": None, "n": 0, "built": False, "done": False, "advice": None,
              "polled": -np.inf}
@@ -107,25 +129,30 @@ def make_document(doc, source: RunSource, parent: int | None = None) -> None:
     def build_advice():
         cols = advice_columns(source.advice_header)
         q = cols["quantiles"]
+        y_range = Range1d(0.0, 1.0)
         f = figure(title=f"when to stop the laser: median, {q[0]}%-{q[1]}%", width=420,
                    height=260, x_axis_label="time (s)", y_axis_label="stop at (s)",
-                   toolbar_location=None)
+                   toolbar_location=None, x_range=t_range, y_range=y_range)
         src = ColumnDataSource({"t": [], "m": [], "lo": [], "hi": []})
         f.varea(x="t", y1="lo", y2="hi", source=src, fill_color="green", fill_alpha=0.25)
         f.line(x="t", y="m", source=src, line_color="green", line_width=2)
         sources["advice"] = src
+        y_ranges["advice"] = (y_range, ["lo", "hi", "m"])
         children = [f]
         if cols["risks"]:
             g = figure(title="risks under the plan", width=420, height=260, y_range=(0, 1),
                        x_axis_label="time (s)", y_axis_label="probability",
-                       toolbar_location=None)
+                       toolbar_location=None, x_range=t_range)
             rsrc = ColumnDataSource({"t": [], **{c: [] for c in cols["risks"].values()}})
-            for j, (label, c) in enumerate(cols["risks"].items()):
-                g.line(x="t", y=c, source=rsrc, line_width=2, legend_label=label,
-                       line_color=("magenta", "red")[j % 2])
-            g.legend.location = "top_left"
+            colours = ("magenta", "red")
+            for j, c in enumerate(cols["risks"].values()):
+                g.line(x="t", y=c, source=rsrc, line_width=2, line_color=colours[j % 2])
             sources["risks"] = rsrc
-            children.append(g)
+            key_text = " &nbsp; ".join(
+                f"<span style='color:{colours[j % 2]}'>&#9644; {label}</span>"
+                for j, label in enumerate(cols["risks"]))
+            children.append(column(g, Div(text=key_text, width=420,
+                                          styles={"font-size": "13px"})))
         advice_figs.children = [row(*children)]
 
     def stream_advice(rows):
@@ -136,8 +163,10 @@ def make_document(doc, source: RunSource, parent: int | None = None) -> None:
         a[~np.isfinite(a)] = np.nan  # beyond the horizon: not drawn
         t = a[:, idx["time_s"]]
         med, lo, hi = cols["stop"]
-        sources["advice"].stream({"t": t, "m": a[:, idx[med]], "lo": a[:, idx[lo]],
-                                  "hi": a[:, idx[hi]]})
+        new = {"t": t, "m": a[:, idx[med]], "lo": a[:, idx[lo]], "hi": a[:, idx[hi]]}
+        sources["advice"].stream(new)
+        widen_time(t)
+        widen(y_ranges["advice"], new)
         if "risks" in sources:
             sources["risks"].stream({"t": t, **{c: a[:, idx[c]] for c in cols["risks"].values()}})
         state["advice"] = rows[-1]
@@ -155,7 +184,8 @@ def make_document(doc, source: RunSource, parent: int | None = None) -> None:
                                     temps, labels, "deg C", width=480))
         if cols["drift"]:
             f = figure(title="P(optics drift while heated)", width=360, height=260,
-                       y_range=(0, 1), x_axis_label="time (s)", toolbar_location=None)
+                       y_range=(0, 1), x_axis_label="time (s)", toolbar_location=None,
+                       x_range=t_range)
             series.data["w"] = []
             src = series
             f.line(x="t", y="w", source=src, line_width=2)
@@ -175,7 +205,33 @@ def make_document(doc, source: RunSource, parent: int | None = None) -> None:
         if source.cols["drift"]:
             upd["w"] = a[:, idx["drift_weight"]]
         series.stream(upd)
+        widen_time(upd["t"])
+        for key in source.cols["params"] + ["T"]:
+            widen(y_ranges[key], upd)
         state["last"], state["n"] = a[-1], state["n"] + len(rows)
+
+    def widen_time(t):
+        t = t[np.isfinite(t)]
+        if t.size and t.max() > t_range.end:  # in steps of TIME_SPAN_S
+            t_range.end = TIME_SPAN_S * math.ceil(t.max() / TIME_SPAN_S + 1e-9)
+
+    def widen(entry, new):
+        """Widen a curve's y range to hold ``new`` (columns -> values), with room to spare
+        (SPARE of the span on the side it grows), so that it changes now and then."""
+        rng, names = entry
+        vals = np.concatenate([np.asarray(new[n], float).ravel() for n in names])
+        vals = vals[np.isfinite(vals)]
+        if not vals.size:
+            return
+        lo, hi = float(vals.min()), float(vals.max())
+        first = id(rng) not in fitted
+        if not first and rng.start <= lo and hi <= rng.end:
+            return
+        start, end = (lo, hi) if first else (min(rng.start, lo), max(rng.end, hi))
+        pad = SPARE * max(end - start, 1e-6 * max(abs(start), abs(end), 1e-9))
+        rng.update(start=start - pad if first or lo < rng.start else start,
+                   end=end + pad if first or hi > rng.end else end)
+        fitted.add(id(rng))
 
     def status_text(done: bool) -> str:
         last = state["last"]
@@ -215,7 +271,14 @@ def make_document(doc, source: RunSource, parent: int | None = None) -> None:
             frame_src.data = {"image": [np.asarray(fr, np.float32)]}  # as recorded
             finite = fr[np.isfinite(fr)]
             if finite.size:
-                frame_map.low, frame_map.high = float(finite.min()), float(finite.max())
+                # the colour scale is refitted only when a frame leaves it or fills less than
+                # half of it (a scale fitted to every frame relabels the colour bar at 10 Hz)
+                lo, hi = float(finite.min()), float(finite.max())
+                low, high = frame_map.low, frame_map.high
+                if (low is None or lo < low or hi > high
+                        or hi - lo < 0.5 * (high - low)):
+                    pad = SPARE * max(hi - lo, 1e-6)
+                    frame_map.update(low=lo - pad, high=hi + pad)
         rk = source.risk()
         if rk is not None:
             risk_src.data = {"image": [np.asarray(rk, float)]}
