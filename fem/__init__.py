@@ -54,6 +54,7 @@ from .bc import FACES, FaceBC, HeatBoundary, face_facets, face_nodes
 from .damage import (
     GAS_CONSTANT,
     KELVIN,
+    DamageIntegral,
     advance_damage,
     arrhenius_increment,
     element_to_node,
@@ -72,7 +73,7 @@ from .mesh import (
     element_voxel_index,
     structured_grid,
 )
-from .probes import probe_matrix
+from .probes import GroupMaxima, probe_matrix
 from .source import load_vector, voxel_load_matrix
 from .stepper import HeatStepper
 
@@ -90,7 +91,9 @@ __all__ = [
     "GAS_CONSTANT",
     "KELVIN",
     "BoxGrid",
+    "DamageIntegral",
     "FaceBC",
+    "GroupMaxima",
     "HeatBoundary",
     "HeatStepper",
     "KroneckerSolver",

@@ -415,3 +415,16 @@ def layered_modes_solve(Y, mux, muy, alpha, beta, cd, co, kd, ko, md, mo, hd):
             for r in range(Pz - 2, -1, -1):
                 for q in range(Py):
                     X[r, q] -= cp[r, q] * X[r + 1, q]
+
+
+@numba.njit(cache=True, nogil=True)
+def group_maxima(T, nodes, starts, out):
+    """out[g] = max(out[g], max T[nodes[starts[g]:starts[g + 1]]]): the groups' running
+    maxima in one pass, no gathered copy."""
+    for g in range(starts.size - 1):
+        m = out[g]
+        for k in range(starts[g], starts[g + 1]):
+            v = T[nodes[k]]
+            if v > m:
+                m = v
+        out[g] = m

@@ -34,7 +34,7 @@ import math
 import numba
 import numpy as np
 
-__all__ = ["GAS_CONSTANT", "KELVIN", "RULES", "advance_damage", "arrhenius_increment",
+__all__ = ["GAS_CONSTANT", "KELVIN", "RULES", "DamageIntegral", "advance_damage", "arrhenius_increment",
            "element_to_node", "fractional_damage", "update_damage"]
 
 GAS_CONSTANT = 8.3144598  #: J mol^-1 K^-1, as MCmatlab
@@ -130,6 +130,49 @@ def advance_damage(omega, T_old, T_new, dt: float, E, A, rule: str = "midpoint")
     if not np.shares_memory(work, omega):
         omega[...] = work.reshape(shape)
     return omega
+
+
+class DamageIntegral:
+    """:func:`advance_damage` for one set of points whose ``E`` and ``A`` stay: checked once,
+    so that a long run's steps pay only the kernel.
+
+    Parameters
+    ----------
+    E, A : array (npoints,)
+        J/mol and 1/s, as :func:`advance_damage`'s.
+    rule : {"midpoint", "trapezoid"}
+    """
+
+    def __init__(self, E, A, rule: str = "midpoint"):
+        if rule not in RULES:
+            raise ValueError(f"rule must be one of {RULES}, got {rule!r}")
+        E, A = _rates(E, A)
+        if E.ndim != 1 or A.shape != E.shape:
+            raise ValueError(f"E and A must be (npoints,) arrays, got {E.shape} and {A.shape}")
+        self.E = np.ascontiguousarray(E)
+        self.A = np.ascontiguousarray(A)
+        self.trapezoid = rule == "trapezoid"
+
+    def advance(self, omega: np.ndarray, T_old: np.ndarray, T_new: np.ndarray,
+                dt: float) -> np.ndarray:
+        """Add one step's damage to ``omega`` ((npoints,) float64, in place) from
+        ``T_old`` to ``T_new`` ((npoints,) deg C) over ``dt`` s; returns ``omega``."""
+        n = self.E.size
+        if not (dt > 0 and math.isfinite(dt)):
+            raise ValueError(f"dt must be > 0, got {float(dt)!r}")
+        if (not isinstance(omega, np.ndarray) or omega.dtype != np.float64
+                or omega.shape != (n,) or not omega.flags.c_contiguous):
+            raise ValueError(f"omega must be a contiguous float64 array of shape ({n},), got "
+                             f"{type(omega).__name__} {getattr(omega, 'dtype', '')} "
+                             f"{np.shape(omega)}")
+        T_old = np.ascontiguousarray(T_old, dtype=np.float64)
+        T_new = np.ascontiguousarray(T_new, dtype=np.float64)
+        if T_old.shape != (n,) or T_new.shape != (n,):
+            raise ValueError(f"T_old and T_new must be ({n},), got {T_old.shape} and "
+                             f"{T_new.shape}")
+        _advance(omega.reshape(1, n), T_old.reshape(1, n), T_new.reshape(1, n), self.E,
+                 self.A, float(dt), self.trapezoid)
+        return omega
 
 
 def arrhenius_increment(T_old, T_new, dt: float, E, A, rule: str = "midpoint") -> np.ndarray:

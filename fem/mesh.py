@@ -262,7 +262,12 @@ def box_mesh(nx: int, ny: int, nz: int, Lx: float, Ly: float, Lz: float) -> Mesh
     strides = np.array([(grid.ny + 1) * (grid.nz + 1), grid.nz + 1, 1])
     local = _KUHN @ strides  # (6, 4) node-number offsets
     t = (base[:, None, None] + local[None, :, :]).reshape(-1, 4).T
-    return MeshTet(p, np.ascontiguousarray(t, dtype=np.int32), sort_t=False)
+    mesh = MeshTet(p, np.ascontiguousarray(t, dtype=np.int32), sort_t=False)
+    try:  # structured_grid's answer, known here (detecting it sorts every element's nodes)
+        mesh._fem_structured_grid = grid
+    except AttributeError:  # pragma: no cover - frozen mesh classes
+        pass
+    return mesh
 
 
 def element_volumes(mesh, signed: bool = False) -> np.ndarray:

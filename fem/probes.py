@@ -7,7 +7,7 @@ import scipy.sparse as sp
 
 from .locate import locate
 
-__all__ = ["probe_matrix"]
+__all__ = ["GroupMaxima", "probe_matrix"]
 
 
 def probe_matrix(mesh, points) -> sp.csr_matrix:
@@ -54,3 +54,36 @@ def probe_matrix(mesh, points) -> sp.csr_matrix:
     indptr = np.arange(0, 4 * n + 1, 4, dtype=idx)
     # the four vertices of an element are distinct nodes: no duplicate entries
     return sp.csr_matrix((bary.T.ravel(), indices, indptr), shape=(n, mesh.p.shape[1]))
+
+
+class GroupMaxima:
+    """The highest value each group of nodes has reached (e.g. each medium's nodes), kept
+    up to date after every step in one pass over the nodes.
+
+    Parameters
+    ----------
+    groups : sequence of int arrays
+        The node indices of each group (a group may be empty; groups may share nodes).
+    """
+
+    def __init__(self, groups):
+        from ._kernels import group_maxima
+
+        self._kernel = group_maxima
+        groups = [np.asarray(g, dtype=np.int64).ravel() for g in groups]
+        self.nodes = np.concatenate(groups) if groups else np.zeros(0, np.int64)
+        self.starts = np.concatenate([[0], np.cumsum([g.size for g in groups])]).astype(np.int64)
+        self.highest = int(self.nodes.max()) if self.nodes.size else -1
+
+    def update(self, values: np.ndarray, out: np.ndarray) -> np.ndarray:
+        """``out[g] = max(out[g], values[group g].max())``, in place ((ngroups,) float64);
+        an empty group leaves its entry."""
+        values = np.ascontiguousarray(values, dtype=np.float64)
+        if self.highest >= values.size:
+            raise ValueError(f"the groups hold node {self.highest}, the values only "
+                             f"{values.size}")
+        if out.dtype != np.float64 or out.shape != (self.starts.size - 1,):
+            raise ValueError(f"out must be ({self.starts.size - 1},) float64, got "
+                             f"{out.dtype} {out.shape}")
+        self._kernel(values, self.nodes, self.starts, out)
+        return out

@@ -108,3 +108,27 @@ def test_vtu_and_pvd_read_back_with_meshio_and_pyvista(tmp_path):
     np.testing.assert_allclose(last.point_data["T"], T + 2)
     with pytest.raises(ValueError, match=r"point_data 'T' must have"):
         write_vtu(tmp_path / "b.vtu", mesh, point_data={"T": T[:-1]})
+
+
+def test_damage_integral_checked_once_adds_what_advance_damage_adds():
+    """fem.DamageIntegral (E and A checked when made) adds bit for bit what
+    advance_damage adds, for both rules, and refuses what advance_damage refuses."""
+    import fem
+
+    rng = np.random.default_rng(0)
+    E = np.where(rng.random(50) < 0.3, 0.0, 4.2e5)
+    A = np.where(E > 0, 7.6e66, 0.0)
+    T0, T1 = rng.uniform(37, 90, 50), rng.uniform(37, 90, 50)
+    for rule in fem.damage.RULES:
+        a, b = np.zeros(50), np.zeros(50)
+        fem.advance_damage(a, T0, T1, 1e-3, E, A, rule)
+        fem.DamageIntegral(E, A, rule).advance(b, T0, T1, 1e-3)
+        np.testing.assert_array_equal(a, b)
+        assert a.max() > 0
+    d = fem.DamageIntegral(E, A)
+    with pytest.raises(ValueError, match="dt"):
+        d.advance(np.zeros(50), T0, T1, 0.0)
+    with pytest.raises(ValueError, match="omega"):
+        d.advance(np.zeros(49), T0, T1, 1e-3)
+    with pytest.raises(ValueError, match="A must be"):
+        fem.DamageIntegral(E, -A)

@@ -35,6 +35,9 @@ def test_box_mesh_counts_orientation_and_volume():
     check_mesh(m)
     assert structured_grid(m) == g
     assert structured_grid(MeshTet.init_tensor(*g.node_axes())) is None
+    # box_mesh records its grid; the detection from the nodes and elements finds the same
+    copy = MeshTet(m.p.copy(), m.t.copy(), sort_t=False)
+    assert not hasattr(copy, "_fem_structured_grid") and structured_grid(copy) == g
 
 
 def test_element_voxel_index_maps_media():

@@ -140,3 +140,16 @@ def test_structured_locate_matches_the_bucket_search():
     v2 = np.einsum("kn,kn->n", b2[:, ok], f[mesh.t[:, e2[ok]]])
     np.testing.assert_allclose(v1, v2, atol=1e-12)
     assert b1.min() >= 0 and np.allclose(b1[:, ok].sum(axis=0), 1)
+
+
+def test_group_maxima_keep_each_groups_running_maximum():
+    import fem
+
+    gm = fem.GroupMaxima([np.array([0, 2]), np.array([], int), np.array([1, 2, 3])])
+    out = np.array([5.0, -np.inf, 0.0])
+    gm.update(np.array([1.0, 4.0, 3.0, -2.0]), out)
+    np.testing.assert_array_equal(out, [5.0, -np.inf, 4.0])
+    gm.update(np.array([9.0, 0.0, 0.0, 0.0]), out)
+    np.testing.assert_array_equal(out, [9.0, -np.inf, 4.0])
+    with pytest.raises(ValueError, match="node 3"):
+        gm.update(np.zeros(3), out)

@@ -191,9 +191,14 @@ def run_heat(model) -> None:  # noqa: C901  (one loop with its callbacks)
         E_vox = np.array([m.E if m.E is not None else 0.0 for m in media])[M.ravel()]
         A_vox = np.array([m.A if m.A is not None else 0.0 for m in media])[M.ravel()]
         T_vox_old = S.to_voxels(T0).ravel()
+        node_damage = fem.DamageIntegral(E_node, A_node)  # checked once, not every step
+        voxel_damage = fem.DamageIntegral(E_vox, A_vox)
+    media_maxima = fem.GroupMaxima(S.medium_nodes)
     if not chained:
         HS.max_media_temps = np.array([T0[n].max() if n.size else -np.inf
                                        for n in S.medium_nodes])
+    else:  # a run that goes on from an earlier one (or its saved outputs)
+        HS.max_media_temps = np.array(HS.max_media_temps, dtype=np.float64)
     snap_every = max(1, (len(times) - 1) // HS.n_snapshots) if HS.n_snapshots else 0
     if not chained or HS.snapshots is None:
         HS.snapshots = [(t_offset, T0.copy())] if snap_every else []
@@ -312,13 +317,11 @@ def run_heat(model) -> None:  # noqa: C901  (one loop with its callbacks)
     def advance_state(dt, T_old, T_new):
         nonlocal T_vox_old
         if E_node is not None:
-            fem.advance_damage(Omega, T_old, T_new, dt, E_node, A_node)
+            node_damage.advance(Omega, T_old, T_new, dt)
             T_vox_new = S.to_voxels(T_new).ravel()
-            fem.advance_damage(Omega_vox, T_vox_old, T_vox_new, dt, E_vox, A_vox)
+            voxel_damage.advance(Omega_vox, T_vox_old, T_vox_new, dt)
             T_vox_old = T_vox_new
-        for i, nodes in enumerate(S.medium_nodes):
-            if nodes.size:
-                HS.max_media_temps[i] = max(HS.max_media_temps[i], float(T_new[nodes].max()))
+        media_maxima.update(T_new, HS.max_media_temps)
 
     def on_step(k, t1, T_old, T_new):
         nonlocal n_update
