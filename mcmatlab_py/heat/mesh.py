@@ -75,11 +75,14 @@ def voxels_to_nodes(L, values) -> np.ndarray:
     return (L @ v.ravel()) / (L @ np.ones(L.shape[1]))
 
 
-def _nodes_of(t: np.ndarray, npoints: int) -> np.ndarray:
-    """The sorted nodes of the elements ``t`` (4, n): ``np.unique(t)`` without its sort."""
-    seen = np.zeros(npoints, dtype=bool)
-    seen[t.ravel()] = True
-    return np.flatnonzero(seen).astype(t.dtype, copy=False)
+def _media_nodes(t: np.ndarray, elem_medium: np.ndarray, n_media: int,
+                 npoints: int) -> list[np.ndarray]:
+    """The sorted nodes of each medium's elements (``t`` (4, n), ``elem_medium`` (n,)), all
+    media in one pass over the elements."""
+    seen = np.zeros((n_media, npoints), dtype=bool)
+    for a in range(t.shape[0]):
+        seen[elem_medium, t[a]] = True
+    return [np.flatnonzero(seen[i]).astype(t.dtype, copy=False) for i in range(n_media)]
 
 
 class Setup:
@@ -105,8 +108,8 @@ class Setup:
         medium_type = np.int16 if int(M.max(initial=0)) < 2**15 else np.int64
         self.elem_medium = M.ravel().astype(medium_type)[self.elem_voxel]
         self._to_voxels = None
-        self.medium_nodes = [_nodes_of(self.mesh.t[:, self.elem_medium == i],
-                                       self.mesh.p.shape[1]) for i in range(len(G.media))]
+        self.medium_nodes = _media_nodes(self.mesh.t, self.elem_medium, len(G.media),
+                                         self.mesh.p.shape[1])
 
     def to_voxels(self, nodal) -> np.ndarray:
         """(nx, ny, nz): a nodal field evaluated at the voxel centres (P1 interpolation)."""

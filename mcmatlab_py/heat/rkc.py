@@ -109,8 +109,20 @@ def spectral_radius(A, mass: np.ndarray, free: np.ndarray | None = None) -> floa
     iterations.
     """
     A = sp.csr_array(A)
-    rows = np.asarray(abs(A).sum(axis=1)).ravel() / mass
+    rows = np.empty(A.shape[0])
+    _abs_row_sums(A.indptr.astype(np.int64), A.data.astype(np.float64), rows)
+    rows /= mass
     return float(rows.max() if free is None else rows[free].max(initial=0.0))
+
+
+@numba.njit(cache=True)
+def _abs_row_sums(indptr, data, out):  # pragma: no cover - numba
+    """out[i] = sum |A[i, :]| of a CSR matrix (no |A| copy)."""
+    for i in range(out.size):
+        acc = 0.0
+        for q in range(indptr[i], indptr[i + 1]):
+            acc += abs(data[q])
+        out[i] = acc
 
 
 @numba.njit(cache=True)
@@ -189,6 +201,52 @@ def _stage_banded(diag, off, strides, Yp, Y0, Ypp, F0, load, w, a0, mu, nu, mut_
                   + gt_h * F0[i])
 
 
+@numba.njit(cache=True)
+def _banded_from_csr(indptr, indices, data, diag, off, strides):  # pragma: no cover - numba
+    """Fill ``diag`` and ``off`` (3, n) from a CSR matrix; ``strides`` (3,) gets the
+    distances above the diagonal. False if the pattern has more than three distances or
+    an entry without its mirror image of equal value."""
+    n = indptr.size - 1
+    m = 0  # distances found
+    upper = np.zeros(3, np.int64)
+    lower = np.zeros(3, np.int64)
+    for i in range(n):
+        for q in range(indptr[i], indptr[i + 1]):
+            o = indices[q] - i
+            v = data[q]
+            if o == 0:
+                diag[i] += v
+                continue
+            d = o if o > 0 else -o
+            k = -1
+            for r in range(m):
+                if strides[r] == d:
+                    k = r
+            if k < 0:
+                if m == 3:
+                    return False
+                strides[m] = d
+                k = m
+                m += 1
+            if o > 0:
+                off[k, i] += v
+                upper[k] += 1
+            else:  # row i + o's entry at distance d, read before this row
+                if off[k, i + o] != v:
+                    return False
+                lower[k] += 1
+    for k in range(3):
+        if upper[k] != lower[k]:
+            return False
+    # unused distances: beyond the last row, so that they couple nothing
+    big = 1
+    for k in range(m):
+        big = max(big, strides[k] + 1)
+    for k in range(m, 3):
+        strides[k] = big
+    return True
+
+
 def banded_operator(A):
     """``(diag, off, strides)`` of a symmetric sparse ``A`` whose entries lie on at most
     three diagonals above the main one (and their mirror images), or None.
@@ -199,24 +257,14 @@ def banded_operator(A):
     product reads 5 numbers a node instead of 13, and no scattered indices.
     """
     A = sp.csr_array(A)
+    A.sum_duplicates()
     n = A.shape[0]
-    coo = A.tocoo()
-    d = coo.col.astype(np.int64) - coo.row.astype(np.int64)
-    strides = np.unique(d[d > 0])
-    if strides.size > 3 or not np.array_equal(np.unique(-d[d < 0]), strides):
+    diag, off, strides = np.zeros(n), np.zeros((3, n)), np.zeros(3, np.int64)
+    if not _banded_from_csr(A.indptr.astype(np.int64), A.indices.astype(np.int64),
+                            A.data.astype(np.float64), diag, off, strides):
         return None
-    diag = A.diagonal().astype(np.float64)
-    off = np.zeros((3, n))  # fewer strides: the rest couple nothing
-    for k, o in enumerate(strides):
-        up = d == o
-        off[k, coo.row[up]] = coo.data[up]
-        low = d == -o  # symmetric: A[i + o, i] == A[i, i + o]
-        mirror = np.zeros(n)
-        mirror[coo.col[low]] = coo.data[low]
-        if not np.array_equal(mirror, off[k]):
-            return None
-    pad = [1 + int(strides.max(initial=0))] * (3 - strides.size)  # beyond the last row
-    return diag, off, np.sort(np.concatenate([strides, pad])).astype(np.int64)
+    order = np.argsort(strides, kind="stable")
+    return diag, np.ascontiguousarray(off[order]), strides[order]
 
 
 @numba.njit(cache=True)
