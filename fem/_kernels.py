@@ -428,3 +428,20 @@ def group_maxima(T, nodes, starts, out):
             if v > m:
                 m = v
         out[g] = m
+
+
+@numba.njit(cache=True)
+def kuhn_elements(nx, ny, nz, local, out):
+    """out (4, 6 nx ny nz): the six Kuhn elements of each voxel, voxel v's as 6 v .. 6 v + 5;
+    ``local`` (6, 4) their node-number offsets from the voxel's low corner."""
+    sy = nz + 1
+    sx = (ny + 1) * sy
+    e = 0
+    for i in range(nx):
+        for j in range(ny):
+            for k in range(nz):
+                base = i * sx + j * sy + k
+                for s in range(6):
+                    for a in range(4):
+                        out[a, e] = base + local[s, a]
+                    e += 1

@@ -255,14 +255,11 @@ def box_mesh(nx: int, ny: int, nz: int, Lx: float, Ly: float, Lz: float) -> Mesh
     X, Y, Z = np.meshgrid(xs, ys, zs, indexing="ij")
     p = np.vstack([X.ravel(), Y.ravel(), Z.ravel()])
 
-    i, j, k = np.meshgrid(
-        np.arange(grid.nx), np.arange(grid.ny), np.arange(grid.nz), indexing="ij"
-    )
-    base = grid.node_index(i.ravel(), j.ravel(), k.ravel())  # low corner per voxel
     strides = np.array([(grid.ny + 1) * (grid.nz + 1), grid.nz + 1, 1])
-    local = _KUHN @ strides  # (6, 4) node-number offsets
-    t = (base[:, None, None] + local[None, :, :]).reshape(-1, 4).T
-    mesh = MeshTet(p, np.ascontiguousarray(t, dtype=np.int32), sort_t=False)
+    local = _KUHN @ strides  # (6, 4) node-number offsets from each voxel's low corner
+    t = np.empty((4, 6 * grid.nvoxels), dtype=np.int32)
+    _kernels.kuhn_elements(grid.nx, grid.ny, grid.nz, local.astype(np.int64), t)
+    mesh = MeshTet(p, t, sort_t=False)
     try:  # structured_grid's answer, known here (detecting it sorts every element's nodes)
         mesh._fem_structured_grid = grid
     except AttributeError:  # pragma: no cover - frozen mesh classes

@@ -162,26 +162,22 @@ def _banded_row(i, n, diag, off, strides, Y):  # pragma: no cover - numba
 
 
 @numba.njit(cache=True, inline="always")
-def _banded_inner(i, diag, a, b, c, o1, o2, o3, Y):  # pragma: no cover - numba
-    """(A Y)_i away from the ends: every neighbour exists."""
-    return (diag[i] * Y[i] + a[i] * Y[i + o1] + a[i - o1] * Y[i - o1]
-            + b[i] * Y[i + o2] + b[i - o2] * Y[i - o2]
-            + c[i] * Y[i + o3] + c[i - o3] * Y[i - o3])
+def _banded_at(i, n, diag, off, strides, Y):  # pragma: no cover - numba
+    """(A Y)_i for A banded (:func:`banded_operator`: three strides, sorted)."""
+    o1, o2, o3 = strides[0], strides[1], strides[2]
+    if o3 <= i < n - o3:  # every neighbour exists: no branches
+        return (diag[i] * Y[i] + off[0, i] * Y[i + o1] + off[0, i - o1] * Y[i - o1]
+                + off[1, i] * Y[i + o2] + off[1, i - o2] * Y[i - o2]
+                + off[2, i] * Y[i + o3] + off[2, i - o3] * Y[i - o3])
+    return _banded_row(i, n, diag, off, strides, Y)
 
 
 @numba.njit(cache=True)
 def _tendency_banded(diag, off, strides, Y, load, w, out):  # pragma: no cover - numba
-    """out = w (load - A Y), A banded (:func:`banded_operator`: three strides, sorted)."""
+    """:func:`_tendency` with A banded."""
     n = Y.size
-    o1, o2, o3 = strides[0], strides[1], strides[2]
-    a, b, c = off[0], off[1], off[2]
-    lo, hi = min(o3, n), max(n - o3, min(o3, n))
     for i in range(n):
-        if lo <= i < hi:
-            acc = _banded_inner(i, diag, a, b, c, o1, o2, o3, Y)
-        else:
-            acc = _banded_row(i, n, diag, off, strides, Y)
-        out[i] = w[i] * (load[i] - acc)
+        out[i] = w[i] * (load[i] - _banded_at(i, n, diag, off, strides, Y))
 
 
 @numba.njit(cache=True)
@@ -189,14 +185,8 @@ def _stage_banded(diag, off, strides, Yp, Y0, Ypp, F0, load, w, a0, mu, nu, mut_
                   out):  # pragma: no cover - numba
     """:func:`_stage` with A banded."""
     n = Yp.size
-    o1, o2, o3 = strides[0], strides[1], strides[2]
-    a, b, c = off[0], off[1], off[2]
-    lo, hi = min(o3, n), max(n - o3, min(o3, n))
     for i in range(n):
-        if lo <= i < hi:
-            acc = _banded_inner(i, diag, a, b, c, o1, o2, o3, Yp)
-        else:
-            acc = _banded_row(i, n, diag, off, strides, Yp)
+        acc = _banded_at(i, n, diag, off, strides, Yp)
         out[i] = (a0 * Y0[i] + mu * Yp[i] + nu * Ypp[i] + mut_h * w[i] * (load[i] - acc)
                   + gt_h * F0[i])
 
