@@ -234,6 +234,11 @@ def test_banded_products_equal_the_sparse_matrix_ones():
     B = A.tolil()
     B[0, 8] = B[8, 0] = -1e-4  # a fourth distance between coupled nodes
     assert banded_operator(B) is None
+    ctl = RKCSteps(sp.csr_array(B), np.ones(n), np.zeros(n), np.array([], int),
+                   lambda a, b: None, 1e-3, 1e-3)  # any other pattern: the CSR kernels
+    assert ctl._banded is None and ctl._csr is not None
+    B = sp.csr_array(B)
+    np.testing.assert_allclose(ctl._rate(Y, load), load - B @ Y, atol=1e-13 * np.abs(B @ Y).max())
     C = A.tolil()
     C[0, 1] = 2 * C[0, 1]  # A[0, 1] != A[1, 0]
     assert banded_operator(C) is None
@@ -247,8 +252,11 @@ def test_banded_and_sparse_steps_agree():
     for banded in (True, False):
         ctl = RKCSteps(A, m, np.zeros(m.size), np.array([0]), lambda a, b: None, 1e-3, 1e-3,
                        spread=2.0)
-        if not banded:
+        if not banded:  # as for an operator of any other pattern
+            A_csr = sp.csr_array(A)
             ctl._banded = None
+            ctl._csr = (A_csr.indptr.astype(np.int64), A_csr.indices.astype(np.int32),
+                        A_csr.data)
         runs.append(ctl.advance(u.copy(), 0.0, 2.0 / lam))
     np.testing.assert_allclose(runs[0], runs[1], rtol=0, atol=1e-12)
     assert runs[0][0] == u[0]  # held

@@ -343,13 +343,16 @@ class RKCSteps:
         nodes stay. ``rho``: :func:`spectral_radius` of these, if the caller has it."""
         A = sp.csr_array(A)
         A.sort_indices()
-        # 32-bit column indices where they fit: the stages stream the matrix from memory
-        # (12 rather than 16 bytes per entry)
-        index = np.int32 if A.shape[0] < 2**31 else np.int64
-        self._csr = (A.indptr.astype(np.int64), A.indices.astype(index),
-                     A.data.astype(np.float64))
-        # the axis-neighbour pattern of a structured mesh: products from its diagonals
+        # the axis-neighbour pattern of a structured mesh: products from its diagonals (and
+        # no copy of the CSR arrays kept)
         self._banded = banded_operator(A)
+        self._csr = None
+        if self._banded is None:
+            # 32-bit column indices where they fit: the stages stream the matrix from
+            # memory (12 rather than 16 bytes per entry)
+            index = np.int32 if A.shape[0] < 2**31 else np.int64
+            self._csr = (A.indptr.astype(np.int64), A.indices.astype(index),
+                         A.data.astype(np.float64))
         self.w = 1.0 / np.asarray(mass, float)
         self.w[self.fixed] = 0.0
         free = np.setdiff1d(np.arange(A.shape[0]), self.fixed, assume_unique=True)
