@@ -445,3 +445,74 @@ def kuhn_elements(nx, ny, nz, local, out):
                     for a in range(4):
                         out[a, e] = base + local[s, a]
                     e += 1
+
+
+@numba.njit(cache=True, inline="always")
+def banded_row(i, n, diag, off, strides, Y):
+    """(A Y)_i for a symmetric A with ``diag`` and, per stride ``o``, the couplings
+    ``off[k, i] = A[i, i + o]`` (0 where none), near the ends of the vector."""
+    acc = diag[i] * Y[i]
+    for k in range(3):
+        o = strides[k]
+        if i + o < n:
+            acc += off[k, i] * Y[i + o]
+        if i >= o:
+            acc += off[k, i - o] * Y[i - o]
+    return acc
+
+
+@numba.njit(cache=True, inline="always")
+def banded_at(i, n, diag, off, strides, Y):
+    """(A Y)_i for A banded (:func:`fem.banded.banded_operator`: three strides, sorted)."""
+    o1, o2, o3 = strides[0], strides[1], strides[2]
+    if o3 <= i < n - o3:  # every neighbour exists: no branches
+        return (diag[i] * Y[i] + off[0, i] * Y[i + o1] + off[0, i - o1] * Y[i - o1]
+                + off[1, i] * Y[i + o2] + off[1, i - o2] * Y[i - o2]
+                + off[2, i] * Y[i + o3] + off[2, i - o3] * Y[i - o3])
+    return banded_row(i, n, diag, off, strides, Y)
+
+
+@numba.njit(cache=True)
+def banded_from_csr(indptr, indices, data, diag, off, strides):
+    """Fill ``diag`` and ``off`` (3, n) from a CSR matrix; ``strides`` (3,) gets the
+    distances above the diagonal. False if the pattern has more than three distances or
+    an entry without its mirror image of equal value."""
+    n = indptr.size - 1
+    m = 0  # distances found
+    upper = np.zeros(3, np.int64)
+    lower = np.zeros(3, np.int64)
+    for i in range(n):
+        for q in range(indptr[i], indptr[i + 1]):
+            o = indices[q] - i
+            v = data[q]
+            if o == 0:
+                diag[i] += v
+                continue
+            d = o if o > 0 else -o
+            k = -1
+            for r in range(m):
+                if strides[r] == d:
+                    k = r
+            if k < 0:
+                if m == 3:
+                    return False
+                strides[m] = d
+                k = m
+                m += 1
+            if o > 0:
+                off[k, i] += v
+                upper[k] += 1
+            else:  # row i + o's entry at distance d, read before this row
+                if off[k, i + o] != v:
+                    return False
+                lower[k] += 1
+    for k in range(3):
+        if upper[k] != lower[k]:
+            return False
+    # unused distances: beyond the last row, so that they couple nothing
+    big = 1
+    for k in range(m):
+        big = max(big, strides[k] + 1)
+    for k in range(m, 3):
+        strides[k] = big
+    return True

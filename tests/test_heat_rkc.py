@@ -214,7 +214,8 @@ def test_banded_products_equal_the_sparse_matrix_ones():
     plus a lumped convective face is applied from its three diagonals: the same products as
     the CSR matrix's, to rounding; a fourth diagonal or an unsymmetric entry is refused."""
     import fem
-    from mcmatlab_py.heat.rkc import _tendency, _tendency_banded, banded_operator
+    from fem.banded import banded_operator
+    from mcmatlab_py.heat.rkc import _tendency, _tendency_banded
 
     mesh = fem.box_mesh(5, 4, 6, 0.5, 0.4, 0.6)
     rng = np.random.default_rng(3)

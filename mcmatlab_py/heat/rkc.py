@@ -53,6 +53,8 @@ import numba
 import numpy as np
 import scipy.sparse as sp
 
+from fem.banded import banded_at, banded_operator
+
 __all__ = ["STABILITY_PER_STAGE2", "RKCSteps", "choose_integrator", "rkc_coefficients",
            "spectral_radius", "stages_for"]
 
@@ -147,37 +149,12 @@ def _stage(indptr, indices, data, Yp, Y0, Ypp, F0, load, w, a0, mu, nu, mut_h, g
                   + gt_h * F0[i])
 
 
-@numba.njit(cache=True, inline="always")
-def _banded_row(i, n, diag, off, strides, Y):  # pragma: no cover - numba
-    """(A Y)_i for a symmetric A with ``diag`` and, per stride ``o``, the couplings
-    ``off[k, i] = A[i, i + o]`` (0 where none), near the ends of the vector."""
-    acc = diag[i] * Y[i]
-    for k in range(3):
-        o = strides[k]
-        if i + o < n:
-            acc += off[k, i] * Y[i + o]
-        if i >= o:
-            acc += off[k, i - o] * Y[i - o]
-    return acc
-
-
-@numba.njit(cache=True, inline="always")
-def _banded_at(i, n, diag, off, strides, Y):  # pragma: no cover - numba
-    """(A Y)_i for A banded (:func:`banded_operator`: three strides, sorted)."""
-    o1, o2, o3 = strides[0], strides[1], strides[2]
-    if o3 <= i < n - o3:  # every neighbour exists: no branches
-        return (diag[i] * Y[i] + off[0, i] * Y[i + o1] + off[0, i - o1] * Y[i - o1]
-                + off[1, i] * Y[i + o2] + off[1, i - o2] * Y[i - o2]
-                + off[2, i] * Y[i + o3] + off[2, i - o3] * Y[i - o3])
-    return _banded_row(i, n, diag, off, strides, Y)
-
-
 @numba.njit(cache=True)
 def _tendency_banded(diag, off, strides, Y, load, w, out):  # pragma: no cover - numba
     """:func:`_tendency` with A banded."""
     n = Y.size
     for i in range(n):
-        out[i] = w[i] * (load[i] - _banded_at(i, n, diag, off, strides, Y))
+        out[i] = w[i] * (load[i] - banded_at(i, n, diag, off, strides, Y))
 
 
 @numba.njit(cache=True)
@@ -186,75 +163,9 @@ def _stage_banded(diag, off, strides, Yp, Y0, Ypp, F0, load, w, a0, mu, nu, mut_
     """:func:`_stage` with A banded."""
     n = Yp.size
     for i in range(n):
-        acc = _banded_at(i, n, diag, off, strides, Yp)
+        acc = banded_at(i, n, diag, off, strides, Yp)
         out[i] = (a0 * Y0[i] + mu * Yp[i] + nu * Ypp[i] + mut_h * w[i] * (load[i] - acc)
                   + gt_h * F0[i])
-
-
-@numba.njit(cache=True)
-def _banded_from_csr(indptr, indices, data, diag, off, strides):  # pragma: no cover - numba
-    """Fill ``diag`` and ``off`` (3, n) from a CSR matrix; ``strides`` (3,) gets the
-    distances above the diagonal. False if the pattern has more than three distances or
-    an entry without its mirror image of equal value."""
-    n = indptr.size - 1
-    m = 0  # distances found
-    upper = np.zeros(3, np.int64)
-    lower = np.zeros(3, np.int64)
-    for i in range(n):
-        for q in range(indptr[i], indptr[i + 1]):
-            o = indices[q] - i
-            v = data[q]
-            if o == 0:
-                diag[i] += v
-                continue
-            d = o if o > 0 else -o
-            k = -1
-            for r in range(m):
-                if strides[r] == d:
-                    k = r
-            if k < 0:
-                if m == 3:
-                    return False
-                strides[m] = d
-                k = m
-                m += 1
-            if o > 0:
-                off[k, i] += v
-                upper[k] += 1
-            else:  # row i + o's entry at distance d, read before this row
-                if off[k, i + o] != v:
-                    return False
-                lower[k] += 1
-    for k in range(3):
-        if upper[k] != lower[k]:
-            return False
-    # unused distances: beyond the last row, so that they couple nothing
-    big = 1
-    for k in range(m):
-        big = max(big, strides[k] + 1)
-    for k in range(m, 3):
-        strides[k] = big
-    return True
-
-
-def banded_operator(A):
-    """``(diag, off, strides)`` of a symmetric sparse ``A`` whose entries lie on at most
-    three diagonals above the main one (and their mirror images), or None.
-
-    The P1 stiffness of a structured Kuhn mesh couples only neighbours along the axes
-    (:func:`fem.box_mesh`): the 7-point pattern, diagonals 1, nz + 1 and (ny + 1)(nz + 1)
-    away. Applied from three (n,) rows of couplings instead of CSR's column indices, a
-    product reads 5 numbers a node instead of 13, and no scattered indices.
-    """
-    A = sp.csr_array(A)
-    A.sum_duplicates()
-    n = A.shape[0]
-    diag, off, strides = np.zeros(n), np.zeros((3, n)), np.zeros(3, np.int64)
-    if not _banded_from_csr(A.indptr.astype(np.int64), A.indices.astype(np.int64),
-                            A.data.astype(np.float64), diag, off, strides):
-        return None
-    order = np.argsort(strides, kind="stable")
-    return diag, np.ascontiguousarray(off[order]), strides[order]
 
 
 @numba.njit(cache=True)
