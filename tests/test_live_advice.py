@@ -147,5 +147,15 @@ def test_the_axes_widen_in_steps_and_hold_every_curve(tmp_path):
     poll()
     mua = next(v for k, v in ranges().items() if k.startswith("mua"))
     assert mua[:2] == (0.0, 2 * TIME_SPAN_S)
+    # a clock far from 0 (a camera's own): the axis starts at the first reading's
+    run2 = tmp_path / "late"
+    run2.mkdir()
+    (run2 / "estimates.csv").write_text(
+        "time_s,mua_mean,mua_std,mus_mean,mus_std,T1_mean,T1_std\n1000.1,1.5,0.1,120,10,40,0.5\n")
+    doc2 = Document()
+    _poll_of(doc2, RunSource(run2))()
+    fig = next(f for f in doc2.select({"type": Plot}) if f.title is not None
+               and f.title.text.startswith("mua"))
+    assert (fig.x_range.start, fig.x_range.end) == (1000.0, 1000.0 + TIME_SPAN_S)
     assert mua[3] >= 2.7 and mua[2] == first[next(k for k in first if k.startswith("mua"))][2]
     assert mua[3] == pytest.approx(2.7 + SPARE * (2.7 - mua[2]))

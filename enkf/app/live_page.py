@@ -211,9 +211,16 @@ def make_document(doc, source: RunSource, parent: int | None = None) -> None:
         state["last"], state["n"] = a[-1], state["n"] + len(rows)
 
     def widen_time(t):
+        """The time axis from the first reading's (a multiple of TIME_SPAN_S below it, so
+        that a camera's clock far from 0 is seen) to the next multiple past the last."""
         t = t[np.isfinite(t)]
-        if t.size and t.max() > t_range.end:  # in steps of TIME_SPAN_S
-            t_range.end = TIME_SPAN_S * math.ceil(t.max() / TIME_SPAN_S + 1e-9)
+        if not t.size:
+            return
+        if id(t_range) not in fitted:
+            fitted.add(id(t_range))
+            t_range.start = TIME_SPAN_S * math.floor(t.min() / TIME_SPAN_S)
+        if t.max() >= t_range.end:
+            t_range.end = TIME_SPAN_S * (math.floor(t.max() / TIME_SPAN_S) + 1)
 
     def widen(entry, new):
         """Widen a curve's y range to hold ``new`` (columns -> values), with room to spare
