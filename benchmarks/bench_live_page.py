@@ -14,8 +14,12 @@ The filter reads the frames as super-pixels, the means of ``--binning`` x ``--bi
 blocks (default 4: 16 x 16 readings of a 64 x 64 frame; 1 reads every pixel, whose dense
 4096 x 4096 model-error covariance takes seconds a step).
 
+``--pin`` runs the filter (and the page's server, its child) on the last CPU and the
+browser's processes on the others (``taskset``): on two cores a browser that the scheduler
+moves onto the filter's core lengthens the filter's steps, one kept off it does not.
+
     python benchmarks/bench_live_page.py [--frames 100] [--rate 10] [--repeat 2] [--pixels 64]
-                                         [--binning 4] [--modes none page]
+                                         [--binning 4] [--modes none page] [--pin]
 """
 
 from __future__ import annotations
@@ -99,7 +103,8 @@ def _cpu_parts(filter_pid: int) -> dict:
     return {"filter": _cpu_s([filter_pid]), "server": _cpu_s(server), "browser": _cpu_s(browser)}
 
 
-def one_run(work: Path, cfg: Path, f: np.ndarray, rate: float, mode: str, cache: str) -> dict:
+def one_run(work: Path, cfg: Path, f: np.ndarray, rate: float, mode: str, cache: str,
+            pin: bool = False) -> dict:
     import tifffile
 
     serve = mode != "none"
@@ -112,6 +117,8 @@ def one_run(work: Path, cfg: Path, f: np.ndarray, rate: float, mode: str, cache:
            "--out", str(out), "--quiet", "--cache-dir", cache, "--idle-timeout", "10"]
     if serve:
         cmd += ["--serve", "0"]
+    if pin:  # the filter (and its page's server) on the last CPU
+        cmd = ["taskset", "-c", str(os.cpu_count() - 1), *cmd]
     proc = subprocess.Popen(cmd, stdout=subprocess.PIPE if serve else subprocess.DEVNULL, text=True,
                             env=dict(os.environ, PYTHONUNBUFFERED="1"))
     browser = pw = None
@@ -125,6 +132,12 @@ def one_run(work: Path, cfg: Path, f: np.ndarray, rate: float, mode: str, cache:
         pw = sync_playwright().start()
         browser = pw.chromium.launch(executable_path=shutil.which("chromium"),
                                      args=["--no-sandbox"])
+        if pin:  # the browser's processes on the other CPUs
+            others = f"0-{os.cpu_count() - 2}"
+            filt = set(_descendants(proc.pid)) | {proc.pid}
+            for pid in set(_descendants(os.getpid())) - filt:
+                subprocess.run(["taskset", "-a", "-p", "-c", others, str(pid)],
+                               capture_output=True, check=False)
         page = browser.new_page()
         page.goto(url)
         page.locator("text=waiting for the first reading").first.wait_for(timeout=60_000)
@@ -173,7 +186,11 @@ def main(argv=None):
     ap.add_argument("--modes", nargs="+", default=["none", "page"],
                     choices=["none", "server", "page"],
                     help="the runs of each repeat: no page, the server with no browser, the page")
+    ap.add_argument("--pin", action="store_true",
+                    help="the filter on the last CPU, the browser on the others (Linux taskset)")
     args = ap.parse_args(argv)
+    if args.pin and (shutil.which("taskset") is None or (os.cpu_count() or 1) < 2):
+        ap.error("--pin needs taskset (util-linux) and at least 2 CPUs")
     work = Path(tempfile.mkdtemp(prefix="bench_live_"))
     text = (ROOT / "examples" / "tiny.toml").read_text()
     head, tail = text.split("[sensors]", 1)
@@ -186,7 +203,7 @@ def main(argv=None):
     rows = []
     for rep in range(args.repeat):
         for mode in args.modes:
-            r = one_run(work, cfg, f, args.rate, mode, cache)
+            r = one_run(work, cfg, f, args.rate, mode, cache, args.pin)
             rows.append((mode, r))
             print(f"repeat {rep} {mode}: {r}", flush=True)
     for mode in args.modes:
