@@ -450,25 +450,35 @@ def kuhn_elements(nx, ny, nz, local, out):
 @numba.njit(cache=True, inline="always")
 def banded_row(i, n, diag, off, strides, Y):
     """(A Y)_i for a symmetric A with ``diag`` and, per stride ``o``, the couplings
-    ``off[k, i] = A[i, i + o]`` (0 where none), near the ends of the vector."""
-    acc = diag[i] * Y[i]
+    ``off[k, i] = A[i, i + o]`` (0 where none), near the ends of the vector. Summed in the
+    order of the columns, as a CSR row is: the same number to the last bit."""
+    acc = 0.0
+    for k in range(2, -1, -1):
+        o = strides[k]
+        if i >= o:
+            acc += off[k, i - o] * Y[i - o]
+    acc += diag[i] * Y[i]
     for k in range(3):
         o = strides[k]
         if i + o < n:
             acc += off[k, i] * Y[i + o]
-        if i >= o:
-            acc += off[k, i - o] * Y[i - o]
     return acc
 
 
 @numba.njit(cache=True, inline="always")
 def banded_at(i, n, diag, off, strides, Y):
-    """(A Y)_i for A banded (:func:`fem.banded.banded_operator`: three strides, sorted)."""
+    """(A Y)_i for A banded (:func:`fem.banded.banded_operator`: three strides, sorted),
+    summed in the order of the columns (:func:`banded_row`)."""
     o1, o2, o3 = strides[0], strides[1], strides[2]
     if o3 <= i < n - o3:  # every neighbour exists: no branches
-        return (diag[i] * Y[i] + off[0, i] * Y[i + o1] + off[0, i - o1] * Y[i - o1]
-                + off[1, i] * Y[i + o2] + off[1, i - o2] * Y[i - o2]
-                + off[2, i] * Y[i + o3] + off[2, i - o3] * Y[i - o3])
+        acc = off[2, i - o3] * Y[i - o3]
+        acc += off[1, i - o2] * Y[i - o2]
+        acc += off[0, i - o1] * Y[i - o1]
+        acc += diag[i] * Y[i]
+        acc += off[0, i] * Y[i + o1]
+        acc += off[1, i] * Y[i + o2]
+        acc += off[2, i] * Y[i + o3]
+        return acc
     return banded_row(i, n, diag, off, strides, Y)
 
 

@@ -212,7 +212,7 @@ def test_spectral_radius_bounds_the_stiffest_mode():
 def test_banded_products_equal_the_sparse_matrix_ones():
     """The structured mesh's stiffness (the conductivity differing from element to element)
     plus a lumped convective face is applied from its three diagonals: the same products as
-    the CSR matrix's, to rounding; a fourth diagonal or an unsymmetric entry is refused."""
+    the CSR matrix's, bit for bit; a fourth diagonal or an unsymmetric entry is refused."""
     import fem
     from fem.banded import banded_operator
     from mcmatlab_py.heat.rkc import _tendency, _tendency_banded
@@ -231,7 +231,7 @@ def test_banded_products_equal_the_sparse_matrix_ones():
     got, want = np.empty(n), np.empty(n)
     _tendency_banded(*op, Y, load, w, got)
     _tendency(A.indptr.astype(np.int64), A.indices.astype(np.int32), A.data, Y, load, w, want)
-    np.testing.assert_allclose(got, want, rtol=0, atol=1e-13 * np.abs(want).max())
+    np.testing.assert_array_equal(got, want)  # summed in the CSR row's order: bit for bit
     B = A.tolil()
     B[0, 8] = B[8, 0] = -1e-4  # a fourth distance between coupled nodes
     assert banded_operator(B) is None
@@ -247,7 +247,7 @@ def test_banded_products_equal_the_sparse_matrix_ones():
 
 def test_banded_and_sparse_steps_agree():
     """RKC's steps from the banded products and from the CSR matrix: the same temperatures
-    to rounding, on a chain with a held node."""
+    bit for bit, on a chain with a held node."""
     A, m, u, lam = mode(k=2)
     runs = []
     for banded in (True, False):
@@ -259,5 +259,5 @@ def test_banded_and_sparse_steps_agree():
             ctl._csr = (A_csr.indptr.astype(np.int64), A_csr.indices.astype(np.int32),
                         A_csr.data)
         runs.append(ctl.advance(u.copy(), 0.0, 2.0 / lam))
-    np.testing.assert_allclose(runs[0], runs[1], rtol=0, atol=1e-12)
+    np.testing.assert_array_equal(runs[0], runs[1])
     assert runs[0][0] == u[0]  # held
