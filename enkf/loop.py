@@ -62,6 +62,30 @@ def _stats(X: np.ndarray, ddof: int = 1) -> tuple[np.ndarray, np.ndarray]:
         return X.mean(axis=0), X.std(axis=0, ddof=ddof)
 
 
+
+def reflect(U: np.ndarray, bounds: np.ndarray) -> np.ndarray:
+    """``U`` (N, n_par) with each column folded into ``[bounds[i, 0], bounds[i, 1]]`` by
+    reflection at the ends (a walk that crosses a bound comes back by as much; a column
+    with an open end, -inf or inf, is reflected once at its finite end); ``U`` itself
+    where every member is inside."""
+    lo, hi = bounds[:, 0], bounds[:, 1]
+    if np.all((U >= lo) & (U <= hi)):
+        return U
+    U = U.copy()
+    closed = np.isfinite(lo) & np.isfinite(hi)
+    if closed.any():
+        a, w = lo[closed], hi[closed] - lo[closed]
+        y = np.mod(U[:, closed] - a, 2.0 * w)
+        U[:, closed] = a + np.where(y > w, 2.0 * w - y, y)
+    for i in np.flatnonzero(~closed):
+        u = U[:, i]
+        if np.isfinite(lo[i]):
+            u = np.where(u < lo[i], 2.0 * lo[i] - u, u)
+        if np.isfinite(hi[i]):
+            u = np.where(u > hi[i], 2.0 * hi[i] - u, u)
+        U[:, i] = u
+    return U
+
 class _Record:
     """Per-step statistics of a run, filled step by step (step 0 is the prior)."""
 
@@ -128,6 +152,10 @@ class _Filter:
         rw = covariance(problem.param_noise, "param_noise", self.n_par)
         self.rw_root = cov_sqrt(rw)
         self.rw_on = bool(self.n_par) and bool(np.any(rw != 0))
+        self.walk_bounds = problem.param_walk_bounds
+        if self.walk_bounds is not None and self.walk_bounds.shape != (self.n_par, 2):
+            raise ValueError(f"param_walk_bounds must have shape ({self.n_par}, 2), got "
+                             f"{self.walk_bounds.shape}")
         self._check_sizes()
         # the next step's model noise can be drawn during this step's analysis when
         # nothing between the two draws takes numbers from the generator
@@ -217,6 +245,8 @@ class _Filter:
                                  f"got {U1.shape}")
         if dU is not None:
             U1 = U1 + dU
+            if self.walk_bounds is not None:
+                U1 = reflect(U1, self.walk_bounds)
         return X1, U1, v
 
     def observe(self, Xf, Uf, k: int, tic: float) -> np.ndarray:

@@ -166,6 +166,12 @@ class FilterProblem:
         and before the random walk, e.g. a drift ``u += v (t1 - t0)`` whose rate
         ``v`` is itself a filtered parameter (a local linear trend). Default: none
         (the pure random walk of the paper).
+    param_walk_bounds : ndarray, shape (n_par, 2), optional
+        Bounds of each parameter in *transformed* units at which the random walk is
+        reflected (a walk on a bounded interval): a member that the step's walk carries
+        past a bound comes back by as much. A walk that the data do not hold back (a
+        parameter the readings barely see) then stays in the range the health check
+        allows. Default: none (an unbounded walk).
     localization : (rho_xy, rho_yy), optional
         Schur-product tapers for :func:`enkf.analysis.enkf_localized`, rows of
         ``rho_xy`` over the augmented state (the state, then the parameters). Only
@@ -198,6 +204,8 @@ class FilterProblem:
     param_noise_scale: Callable[[float, float], float] | None = None
     #: optional ``dynamics(U, t0, t1) -> U`` on the transformed parameters (a drift)
     param_dynamics: Callable[[np.ndarray, float, float], np.ndarray] | None = None
+    #: optional (n_par, 2) transformed bounds that reflect the random walk
+    param_walk_bounds: np.ndarray | None = None
     #: optional covariance localization ``(rho_xy (n_state + n_par, p), rho_yy (p, p))``
     #: for method "enkf" (see :func:`enkf.analysis.enkf_localized`)
     localization: tuple | None = None
@@ -260,6 +268,12 @@ class FilterProblem:
         if pn.ndim < 2 and np.any(pn < 0):
             raise ValueError(f"param_noise must be non-negative, got min {pn.min()!r}")
         set_(self, "param_noise", pn)
+        if self.param_walk_bounds is not None:
+            b = float_array(self.param_walk_bounds, "param_walk_bounds", 2, finite=False)
+            if b.ndim != 2 or b.shape[1] != 2 or np.any(np.isnan(b)) or np.any(b[:, 0] >= b[:, 1]):
+                raise ValueError(f"param_walk_bounds must be (n_par, 2) with lo < hi, got "
+                                 f"{self.param_walk_bounds!r}")
+            set_(self, "param_walk_bounds", b)
         tracked = np.asarray(self.tracked)
         if tracked.size == 0:
             tracked = np.zeros(0, dtype=np.intp)

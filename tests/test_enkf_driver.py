@@ -417,3 +417,40 @@ def test_rtps_relaxes_the_state_spread_to_the_forecast(mda):
     np.testing.assert_allclose(Xa.mean(0), plain[1].mean(0), rtol=1e-12, atol=1e-12)
     for k, (Xf, Xa) in seen.items():  # never wider than the forecast, never narrower
         assert np.all(Xa.std(0, ddof=1) <= Xf.std(0, ddof=1) * (1 + 1e-12)), k
+
+
+def test_reflect_folds_members_into_the_bounds():
+    from enkf.loop import reflect
+    b = np.array([[0.0, 1.0], [-np.inf, 1.0]])
+    inside = np.array([[0.2, -5.0], [1.0, 0.5]])
+    assert reflect(inside, b) is inside  # nothing to do: the same array
+    U = np.array([[1.2, 1.2], [-0.3, 5.0], [2.5, -7.0], [3.7, 1.0]])
+    np.testing.assert_allclose(reflect(U, b), [[0.8, 0.8], [0.3, -3.0], [0.5, -7.0],
+                                               [0.3, 1.0]], atol=1e-12)
+
+
+@pytest.mark.parametrize("bounded", [True, False])
+def test_param_walk_bounds_keep_a_free_walk_inside(bounded):
+    # No data and a wide walk: reflected at [1.5, 2.5], the members stay inside and
+    # spread as a uniform on it (sd 1/sqrt(12)); unbounded, they leave it.
+    seen = []
+    problem = linear_problem(M=30, obs_data=np.full((30, 1), np.nan), param_noise=4.0,
+                             param_walk_bounds=np.array([[1.5, 2.5]]) if bounded else None)
+    run_filter(problem, FilterConfig(n_members=400, seed=3),
+               callback=lambda rep: seen.append(rep.param_ensemble[:, 0].copy()))
+    later = np.array(seen[1:])
+    inside = (later >= 1.5) & (later <= 2.5)
+    if bounded:
+        assert inside.all()
+        # the sd of 400 uniform members: 0.2887 with a standard error of about 0.005
+        np.testing.assert_allclose(later[-1].std(ddof=1), 1 / np.sqrt(12), atol=0.025)
+    else:
+        assert inside.mean() < 0.5
+
+
+def test_bad_param_walk_bounds():
+    with pytest.raises(ValueError, match="^param_walk_bounds"):
+        linear_problem(param_walk_bounds=np.array([[2.0, 1.0]]))
+    with pytest.raises(ValueError, match="^param_walk_bounds"):
+        run_filter(linear_problem(param_walk_bounds=np.array([[0.0, 1.0], [0.0, 1.0]])),
+                   FilterConfig(n_members=5))

@@ -20,7 +20,7 @@ from ..discrepancy import discrepancy_posterior
 from ..health import HealthCheck
 from ..problem import FilterConfig, FilterProblem, uniform_prior
 from ..random import standard_normal
-from ..transforms import IdentityTransform, LogTransform
+from ..transforms import IdentityTransform, LogTransform, as_transforms
 from .coagulation import CoagulationForwardModel
 from .forward import TissueForwardModel, observation_operator
 from .model_error import StructuredModelError
@@ -57,6 +57,9 @@ class FilterPieces:
     #: ``tracked(rep) -> (mean, std)`` of the tracked points, with the camera's model
     #: error at those on the top face (:func:`tracked_statistics`; assemble sets it)
     tracked: Callable | None = None
+    #: (n_par, 2) the health check's bounds in the filter's (log) units, where the
+    #: parameters' random walk is reflected
+    walk_bounds: np.ndarray | None = None
 
     def model_noise(self):
         """The model error of a new run: a :class:`StructuredModelError` on the mesh nodes,
@@ -84,7 +87,8 @@ class FilterPieces:
             param_noise=self.rw,
             transforms=self.transforms, t0=t0, param_dynamics=self.dynamics,
             localization=self.localization, param_noise_scale=self.walk_scale,
-            observation_offset=self.observation_offset, obs_error=self.obs_error)
+            param_walk_bounds=self.walk_bounds, observation_offset=self.observation_offset,
+            obs_error=self.obs_error)
 
 
 def assemble(setup: TissueFilterSetup, param_bounds=None, warm_dt: float | None = None
@@ -184,12 +188,32 @@ def assemble(setup: TissueFilterSetup, param_bounds=None, warm_dt: float | None 
     # no tissue reaches (a runaway state: adaptive inflation compounding on the deep
     # temperatures with drifting optics reached 1e8 deg C)
     min_std = np.concatenate([1e-6 * nominal, np.zeros(len(bounds_extra))])
-    health = HealthCheck(param_bounds=np.vstack([param_bounds, bounds_extra]),
-                         min_param_std=min_std, state_bounds=STATE_BOUNDS)
+    all_bounds = np.vstack([param_bounds, bounds_extra])
+    health = HealthCheck(param_bounds=all_bounds, min_param_std=min_std,
+                         state_bounds=STATE_BOUNDS)
+    # the walk is reflected at the health check's bounds: a parameter the readings barely
+    # see (mus with VHC and TC estimated too) walks within them instead of out of the run
+    walk_bounds = filter_space_bounds(transforms, all_bounds)
     return FilterPieces(model, P_obs, noise_var, P_track, prior, rw, transforms, dynamics,
                    localization, None if setup.parameters.random_walk_when_off == 1.0 else walk_scale,
                    config, health, n, observation_offset, obs_error,
-                   tracked_statistics(setup, model.mesh, P_track))
+                   tracked_statistics(setup, model.mesh, P_track), walk_bounds)
+
+
+def filter_space_bounds(transforms, bounds: np.ndarray) -> np.ndarray:
+    """(n_par, 2) ``bounds`` (physical units) in the filter's units; an end that the
+    transform cannot map (0 under the log) is open (-inf or inf)."""
+    trs = as_transforms(transforms, len(bounds))
+    out = np.array([[-np.inf, np.inf]] * len(bounds))
+    for i, tr in enumerate(trs):
+        for j in range(2):
+            try:
+                v = float(tr.forward(np.array([bounds[i, j]]))[0])
+            except ValueError:
+                continue
+            if np.isfinite(v):
+                out[i, j] = v
+    return out
 
 
 def tracked_statistics(setup: TissueFilterSetup, mesh, P_track) -> Callable:
