@@ -40,9 +40,9 @@ ROOT = Path(__file__).parents[1]
 CONSTANT = ("constant", "pulse-train")
 
 
-def config_for(case: str, mode: str = "auto", forms=None):
+def config_for(case: str, mode: str = "auto", forms=None, delay=None):
     """examples/own_data.toml with the laser of ``case`` (and ``[filter.drift] mode``,
-    ``restart_knots = forms`` unless None)."""
+    ``restart_knots = forms`` and ``restart_delay = delay`` unless None)."""
     from enkf.app.config import identify_config_from_dict
     from mcmatlab_py.config import read_toml
 
@@ -54,6 +54,8 @@ def config_for(case: str, mode: str = "auto", forms=None):
     raw["filter"].setdefault("drift", {})["mode"] = mode
     if forms is not None:
         raw["filter"]["drift"]["restart_knots"] = list(forms)
+    if delay is not None:
+        raw["filter"]["drift"]["restart_delay"] = float(delay)
     raw.pop("data", None)
     return identify_config_from_dict(raw)
 
@@ -64,10 +66,10 @@ _CFG: dict = {}
 def run_one(args) -> dict:
     from enkf.tissue import identify
 
-    model, case, seed, mode, forms = args
-    key = (case, mode, forms)
+    model, case, seed, mode, forms, delay = args
+    key = (case, mode, forms, delay)
     if key not in _CFG:
-        cfg = config_for(case, mode, forms)
+        cfg = config_for(case, mode, forms, delay)
         _CFG[key] = (cfg, cfg.emulator(progress=False))
     cfg, emulator = _CFG[key]
     truth = independent_truth(model, case)
@@ -87,6 +89,8 @@ def run_one(args) -> dict:
         "model": model, "case": case, "seed": seed, "mode": mode, "diverged": est.diverged,
         "restart_knots": list(forms or setup.parameters.drift.restart_knots
                               if setup.parameters.drift is not None else ()),
+        "restart_delay": None if setup.parameters.drift is None else
+        setup.parameters.drift.restart_delay,
         "final": est.param_mean[-1].tolist(), "final_sd": est.param_std[-1].tolist(),
         "final_truth": true_p[-1].tolist(),
         "band_final": [[float(lo[-1]), float(hi[-1])] for lo, hi in band],
@@ -178,6 +182,9 @@ def main(argv=None):
     ap.add_argument("--restart-knots", nargs="+", default=None, metavar="FORM",
                     help="[filter.drift] restart_knots instead of the config's: counts of "
                          "knots and/or 'logistic'")
+    ap.add_argument("--restart-delay", type=float, default=None, metavar="S",
+                    help="[filter.drift] restart_delay (s after each pulse) instead of the "
+                         "config's")
     ap.add_argument("--out", default=str(ROOT / "validation" / "reports" / "drift_bank.md"))
     ap.add_argument("--from-json", nargs="+", default=None, metavar="FILE",
                     help="write the report from the per-run numbers of earlier runs (their "
@@ -195,7 +202,7 @@ def main(argv=None):
             independent_truth(model, case)
     forms = None if args.restart_knots is None else tuple(
         v if v == "logistic" else int(v) for v in args.restart_knots)
-    tasks = [(m, c, s, args.mode, forms) for c in args.case for m in args.model
+    tasks = [(m, c, s, args.mode, forms, args.restart_delay) for c in args.case for m in args.model
              for s in range(args.first_seed, args.first_seed + args.seeds)]
     rows = []
     t0 = time.perf_counter()

@@ -78,7 +78,7 @@ class DriftBank:
     switch_prob: float = 1e-3
     prior_weight: float = 0.5
     restart_weight: float = 0.05
-    restart_delay: float = 2.5
+    restart_delay: float = 1.0
     restart_knots: tuple = (2, 9, "logistic")
     restart_discrepancy: float = 0.01
     rtps: float = 0.1
