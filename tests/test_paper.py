@@ -89,7 +89,7 @@ def test_truth_key_holds_the_heat_scheme():
     assert old.key() == "256302e53539898f81bd"  # the constant truth's key before the scheme
 
 
-@pytest.mark.parametrize("hotter", [1.8, 2.5])  # 1.8: stopped at step 54; 2.5: at the first
+@pytest.mark.parametrize("hotter", [1.5, 2.5])  # 2.5: stopped at the first step
 def test_a_paper_run_stopped_by_the_health_check_says_so_as_identify(tmp_path, monkeypatch,
                                                                      capsys, hotter):
     """summary.json's "stopped" (identify's key), the parameter by name; no "diverged"."""

@@ -378,9 +378,11 @@ def test_the_forecast_gives_a_step_the_energy_of_a_pulse_edge_inside_it(tissue):
     assert _setup(tissue, power=lambda t: 0.5 if t < 0.25 else 0.0).mean_power(0.2, 0.3) == 0.0
 
 
-def test_the_walk_is_reflected_at_the_health_checks_bounds(tissue):
-    # the parameters walk in log units: their walk bounds are the logs of the bounds at
-    # which the health check stops a run, so a free walk never stops it
-    pieces = assemble(_setup(tissue))
+def test_the_walk_is_reflected_at_the_health_checks_bounds_where_restarts_reset_it(tissue):
+    # a filter restarted from the smoother walks in log units within the logs of the bounds
+    # at which the health check stops a run; without restarts the walk is unbounded (a walk
+    # that leaves them stops the run: nothing would reset it)
+    pieces = assemble(_setup(tissue, smoother_restarts="laser_off"))
     np.testing.assert_allclose(pieces.walk_bounds, np.log(pieces.health.param_bounds))
     assert pieces.problem(np.array([0.1]), np.zeros((1, 1))).param_walk_bounds is not None
+    assert assemble(_setup(tissue)).walk_bounds is None

@@ -58,7 +58,7 @@ class FilterPieces:
     #: error at those on the top face (:func:`tracked_statistics`; assemble sets it)
     tracked: Callable | None = None
     #: (n_par, 2) the health check's bounds in the filter's (log) units, where the
-    #: parameters' random walk is reflected
+    #: parameters' random walk is reflected (filters restarted from the smoother only)
     walk_bounds: np.ndarray | None = None
 
     def model_noise(self):
@@ -191,9 +191,12 @@ def assemble(setup: TissueFilterSetup, param_bounds=None, warm_dt: float | None 
     all_bounds = np.vstack([param_bounds, bounds_extra])
     health = HealthCheck(param_bounds=all_bounds, min_param_std=min_std,
                          state_bounds=STATE_BOUNDS)
-    # the walk is reflected at the health check's bounds: a parameter the readings barely
-    # see (mus with VHC and TC estimated too) walks within them instead of out of the run
-    walk_bounds = filter_space_bounds(transforms, all_bounds)
+    # a filter restarted from the smoother (a drift bank's drifting filters) walks within
+    # the health check's bounds, reflected there: a parameter the readings barely see (mus
+    # with VHC and TC estimated too) waits inside them for the restart that resets it.
+    # Without restarts nothing would reset it, and a walk that leaves them stops the run.
+    walk_bounds = filter_space_bounds(transforms, all_bounds) if setup.restarts.times \
+        else None
     return FilterPieces(model, P_obs, noise_var, P_track, prior, rw, transforms, dynamics,
                    localization, None if setup.parameters.random_walk_when_off == 1.0 else walk_scale,
                    config, health, n, observation_offset, obs_error,
