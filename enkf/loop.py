@@ -62,7 +62,6 @@ def _stats(X: np.ndarray, ddof: int = 1) -> tuple[np.ndarray, np.ndarray]:
         return X.mean(axis=0), X.std(axis=0, ddof=ddof)
 
 
-
 def reflect(U: np.ndarray, bounds: np.ndarray) -> np.ndarray:
     """``U`` (N, n_par) with each column folded into ``[bounds[i, 0], bounds[i, 1]]`` by
     reflection at the ends (a walk that crosses a bound comes back by as much; a column
@@ -85,6 +84,7 @@ def reflect(U: np.ndarray, bounds: np.ndarray) -> np.ndarray:
             u = np.where(u > hi[i], 2.0 * hi[i] - u, u)
         U[:, i] = u
     return U
+
 
 class _Record:
     """Per-step statistics of a run, filled step by step (step 0 is the prior)."""
@@ -153,9 +153,6 @@ class _Filter:
         self.rw_root = cov_sqrt(rw)
         self.rw_on = bool(self.n_par) and bool(np.any(rw != 0))
         self.walk_bounds = problem.param_walk_bounds
-        if self.walk_bounds is not None and self.walk_bounds.shape != (self.n_par, 2):
-            raise ValueError(f"param_walk_bounds must have shape ({self.n_par}, 2), got "
-                             f"{self.walk_bounds.shape}")
         self._check_sizes()
         # the next step's model noise can be drawn during this step's analysis when
         # nothing between the two draws takes numbers from the generator
@@ -181,6 +178,9 @@ class _Filter:
             if rxy.shape != (n, p) or ryy.shape != (p, p):
                 raise ValueError(f"localization must be (rho_xy ({n}, {p}), rho_yy ({p}, {p})), "
                                  f"got {rxy.shape} and {ryy.shape}")
+        if P.param_walk_bounds is not None and P.param_walk_bounds.shape != (self.n_par, 2):
+            raise ValueError(f"param_walk_bounds must have shape ({self.n_par}, 2), got "
+                             f"{P.param_walk_bounds.shape}")
         tracked = P.tracked
         if tracked.size and tracked.max() >= n_state:
             raise ValueError(f"tracked indices must be < n_state = {n_state}, got max "

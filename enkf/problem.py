@@ -270,7 +270,7 @@ class FilterProblem:
         set_(self, "param_noise", pn)
         if self.param_walk_bounds is not None:
             b = float_array(self.param_walk_bounds, "param_walk_bounds", 2, finite=False)
-            if b.ndim != 2 or b.shape[1] != 2 or np.any(np.isnan(b)) or np.any(b[:, 0] >= b[:, 1]):
+            if b.shape[1] != 2 or np.any(np.isnan(b)) or np.any(b[:, 0] >= b[:, 1]):
                 raise ValueError(f"param_walk_bounds must be (n_par, 2) with lo < hi, got "
                                  f"{self.param_walk_bounds!r}")
             set_(self, "param_walk_bounds", b)
