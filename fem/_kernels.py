@@ -370,6 +370,90 @@ def tridiag3_rhs(T, a, dx, ox, dy, oy, dz, oz, scale, g, f, out):
                     out[n, q] = c * v + g[q] + fn[q]
 
 
+@numba.njit(cache=True, nogil=True, inline="always")
+def _tri_z(X, d, o, out):
+    """out = (I ⊗ I ⊗ T) X for the tridiagonal T (diagonal ``d``, off-diagonal ``o``)."""
+    nx, ny, nz = X.shape
+    for i in range(nx):
+        for j in range(ny):
+            for k in range(nz):
+                v = d[k] * X[i, j, k]
+                if k > 0:
+                    v += o[k - 1] * X[i, j, k - 1]
+                if k < nz - 1:
+                    v += o[k] * X[i, j, k + 1]
+                out[i, j, k] = v
+
+
+@numba.njit(cache=True, nogil=True, inline="always")
+def _tri_y(X, d, o, out, add):
+    """out (+)= (I ⊗ T ⊗ I) X (added to ``out`` where ``add``)."""
+    nx, ny, nz = X.shape
+    for i in range(nx):
+        for j in range(ny):
+            for k in range(nz):
+                v = d[j] * X[i, j, k]
+                if j > 0:
+                    v += o[j - 1] * X[i, j - 1, k]
+                if j < ny - 1:
+                    v += o[j] * X[i, j + 1, k]
+                if add:
+                    out[i, j, k] += v
+                else:
+                    out[i, j, k] = v
+
+
+@numba.njit(cache=True, nogil=True)
+def tridiag3_theta_rhs(T, a, beta, mass, stiff, mzk, g, f, out):
+    """out[n] = a[n] (Mx ⊗ My ⊗ Mz) T[n] - beta[n] K T[n] + g + f[n or 0], with
+    ``K = Kx ⊗ My ⊗ Mz' + Mx ⊗ Ky ⊗ Mz' + Mx ⊗ My ⊗ Kz``: the right-hand side of a theta
+    step on the tensor-product operator in one pass (beta = (1 - theta) x the member's TC
+    factor), without the 27-point stiffness product and its temporaries.
+
+    T (N, nx, ny, nz), any strides; ``mass`` = (dx, ox, dy, oy, dz, oz) the 1-D masses
+    (diagonals, off-diagonals; the VHC folded in), ``stiff`` = (kdx, kox, kdy, koy, kdz,
+    koz) the 1-D stiffnesses and ``mzk`` = (dz', oz') the z mass of K's cross terms (the TC
+    folded into the z factors; equal to the mass's z factor on one medium); ``g``
+    (nx*ny*nz,), ``f`` (1 or N, nx*ny*nz); out (N, nx*ny*nz).
+    """
+    N, nx, ny, nz = T.shape
+    dx, ox, dy, oy, dz, oz = mass
+    kdx, kox, kdy, koy, kdz, koz = stiff
+    md, mo = mzk
+    one = f.shape[0] == 1
+    Zc = np.empty((nx, ny, nz))
+    Zm = np.empty((nx, ny, nz))
+    Zk = np.empty((nx, ny, nz))
+    Y1 = np.empty((nx, ny, nz))
+    Y2 = np.empty((nx, ny, nz))
+    Y3 = np.empty((nx, ny, nz))
+    for n in range(N):
+        X = T[n]
+        _tri_z(X, dz, oz, Zc)
+        _tri_z(X, md, mo, Zm)
+        _tri_z(X, kdz, koz, Zk)
+        _tri_y(Zc, dy, oy, Y1, False)     # My Mz X (the mass)
+        _tri_y(Zm, dy, oy, Y2, False)     # My Mz' X (under Kx)
+        _tri_y(Zm, kdy, koy, Y3, False)   # Ky Mz' X + My Kz X (under Mx)
+        _tri_y(Zk, dy, oy, Y3, True)
+        fn = f[0] if one else f[n]
+        an = a[n]
+        bn = beta[n]
+        for i in range(nx):  # x: Mx (a Y1 - beta Y3) - beta Kx Y2, and the loads
+            for j in range(ny):
+                for k in range(nz):
+                    v = dx[i] * (an * Y1[i, j, k] - bn * Y3[i, j, k]) \
+                        - bn * kdx[i] * Y2[i, j, k]
+                    if i > 0:
+                        v += ox[i - 1] * (an * Y1[i - 1, j, k] - bn * Y3[i - 1, j, k]) \
+                            - bn * kox[i - 1] * Y2[i - 1, j, k]
+                    if i < nx - 1:
+                        v += ox[i] * (an * Y1[i + 1, j, k] - bn * Y3[i + 1, j, k]) \
+                            - bn * kox[i] * Y2[i + 1, j, k]
+                    q = (i * ny + j) * nz + k
+                    out[n, q] = v + g[q] + fn[q]
+
+
 @numba.njit(cache=True, nogil=True)
 def layered_modes_solve(Y, mux, muy, alpha, beta, cd, co, kd, ko, md, mo, hd):
     """Solve, in place, the z-tridiagonal system of every member and (x, y) mode.

@@ -343,7 +343,7 @@ def tensor_product_operators(grid: BoxGrid, boundary, mass: str, vhc: float, tc:
         g += bc.h * bc.temperature * np.asarray(area.sum(axis=1)).ravel()
     if layers is not None:  # the mass carries the layers' VHC
         M1, Ms = M1c, [Ms[0], Ms[1], Mzc]
-    out = {"K": sp.csr_matrix(k * K), "g": g, "m_tridiag": None}
+    out = {"K": sp.csr_matrix(k * K), "g": g, "m_tridiag": None, "theta_tridiag": None}
     if mass == "lumped":
         out["m_lumped"] = c * np.einsum("i,j,k->ijk", *(np.diag(m) for m in M1)).ravel()
         out["M"] = sp.diags_array(out["m_lumped"], format="csr")
@@ -355,4 +355,18 @@ def tensor_product_operators(grid: BoxGrid, boundary, mass: str, vhc: float, tc:
         out["m_tridiag"] = (c, grid.node_shape, [np.ascontiguousarray(np.diagonal(m))
                                                  for m in M1],
                             [np.ascontiguousarray(np.diagonal(m, 1)) for m in M1])
+        # the theta step's whole right-hand side, axis by axis (fem._kernels.
+        # tridiag3_theta_rhs): x and y factors unit, the VHC and TC in the z factors
+        if layers is None:
+            zc, zm, zk = c * M1[2], k * M1[2], k * K1[2]
+        else:
+            zc, zm, zk = M1[2], Mzk.toarray(), Kzk.toarray()
+
+        def dia(m, off):
+            return np.ascontiguousarray(np.diagonal(np.asarray(m, float), off))
+
+        out["theta_tridiag"] = (
+            tuple(dia(m, o) for m in (M1[0], M1[1], zc) for o in (0, 1)),
+            tuple(dia(m, o) for m in (K1[0], K1[1], zk) for o in (0, 1)),
+            (dia(zm, 0), dia(zm, 1)))
     return out

@@ -288,6 +288,7 @@ class HeatStepper:
         th = self.theta
 
         f = None
+        explicit_done = False
         if load is not None:
             f = np.asarray(load, dtype=float)
             if f.shape not in ((self.npoints,), (N, self.npoints)):
@@ -307,17 +308,26 @@ class HeatStepper:
             T4 = T2.reshape(N, *shape)
             a_c = np.ascontiguousarray(a)
 
+            fused = getattr(self, "_theta_tridiag", None)
+            if fused is not None:  # the stiffness's explicit part too, in the same pass
+                beta = np.ascontiguousarray((1.0 - th) * b)
+                explicit_done = True
+
             def block(i0, i1):
                 fb = f2 if f2.shape[0] == 1 else f2[i0:i1]
-                _kernels.tridiag3_rhs(T4[i0:i1], a_c[i0:i1], d[0], o[0], d[1], o[1], d[2], o[2],
-                                      c, self.g, fb, rhs[i0:i1])
+                if fused is not None:
+                    _kernels.tridiag3_theta_rhs(T4[i0:i1], a_c[i0:i1], beta[i0:i1], *fused,
+                                                self.g, fb, rhs[i0:i1])
+                else:
+                    _kernels.tridiag3_rhs(T4[i0:i1], a_c[i0:i1], d[0], o[0], d[1], o[1], d[2],
+                                          o[2], c, self.g, fb, rhs[i0:i1])
 
             run_blocks(N, block, 2 if N >= 8 else 1)
         else:
             rhs = self._apply(self.M, T2) * a[:, None] + self.g
             if f is not None:
                 rhs += f
-        if th != 1.0:
+        if th != 1.0 and not explicit_done:
             rhs -= (1.0 - th) * (self._apply(self.K, T2) * b[:, None] + self._apply(self.R, T2))
 
         if self.fixed.size == 0 and self._identity_order:

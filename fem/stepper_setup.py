@@ -25,6 +25,8 @@ and set what they build in it: ``layers``, ``M``, ``K``, ``R``, ``g`` (the
 tensor-product operator), and the private state of the steps: ``_grid`` (the
 :class:`fem.mesh.BoxGrid` of a box mesh, looked for once), ``_m_lumped`` (array
 (npoints,), J/K, or None), ``_m_tridiag`` (the 1-D mass factors of the right-hand side),
+``_theta_tridiag`` (with them the 1-D stiffness factors, where a theta < 1 step's
+right-hand side is computed in one pass),
 ``_solver``, ``_order`` (int array, the unknowns in the solver's order),
 ``_identity_order`` and ``_layer_mean`` (bool). Nothing else imports them; the stepper
 is the public face (its docstring describes the choices).
@@ -167,6 +169,8 @@ def kronecker_operators(st) -> None:
     if ops["m_tridiag"] is not None:
         # the right-hand side's mass product, axis by axis (numba), not the 27-point M
         st._m_tridiag = ops["m_tridiag"]
+        if st.theta != 1.0 and st.R.nnz == 0:  # no convective face: K's product fused in
+            st._theta_tridiag = ops["theta_tridiag"]
 
 
 # -------------------------------------------------------------------------- solver

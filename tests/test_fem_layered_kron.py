@@ -56,6 +56,34 @@ def test_equals_sparse_lu_of_the_same_matrices(mesh, boundary, mass, theta):
                                atol=1e-13)
 
 
+@pytest.mark.parametrize("boundary", [BOUNDARIES[0], BOUNDARIES[2]])
+@pytest.mark.parametrize("mass", ["averaged", "consistent"])
+@pytest.mark.parametrize("layered", [False, True])
+def test_theta_right_hand_side_in_one_pass_equals_the_sparse_products(mesh, boundary, mass,
+                                                                       layered):
+    rng = np.random.default_rng(5)
+    n = mesh.p.shape[1]
+    T, f = rng.random((5, n)), 1e-3 * rng.random((5, n))
+    s1, s2 = rng.uniform(0.5, 2, 5), rng.uniform(0.5, 2, 5)
+    c, k = (per_element(GRID, v) for v in two_layers(GRID)) if layered else (3.76, 3.7e-3)
+    st = fem.HeatStepper(mesh, c, k, 0.1, theta=0.6, boundary=boundary, operator="kronecker",
+                         mass=mass)
+    assert st._theta_tridiag is not None
+    x = st.step(T, f, s1, s2)
+    st._theta_tridiag = None  # M T and K T as sparse products
+    ref = st.step(T, f, s1, s2)
+    np.testing.assert_allclose(x, ref, rtol=0, atol=1e-12 * np.abs(ref).max())
+    assert np.abs(ref - T).max() > 1e-3  # the step moved the temperatures
+
+
+def test_theta_right_hand_side_in_one_pass_only_where_it_applies(mesh):
+    kw = dict(operator="kronecker", mass="averaged")
+    assert getattr(fem.HeatStepper(mesh, 3.76, 3.7e-3, 0.1, theta=1.0, **kw),
+                   "_theta_tridiag", None) is None  # backward Euler: no explicit part
+    assert getattr(fem.HeatStepper(mesh, 3.76, 3.7e-3, 0.1, theta=0.5, boundary=BOUNDARIES[1],
+                                   **kw), "_theta_tridiag", None) is None  # a convective face
+
+
 @pytest.mark.parametrize("mass", ["lumped", "averaged", "consistent"])
 def test_homogeneous_layers_equal_kronecker_solver(mass):
     boundary = BOUNDARIES[1]
