@@ -90,7 +90,10 @@ def test_the_trend_is_each_members_slope(tissue):
     for k in range(16):  # 1.5 s of heating, readings every 0.1 s
         t = 0.1 * k
         adv(_report(k, t, base * np.exp(v * t), X))
-    np.testing.assert_allclose(adv.trend(None), v, rtol=0, atol=1e-10)
+        if k == 0:  # the start alone: no slope yet
+            assert np.all(adv.trend(None) == 0)
+        else:  # from the second reading, over the readings so far (then the last 1 s)
+            np.testing.assert_allclose(adv.trend(None), v, rtol=0, atol=1e-10)
     # the trend moves each member's optics by its slope times the heated time ahead
     theta = base * np.exp(v * 1.5)
     with_trend, seg = adv.optics_paths(None, theta, 1.5, adv.K)
