@@ -9,7 +9,11 @@ the box; B: attenuation Monte Carlo and a finite-volume cylinder; C: B's light w
 spectral solution on the box), one surface sensor at 10 Hz with noise of variance 0.01,
 and every case of the optics there: constant, the paper's ramps, a step at the onset of
 coagulation, a saturating drift, mua alone drifting, and a train of two 2 s pulses with
-constant and with drifting optics.
+constant and with drifting optics. Each row of the report names the drift bank's settings it
+ran with: the drifting filters' restart forms (``restart_knots``), their restarts' delay after
+each pulse (``restart_delay``, s) and their walk (``walk_std``, log units per heated step, mua
+and mus); rows with settings other than the shipped default's are alternatives measured on the
+same seeds and data.
 
 Targets per run: constant optics, mua within 5% and mus within 25 cm^-1 at 15 s; drifting
 optics, mua's RMSE over the run <= 0.3 cm^-1 and mus within 10% at 15 s; each
@@ -40,9 +44,10 @@ ROOT = Path(__file__).parents[1]
 CONSTANT = ("constant", "pulse-train")
 
 
-def config_for(case: str, mode: str = "auto", forms=None, delay=None):
+def config_for(case: str, mode: str = "auto", forms=None, delay=None, walk=None):
     """examples/own_data.toml with the laser of ``case`` (and ``[filter.drift] mode``,
-    ``restart_knots = forms`` and ``restart_delay = delay`` unless None)."""
+    ``restart_knots = forms``, ``restart_delay = delay`` and ``walk_std = walk`` unless
+    None)."""
     from enkf.app.config import identify_config_from_dict
     from mcmatlab_py.config import read_toml
 
@@ -56,6 +61,8 @@ def config_for(case: str, mode: str = "auto", forms=None, delay=None):
         raw["filter"]["drift"]["restart_knots"] = list(forms)
     if delay is not None:
         raw["filter"]["drift"]["restart_delay"] = float(delay)
+    if walk is not None:
+        raw["filter"]["drift"]["walk_std"] = [float(v) for v in walk]
     raw.pop("data", None)
     return identify_config_from_dict(raw)
 
@@ -66,10 +73,10 @@ _CFG: dict = {}
 def run_one(args) -> dict:
     from enkf.tissue import identify
 
-    model, case, seed, mode, forms, delay = args
-    key = (case, mode, forms, delay)
+    model, case, seed, mode, forms, delay, walk = args
+    key = (case, mode, forms, delay, walk)
     if key not in _CFG:
-        cfg = config_for(case, mode, forms, delay)
+        cfg = config_for(case, mode, forms, delay, walk)
         _CFG[key] = (cfg, cfg.emulator(progress=False))
     cfg, emulator = _CFG[key]
     truth = independent_truth(model, case)
@@ -91,6 +98,8 @@ def run_one(args) -> dict:
                               if setup.parameters.drift is not None else ()),
         "restart_delay": None if setup.parameters.drift is None else
         setup.parameters.drift.restart_delay,
+        "walk_std": None if setup.parameters.drift is None else
+        list(setup.parameters.drift.walk_std),
         "final": est.param_mean[-1].tolist(), "final_sd": est.param_std[-1].tolist(),
         "final_truth": true_p[-1].tolist(),
         "band_final": [[float(lo[-1]), float(hi[-1])] for lo, hi in band],
@@ -117,6 +126,10 @@ def passes(r: dict) -> dict:
     return ok
 
 
+#: the restart delay of the runs whose numbers predate its record (``--restart-delay 2.5``)
+OLD_DELAY = 2.5
+
+
 def forms_of(r: dict) -> str:
     """The drift bank's restart forms a run used (``DriftBank.restart_knots``)."""
     from enkf.tissue.drift import DriftBank
@@ -125,7 +138,20 @@ def forms_of(r: dict) -> str:
     return ", ".join(str(v) for v in forms) if len(forms) else "none (no bank)"
 
 
+def setting_of(r: dict) -> tuple[str, str, str]:
+    """(restart forms, restart delay, walk) of a run, as the report writes them."""
+    from enkf.tissue.drift import DriftBank
+
+    delay = r.get("restart_delay", OLD_DELAY)
+    walk = r.get("walk_std", DriftBank().walk_std)
+    return (forms_of(r), "" if delay is None else f"{delay:g}",
+            "" if walk is None else ", ".join(f"{v:g}" for v in walk))
+
+
 def report(rows: list, path: Path, command: str) -> None:
+    from enkf.tissue.drift import DriftBank
+
+    default = setting_of({"restart_delay": DriftBank().restart_delay})
     lines = ["# One default config for still, drifting and pulsed optics", "",
              f"Command: `{command}`", "", __doc__.split("\n\n")[1].replace("\n", " "), "",
              __doc__.split("\n\n")[2].replace("\n", " "), "",
@@ -133,19 +159,20 @@ def report(rows: list, path: Path, command: str) -> None:
              "estimates, >= 18 of 20 elsewhere); the temperature coverage is the mean (worst) "
              "over seeds; P(drift) the final drift weight (median over seeds); restarts the "
              "runs in which a drifting filter restarted from the smoother (where none did, "
-             "the restart forms never ran and the row holds for any). The shipped default's "
-             f"restart forms are {forms_of({})}; rows of other forms are alternatives "
-             "measured on the same seeds and data (a row of n seeds holds seeds 0 to n - 1, "
-             "the first n of the 20). The wall times were measured with two "
-             "or three runs sharing the two cores.", "",
+             "the restart forms never ran and the row holds for any). The shipped default: "
+             f"restart forms {default[0]}, restarts {default[1]} s after each pulse, walk "
+             f"{default[2]}; rows of other settings are alternatives measured on the same "
+             "seeds and data (a row of n seeds holds seeds 0 to n - 1, the first n of the "
+             "20). The wall times were measured with two or three runs sharing the two "
+             "cores.", "",
              "| truth | case | seeds | estimates | parameter bands | T bands >= 0.9 | "
              "T coverage z = 0, 0.1, 0.2 | mua, mus at 15 s (median) | truth | P(drift) | "
-             "restarts (runs) | restart forms | wall s (median) |",
-             "|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
-    keys = sorted({(r["model"], r["case"], forms_of(r)) for r in rows},
-                  key=lambda k: (k[0], CASES.index(k[1]), k[2]))
+             "restarts (runs) | restart forms | restart delay s | walk | wall s (median) |",
+             "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
+    keys = sorted({(r["model"], r["case"], *setting_of(r)) for r in rows},
+                  key=lambda k: (k[0], CASES.index(k[1]), k[2:] != default, k[2:]))
     for key in keys:
-        rs = [r for r in rows if (r["model"], r["case"], forms_of(r)) == key]
+        rs = [r for r in rows if (r["model"], r["case"], *setting_of(r)) == key]
         n = len(rs)
         ok = [passes(r) for r in rs]
         c = np.array([r["cov_T"] for r in rs])
@@ -158,7 +185,7 @@ def report(rows: list, path: Path, command: str) -> None:
             f"{sum(o['bands'] for o in ok)} | {sum(o['T bands'] for o in ok)} | {cov} | "
             f"{fin[0]:.3g}, {fin[1]:.4g} | {rs[0]['final_truth'][0]:.3g}, "
             f"{rs[0]['final_truth'][1]:.4g} | {np.median(w) if w else float('nan'):.3g} | "
-            f"{sum(r['restarts'] > 0 for r in rs)} | {key[2]} | "
+            f"{sum(r['restarts'] > 0 for r in rs)} | {key[2]} | {key[3]} | {key[4]} | "
             f"{np.median([r['wall_s'] for r in rs]):.1f} |")
     write_report(path, lines, rows)
 
@@ -185,6 +212,9 @@ def main(argv=None):
     ap.add_argument("--restart-delay", type=float, default=None, metavar="S",
                     help="[filter.drift] restart_delay (s after each pulse) instead of the "
                          "config's")
+    ap.add_argument("--walk-std", type=float, nargs=2, default=None, metavar=("MUA", "MUS"),
+                    help="[filter.drift] walk_std (log units per heated step) instead of the "
+                         "config's")
     ap.add_argument("--out", default=str(ROOT / "validation" / "reports" / "drift_bank.md"))
     ap.add_argument("--from-json", nargs="+", default=None, metavar="FILE",
                     help="write the report from the per-run numbers of earlier runs (their "
@@ -202,8 +232,9 @@ def main(argv=None):
             independent_truth(model, case)
     forms = None if args.restart_knots is None else tuple(
         v if v == "logistic" else int(v) for v in args.restart_knots)
-    tasks = [(m, c, s, args.mode, forms, args.restart_delay) for c in args.case for m in args.model
-             for s in range(args.first_seed, args.first_seed + args.seeds)]
+    walk = None if args.walk_std is None else tuple(args.walk_std)
+    tasks = [(m, c, s, args.mode, forms, args.restart_delay, walk) for c in args.case
+             for m in args.model for s in range(args.first_seed, args.first_seed + args.seeds)]
     rows = []
     t0 = time.perf_counter()
     # each run's numbers as they come (one JSON line each): an interrupted study keeps them
