@@ -322,54 +322,6 @@ def lumped_rhs(T, a, m, g, f, out):
             out[k, i] = ak * m[i] * T[k, i] + g[i] + fk[i]
 
 
-@numba.njit(cache=True, nogil=True)
-def tridiag3_rhs(T, a, dx, ox, dy, oy, dz, oz, scale, g, f, out):
-    """out[n] = a[n] scale (Mx ⊗ My ⊗ Mz) T[n] + g + f[n or 0] for tridiagonal 1-D masses.
-
-    T (N, nx, ny, nz) C order; ``d*`` the 1-D diagonals, ``o*`` the off-diagonals
-    (``o*[i]`` couples nodes i and i + 1: constant on a homogeneous box, weighted by the
-    layers' VHC along z); ``g`` (nx*ny*nz,), ``f`` (1 or N, nx*ny*nz); out (N, nx*ny*nz).
-    The three 1-D products are applied one axis at a time (9 instead of 27 flops
-    per node).
-    """
-    N, nx, ny, nz = T.shape
-    one = f.shape[0] == 1
-    A = np.empty((nx, ny, nz))
-    B = np.empty((nx, ny, nz))
-    for n in range(N):
-        X = T[n]
-        for i in range(nx):  # z
-            for j in range(ny):
-                for k in range(nz):
-                    v = dz[k] * X[i, j, k]
-                    if k > 0:
-                        v += oz[k - 1] * X[i, j, k - 1]
-                    if k < nz - 1:
-                        v += oz[k] * X[i, j, k + 1]
-                    A[i, j, k] = v
-        for i in range(nx):  # y
-            for j in range(ny):
-                for k in range(nz):
-                    v = dy[j] * A[i, j, k]
-                    if j > 0:
-                        v += oy[j - 1] * A[i, j - 1, k]
-                    if j < ny - 1:
-                        v += oy[j] * A[i, j + 1, k]
-                    B[i, j, k] = v
-        fn = f[0] if one else f[n]
-        c = a[n] * scale
-        for i in range(nx):  # x, then scale and add the loads
-            for j in range(ny):
-                for k in range(nz):
-                    v = dx[i] * B[i, j, k]
-                    if i > 0:
-                        v += ox[i - 1] * B[i - 1, j, k]
-                    if i < nx - 1:
-                        v += ox[i] * B[i + 1, j, k]
-                    q = (i * ny + j) * nz + k
-                    out[n, q] = c * v + g[q] + fn[q]
-
-
 @numba.njit(cache=True, nogil=True, inline="always")
 def _tri_z(X, d, o, out):
     """out = (I ⊗ I ⊗ T) X for the tridiagonal T (diagonal ``d``, off-diagonal ``o``)."""
@@ -401,6 +353,37 @@ def _tri_y(X, d, o, out, add):
                     out[i, j, k] += v
                 else:
                     out[i, j, k] = v
+
+
+@numba.njit(cache=True, nogil=True)
+def tridiag3_rhs(T, a, dx, ox, dy, oy, dz, oz, scale, g, f, out):
+    """out[n] = a[n] scale (Mx ⊗ My ⊗ Mz) T[n] + g + f[n or 0] for tridiagonal 1-D masses.
+
+    T (N, nx, ny, nz) C order; ``d*`` the 1-D diagonals, ``o*`` the off-diagonals
+    (``o*[i]`` couples nodes i and i + 1: constant on a homogeneous box, weighted by the
+    layers' VHC along z); ``g`` (nx*ny*nz,), ``f`` (1 or N, nx*ny*nz); out (N, nx*ny*nz).
+    The three 1-D products are applied one axis at a time (9 instead of 27 flops
+    per node).
+    """
+    N, nx, ny, nz = T.shape
+    one = f.shape[0] == 1
+    A = np.empty((nx, ny, nz))
+    B = np.empty((nx, ny, nz))
+    for n in range(N):
+        _tri_z(T[n], dz, oz, A)
+        _tri_y(A, dy, oy, B, False)
+        fn = f[0] if one else f[n]
+        c = a[n] * scale
+        for i in range(nx):  # x, then scale and add the loads
+            for j in range(ny):
+                for k in range(nz):
+                    v = dx[i] * B[i, j, k]
+                    if i > 0:
+                        v += ox[i - 1] * B[i - 1, j, k]
+                    if i < nx - 1:
+                        v += ox[i] * B[i + 1, j, k]
+                    q = (i * ny + j) * nz + k
+                    out[n, q] = c * v + g[q] + fn[q]
 
 
 @numba.njit(cache=True, nogil=True)
