@@ -394,7 +394,7 @@ def tridiag3_theta_rhs(T, a, beta, mass, stiff, mzk, g, f, out):
     factor), without the 27-point stiffness product and its temporaries.
 
     T (N, nx, ny, nz), any strides; ``mass`` = (dx, ox, dy, oy, dz, oz) the 1-D masses
-    (diagonals, off-diagonals; the VHC folded in), ``stiff`` = (kdx, kox, kdy, koy, kdz,
+    (diagonals, off-diagonals; the VHC folded into the z factor), ``stiff`` = (kdx, kox, kdy, koy, kdz,
     koz) the 1-D stiffnesses and ``mzk`` = (dz', oz') the z mass of K's cross terms (the TC
     folded into the z factors; equal to the mass's z factor on one medium); ``g``
     (nx*ny*nz,), ``f`` (1 or N, nx*ny*nz); out (N, nx*ny*nz).
