@@ -357,16 +357,14 @@ def tensor_product_operators(grid: BoxGrid, boundary, mass: str, vhc: float, tc:
                             [np.ascontiguousarray(np.diagonal(m, 1)) for m in M1])
         # the theta step's whole right-hand side, axis by axis (fem._kernels.
         # tridiag3_theta_rhs): x and y factors unit, the VHC and TC in the z factors
-        if layers is None:
-            zc, zm, zk = c * M1[2], k * M1[2], k * K1[2]
-        else:
-            zc, zm, zk = M1[2], Mzk.toarray(), Kzk.toarray()
+        _, _, md, mo = out["m_tridiag"]
+        zm, zk = (k * M1[2], k * K1[2]) if layers is None else (Mzk.toarray(), Kzk.toarray())
 
         def dia(m, off):
             return np.ascontiguousarray(np.diagonal(np.asarray(m, float), off))
 
         out["theta_tridiag"] = (
-            tuple(dia(m, o) for m in (M1[0], M1[1], zc) for o in (0, 1)),
+            (md[0], mo[0], md[1], mo[1], c * md[2], c * mo[2]),
             tuple(dia(m, o) for m in (K1[0], K1[1], zk) for o in (0, 1)),
             (dia(zm, 0), dia(zm, 1)))
     return out

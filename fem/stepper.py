@@ -288,7 +288,8 @@ class HeatStepper:
         th = self.theta
 
         f = None
-        explicit_done = False
+        # the tensor-product operator's theta step: its stiffness product in the mass's pass
+        fused = getattr(self, "_theta_tridiag", None)
         if load is not None:
             f = np.asarray(load, dtype=float)
             if f.shape not in ((self.npoints,), (N, self.npoints)):
@@ -308,10 +309,7 @@ class HeatStepper:
             T4 = T2.reshape(N, *shape)
             a_c = np.ascontiguousarray(a)
 
-            fused = getattr(self, "_theta_tridiag", None)
-            if fused is not None:  # the stiffness's explicit part too, in the same pass
-                beta = np.ascontiguousarray((1.0 - th) * b)
-                explicit_done = True
+            beta = None if fused is None else np.ascontiguousarray((1.0 - th) * b)
 
             def block(i0, i1):
                 fb = f2 if f2.shape[0] == 1 else f2[i0:i1]
@@ -327,7 +325,7 @@ class HeatStepper:
             rhs = self._apply(self.M, T2) * a[:, None] + self.g
             if f is not None:
                 rhs += f
-        if th != 1.0 and not explicit_done:
+        if th != 1.0 and fused is None:
             rhs -= (1.0 - th) * (self._apply(self.K, T2) * b[:, None] + self._apply(self.R, T2))
 
         if self.fixed.size == 0 and self._identity_order:

@@ -26,6 +26,7 @@ the rise, correlated over ``--discrepancy-time`` s (generalised least squares).
 from __future__ import annotations
 
 import argparse
+import functools
 import sys
 import time
 from pathlib import Path
@@ -83,6 +84,7 @@ def main(argv=None) -> None:
             np.exp(-np.abs(t[:, None] - t[None, :]) / args.discrepancy_time)
         return cholesky(R, lower=True)
 
+    @functools.cache
     def shape(case):  # the truth's own curve of the drift, 0 at the start, 1 at the end
         a = np.array([optics(case, float(t))[0] for t in mid])
         return (a - a[0]) / (optics(case, float(TIMES[-1]))[0] - optics(case, 0.0)[0])
