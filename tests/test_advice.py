@@ -159,6 +159,12 @@ def test_target_and_stop_times_and_risks_by_brute_force(tissue):
     np.testing.assert_array_equal(res.risks["protected_plan"],
                                   (Y_plan[:, :, pr].max(axis=(1, 2)) >= 45.0)
                                   | (omega_final(adv, Y_plan, pr) >= 1.0))
+    # the hottest the protected point and the surface get under the plan (the track
+    # starts here, so nothing hotter came before)
+    for region in ("protected", "surface"):
+        np.testing.assert_allclose(res.peak_T[region],
+                                   Y_plan[:, :, adv.slices[region]].max(axis=(1, 2)),
+                                   rtol=0, atol=1e-8)
     Y_off = by_hand(adv, X, theta, np.zeros(K))
     np.testing.assert_array_equal(res.risks["surface_off"],
                                   Y_off[:, :, adv.slices["surface"]].max(axis=(1, 2)) >= 70.0)
@@ -175,9 +181,11 @@ def test_the_mixture_weighs_each_filters_members():
     adv = object.__new__(Advisor)
     adv.quantiles = (0.05, 0.95)
     a = MemberAdvice(1.0, 11.0, np.array([2.0, 3.0, np.inf]), np.array([1.5, 2.5, np.inf]),
-                     {"protected_plan": np.array([True, False, False])}, 0.01)
+                     {"protected_plan": np.array([True, False, False])}, 0.01,
+                     {"protected": np.array([50.0, 46.0, 44.0])})
     b = MemberAdvice(1.0, 11.0, np.array([4.0, 5.0]), np.array([3.0, 4.0]),
-                     {"protected_plan": np.array([True, True])}, 0.02)
+                     {"protected_plan": np.array([True, True])}, 0.02,
+                     {"protected": np.array([52.0, 51.0])})
     row = Advisor.mix(adv, [(3.0, a), (1.0, b)])
     assert isinstance(row, AdviceRow) and row.time == 1.0 and row.wall_s == pytest.approx(0.03)
     assert row.p_target == pytest.approx(0.75 * 2 / 3 + 0.25)
@@ -188,9 +196,14 @@ def test_the_mixture_weighs_each_filters_members():
     ref = np.where(ref > 11.0, np.inf, ref)
     np.testing.assert_allclose(row.target_time, ref)
     assert row.target_time[2] == np.inf  # the upper end beyond the horizon
+    peak = weighted_quantiles([np.r_[50.0, 46.0, 44.0][:, None], np.r_[52.0, 51.0][:, None]],
+                              [0.75, 0.25], [0.5, 0.05, 0.95])[:, 0]
+    np.testing.assert_allclose(row.peak_T["protected"], peak)
+    assert peak[1] < 46.0 < peak[0] < 50.0 < peak[2]  # the heavier filter's members lead
     d = row.as_dict((0.05, 0.95))
     assert list(d)[:5] == ["time_s", "target_time_median_s", "target_time_q5_s",
                            "target_time_q95_s", "p_target"]
+    assert [d[f"protected_peak_T_{c}_C"] for c in ("median", "q5", "q95")] == list(peak)
 
 
 def test_identify_with_a_drift_bank_mixes_its_filters_by_weight(tissue):

@@ -55,15 +55,19 @@ MODELS = ("A", "B", "C")
 TAIL = 5.0  # s of forecast after the pulse
 EVAL = np.round(0.5 * np.arange(1, 11), 10)  # s: the readings whose risks are scored
 EDGES = (0.0, 0.1, 0.3, 0.5, 0.7, 0.9, 1.0)
+#: the limits scored besides the case's own: its rise over 37 deg C times 1 + these
+LIMIT_STEPS = np.array([-0.2, -0.1, -0.05, 0.0, 0.05, 0.1, 0.2])
 
 
-def config_for(power: float):
-    """examples/own_data.toml at 37 deg C with the laser at ``power`` W (5 s on, 10 s off)."""
+def config_for(power: float, nominal=(1.0, 100.0)):
+    """examples/own_data.toml at 37 deg C with the laser at ``power`` W (5 s on, 10 s off)
+    and the tissue's nominal optics (mua, mus) cm^-1, the centre of the filter's prior."""
     from enkf.app.config import identify_config_from_dict
     from mcmatlab_py.config import read_toml
 
     raw = read_toml(ROOT / "examples" / "own_data.toml")
     raw["HS"].update(P=float(power), T_initial=T0)
+    raw["G"]["media"][0].update(mua=float(nominal[0]), mus=float(nominal[1]))
     raw.pop("data", None)
     return identify_config_from_dict(raw)
 
@@ -98,16 +102,29 @@ def advisor_for(setup, case: str):
                    surface_T=c["surface_T"], tail=TAIL)
 
 
-def run_one(case: str, seed: int, check_rows: bool = False) -> dict:
+def nominal_for(case: str, seed: int, prior: str) -> tuple[float, float]:
+    """The filter's nominal (mua, mus) cm^-1 for a run: the truth's start (1, 100) with
+    ``prior = "centred"``; with ``"drawn"`` the truth's start divided by factors drawn
+    uniformly from the prior's range (0.5 to 2), so that the truth lies where the prior
+    puts it at random, not at its centre."""
+    if prior == "centred":
+        return 1.0, 100.0
+    r = np.random.default_rng([seed, list(CASES).index(case), 53, 1]).uniform(0.5, 2.0, 2)
+    return float(1.0 / r[0]), float(100.0 / r[1])
+
+
+def run_one(case: str, seed: int, check_rows: bool = False, prior: str = "drawn") -> dict:
     """One filter run with the advice at every reading; with ``check_rows``, the
-    forecast's low-rank rows set against the full ones on the members of a few readings."""
+    forecast's low-rank rows set against the full ones on the members of a few readings;
+    ``prior``: where the truth lies in the filter's prior (:func:`nominal_for`)."""
     from enkf.tissue import identify
     from enkf.tissue.advice.forecast import PointForecast
 
     model = MODELS[seed % len(MODELS)]
     rng = np.random.default_rng([seed, list(CASES).index(case), 53])
     power = float(rng.uniform(*CASES[case]["power"]))
-    cfg = config_for(power)
+    nominal = nominal_for(case, seed, prior)
+    cfg = config_for(power, nominal)
     setup = cfg.setup(_emulator(cfg), seed=seed)
     T = truth_of(model, case, power)
     data = T[1:, :1] + 0.1 * rng.standard_normal((len(TIMES) - 1, 1))
@@ -124,11 +141,21 @@ def run_one(case: str, seed: int, check_rows: bool = False) -> dict:
         warnings.simplefilter("ignore")
         est = identify(setup, TIMES[1:], data, callback=callback, param_bounds=cfg.param_bounds)
     wall = time.perf_counter() - tic
+    mixed, mix = {}, adv.mix
+
+    def keep_members(parts):  # each row's weighted members, for the scores below
+        row = mix(parts)
+        mixed[row.time] = parts
+        return row
+
+    adv.mix = keep_members
     rows = adv.table(est)
     c = CASES[case]
     out = {"case": case, "seed": seed, "model": model, "power": power, "wall_s": wall,
+           "prior": prior, "nominal": list(nominal),
            "stopped": est.diverged, "true_target_s": true_target_time(T),
            "true_protected": bool(T[:, 2].max() >= c["protected_T"]),
+           "true_peak_protected": float(T[:, 2].max()), "true_peak_surface": float(T[:, 0].max()),
            "true_surface": bool(T[:, 0].max() >= c["surface_T"]),
            "drift_weight": float(est.drift_weight[-1]) if est.drift_weight is not None else None,
            "rows": {"time": [r.time for r in rows], "median": [r.target_time[0] for r in rows],
@@ -136,7 +163,30 @@ def run_one(case: str, seed: int, check_rows: bool = False) -> dict:
                     "stop": [r.stop_time[0] for r in rows], "p_target": [r.p_target for r in rows],
                     "p_protected": [r.risks["protected_plan"] for r in rows],
                     "p_surface": [r.risks["surface_plan"] for r in rows],
+                    "peak_protected": [r.peak_T["protected"] for r in rows],
+                    "peak_surface": [r.peak_T["surface"] for r in rows],
                     "ms": [1e3 * r.wall_s for r in rows]}}
+    # at the scored readings: where each truth's peak falls in the members' forecast (the
+    # weighted share of members below it, the PIT) and the forecast probabilities of
+    # passing limits spread around the case's own
+    out["scores"] = {}
+    for t in EVAL:
+        if t not in mixed:
+            continue
+        w = np.array([p[0] for p in mixed[t]], float)
+        w = w / w.sum()
+        sc = {}
+        for region, col, lim in (("protected", 2, c["protected_T"]), ("surface", 0, c["surface_T"])):
+            peaks = [a.peak_T[region] for _, a in mixed[t]]
+            truth = float(T[:, col].max())
+            below = sum(wj * np.mean(pk < truth) for wj, pk in zip(w, peaks, strict=True))
+            ties = sum(wj * np.mean(pk == truth) for wj, pk in zip(w, peaks, strict=True))
+            limits = lim + (lim - T0) * LIMIT_STEPS
+            sc[region] = {"pit": float(below + 0.5 * ties),
+                          "p": [float(sum(wj * np.mean(pk >= L) for wj, pk in
+                                          zip(w, peaks, strict=True))) for L in limits],
+                          "hit": [bool(truth >= L) for L in limits]}
+        out["scores"][f"{t:g}"] = sc
     if kept:
         full = PointForecast(adv.model, adv.P, adv.step, adv.K, "adjoint", rtol=0.0)
         dH = dG = 0.0
@@ -245,6 +295,66 @@ def risk_scores(runs: list, key: str, truth: str) -> dict:
             "table": table}
 
 
+def peak_table(runs: list, region: str) -> list:
+    """Rows (reading, runs, truth below / inside / above the forecast's 90% interval of the
+    region's hottest temperature under the plan, the interval's median width deg C, the
+    median's median error deg C) at the readings of EVAL, then all of them together."""
+    out, every = [], []
+    for t in EVAL:
+        pos, widths, errs = [], [], []
+        for r in runs:
+            rows = r["rows"]
+            if t not in rows["time"] or f"peak_{region}" not in rows:
+                continue
+            med, lo, hi = rows[f"peak_{region}"][rows["time"].index(t)]
+            truth = r[f"true_peak_{region}"]
+            pos.append(-1 if truth < lo else (1 if truth > hi else 0))
+            widths.append(hi - lo)
+            errs.append(abs(med - truth))
+        if pos:
+            every += pos
+            pos = np.array(pos)
+            out.append((f"{t:g} s", len(pos), int((pos < 0).sum()), int((pos == 0).sum()),
+                        int((pos > 0).sum()), float(np.median(widths)), float(np.median(errs))))
+    if every:
+        e = np.array(every)
+        out.append(("every one", len(e), int((e < 0).sum()), int((e == 0).sum()),
+                    int((e > 0).sum()), np.nan, np.nan))
+    return out
+
+
+def pit_counts(runs: list, region: str, bins: int = 10) -> np.ndarray:
+    """How many of the scored forecasts put the truth's peak in each tenth of the members'
+    weighted distribution (a calibrated forecast: equal counts)."""
+    pit = [sc[region]["pit"] for r in runs for sc in r.get("scores", {}).values()]
+    return np.histogram(np.clip(pit, 0, 1), bins=bins, range=(0, 1))[0]
+
+
+def limits_scores(runs: list, region: str) -> dict:
+    """Brier score and reliability of P(peak >= L) over the limits of LIMIT_STEPS around
+    the case's own (each limit against its own base rate)."""
+    p, o, clim = [], [], []
+    for j in range(len(LIMIT_STEPS)):
+        pj = [sc[region]["p"][j] for r in runs for sc in r.get("scores", {}).values()]
+        oj = [float(sc[region]["hit"][j]) for r in runs for sc in r.get("scores", {}).values()]
+        if not pj:
+            continue
+        p += pj
+        o += oj
+        clim += [np.mean(oj) * (1 - np.mean(oj))] * len(oj)
+    if not p:
+        return {}
+    p, o = np.array(p), np.array(o)
+    table = []
+    for a, b in zip(EDGES[:-1], EDGES[1:], strict=True):
+        m = (p >= a) & ((p < b) if b < 1 else (p <= b))
+        if m.any():
+            table.append((f"[{a:.1f}, {b:.1f}{']' if b == 1 else ')'}", int(m.sum()),
+                          float(p[m].mean()), float(o[m].mean())))
+    return {"n": len(p), "brier": float(np.mean((p - o) ** 2)), "base": float(np.mean(clim)),
+            "table": table}
+
+
 def findings(runs: list) -> list:
     """The report's reading of its tables: where the targets are met and where not."""
     L = ["## What the tables show", ""]
@@ -330,6 +440,35 @@ def report(runs: list, command: str, latency: dict | None) -> list:
                   "|---|---|---|---|"]
             L += [f"| {a} | {n} | {m:.3f} | {f:.3f} |" for a, n, m, f in s["table"]]
             L.append("")
+            region = key.split("_")[1]
+            tab = peak_table(rs, region)
+            if tab:
+                where = "0.2 cm" if region == "protected" else "the surface"
+                L += [f"The same forecast as a temperature: the hottest {where} gets under the "
+                      "plan (the members' median and 90% interval) against the truth's:", "",
+                      "| reading | runs | truth below | inside | above | share inside | "
+                      "width deg C | abs(median - truth) deg C |", "|---|---|---|---|---|---|---|---|"]
+                for label, n, lo, ins, hi, w, e in tab:
+                    L.append(f"| {label} | {n} | {lo} | {ins} | {hi} | {ins / n:.2f} | "
+                             f"{'' if not np.isfinite(w) else f'{w:.2f}'} | "
+                             f"{'' if not np.isfinite(e) else f'{e:.2f}'} |")
+                L.append("")
+            counts = pit_counts(rs, region)
+            ls = limits_scores(rs, region)
+            if counts.sum() and ls:
+                steps = ", ".join(f"{100 * v:+g}%" for v in LIMIT_STEPS)
+                L += [f"Where the truth's peak falls among the members' (weighted) peaks, in "
+                      f"tenths of their distribution (a calibrated forecast fills each alike): "
+                      f"{', '.join(str(int(v)) for v in counts)} of {int(counts.sum())}.", "",
+                      f"P(the peak passes a limit) for limits around the case's own (its rise "
+                      f"over 37 deg C changed by {steps}): Brier {ls['brier']:.3f} against "
+                      f"{ls['base']:.3f} for each limit's base rate (skill "
+                      f"{1 - ls['brier'] / ls['base'] if ls['base'] > 0 else np.nan:.2f}); "
+                      f"{ls['n']} forecasts.", "",
+                      "| forecast | forecasts | mean forecast | observed frequency |",
+                      "|---|---|---|---|"]
+                L += [f"| {a} | {n} | {m:.3f} | {f:.3f} |" for a, n, m, f in ls["table"]]
+                L.append("")
         ms = np.concatenate([r["rows"]["ms"] for r in rs])
         L += [f"The advice's forecasts at each reading (the bank's filters together): median "
               f"{np.median(ms):.0f} ms, 95th percentile {np.percentile(ms, 95):.0f} ms.", ""]
@@ -361,6 +500,9 @@ def main(argv=None):
     ap.add_argument("--seeds", type=int, nargs="+", default=[20],
                     help="seeds 0..N-1: one N for every case, or one per case of --cases")
     ap.add_argument("--cases", nargs="+", default=list(CASES), choices=list(CASES))
+    ap.add_argument("--prior", default="drawn", choices=("drawn", "centred"),
+                    help="where the truth lies in the filter's prior: at a place drawn per "
+                         "seed (default), or at its centre")
     ap.add_argument("--out", type=Path, default=REPORT)
     ap.add_argument("--runs-file", type=Path, default=None,
                     help="keep the runs' numbers here (JSON, outside the repository), or, if "
@@ -385,7 +527,7 @@ def main(argv=None):
             ap.error("--seeds takes one number or one per case")
         n_seeds = dict(zip(args.cases, args.seeds * len(args.cases) if len(args.seeds) == 1
                            else args.seeds, strict=False))
-        runs = [run_one(case, seed, seed == 0) for case in args.cases
+        runs = [run_one(case, seed, seed == 0, args.prior) for case in args.cases
                 for seed in range(n_seeds[case])]
         latency = online_latency()
         if args.runs_file is not None:

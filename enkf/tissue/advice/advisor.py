@@ -310,7 +310,7 @@ class Advisor:
                     stop[n] = t0 + (c - 1 + float(np.clip(f, 0, 1))) * h
                 else:  # heated to the crossing it reaches; between samples, the crossing
                     stop[n] = target[n]
-        risks = {}
+        risks, peaks = {}, {}
         own = np.where(np.isfinite(stop), np.ceil((stop - t0) / h - 1e-9), K).astype(int)
         scenarios = (("plan", plan), ("off", H), ("at_target", heat(H, G, P, own, seg)))
         for region, T_lim, om_lim in (("protected", self.protected_T, self.protected_omega),
@@ -320,15 +320,18 @@ class Advisor:
             sl = self.slices[region]
             hit = np.zeros((3, N), bool)
             Ys = np.stack([Y[..., sl] for _, Y in scenarios])  # (3, N, K+1, p)
+            hottest = np.maximum(Ys.max(axis=2), tr.T_max[:, sl])  # (3, N, p), so far too
+            peaks[region] = hottest[0].max(axis=1)
             if T_lim is not None:
-                hit |= (np.maximum(Ys.max(axis=2), tr.T_max[:, sl]) >= T_lim).any(axis=2)
+                hit |= (hottest >= T_lim).any(axis=2)
             if om_lim is not None:
                 om = damage(self.E, self.A, h, np.tile(tr.omega[:, sl], (3, 1)),
                             Ys.reshape(3 * N, K + 1, -1))
                 hit |= (om.reshape(3, N, -1) >= om_lim).any(axis=2)
             for i, (scen, _) in enumerate(scenarios):
                 risks[f"{region}_{scen}"] = hit[i]
-        return MemberAdvice(t0, t0 + K * h, target, stop, risks, time.perf_counter() - tic)
+        return MemberAdvice(t0, t0 + K * h, target, stop, risks, time.perf_counter() - tic,
+                            peaks)
 
     # ------------------------------------------------------------------ following a filter
     def __call__(self, rep) -> None:
@@ -401,11 +404,16 @@ class Advisor:
         def prob(get):
             return float(sum(wj * np.mean(get(a)) for wj, a in zip(w, advs, strict=True)))
 
+        peaks = {}
+        for region in advs[0].peak_T:
+            pq = weighted_quantiles([a.peak_T[region][:, None] for a in advs], w,
+                                    [0.5, *self.quantiles])[:, 0]
+            peaks[region] = tuple(float(v) for v in pq)
         return AdviceRow(
             advs[0].time, tuple(float(v) for v in qs[:, 0]),
             prob(lambda a: np.isfinite(a.target_time)), tuple(float(v) for v in qs[:, 1]),
             {k: prob(lambda a, k=k: a.risks[k]) for k in advs[0].risks},
-            float(sum(a.wall_s for a in advs)))
+            float(sum(a.wall_s for a in advs)), peaks)
 
 
 def online_ensembles(ident) -> list[tuple]:

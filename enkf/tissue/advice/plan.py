@@ -3,7 +3,7 @@ reading's advice (:mod:`enkf.tissue.advice`)."""
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -78,6 +78,9 @@ class MemberAdvice:
     stop_time: np.ndarray  #: (N,) s, the earliest switch-off that still reaches it (inf)
     risks: dict  #: {name in RISKS: (N,) bool}, the risks with a limit
     wall_s: float  #: s spent on the forecast
+    #: {"protected" | "surface": (N,) deg C}: the hottest the region gets under the plan
+    #: (so far or within the horizon)
+    peak_T: dict = field(default_factory=dict)
 
 
 @dataclass
@@ -90,6 +93,9 @@ class AdviceRow:
     stop_time: tuple  #: s, (median, lower, upper quantile)
     risks: dict  #: {name: probability}
     wall_s: float  #: s, the forecast of every filter mixed here
+    #: {"protected" | "surface": (median, lower, upper quantile) deg C}: the region's
+    #: hottest under the plan
+    peak_T: dict = field(default_factory=dict)
 
     def as_dict(self, quantiles) -> dict:
         """Flat ``{column: value}`` (advice.csv's columns, times in s)."""
@@ -101,5 +107,9 @@ class AdviceRow:
             if what == "target_time":
                 out["p_target"] = self.p_target
         out.update({f"p_{k}": v for k, v in self.risks.items()})
+        for region, v in self.peak_T.items():
+            out[f"{region}_peak_T_median_C"] = v[0]
+            for q, x in zip(quantiles, v[1:], strict=True):
+                out[f"{region}_peak_T_q{100 * q:g}_C".replace(".", "p")] = x
         out["advice_ms"] = 1e3 * self.wall_s
         return out
