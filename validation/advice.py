@@ -7,7 +7,12 @@ the independent forward models of ``validation/independent_models.py`` (truth A,
 turn by seed), with constant optics and with the paper's ramps (mua 1 -> 4, mus 100 ->
 500 over the pulse). A truth at power P and 37 deg C is exactly ``37 + P / 0.5`` times
 the cached rise at 0.5 W (the heat equations are linear, the boxes insulated). One
-surface sensor at 10 Hz, noise variance 0.01 deg C^2.
+surface sensor at 10 Hz, noise variance 0.01 deg C^2. The truth starts at mua 1, mus 100
+cm^-1; the filter's nominal optics (its prior's centre, the prior 0.5 to 2 times them)
+are these divided by factors drawn per seed from 0.5 to 2 (``--prior drawn``), so that
+the truth lies where the prior puts it at random, as when a user's guess of the tissue
+is off, and not at the prior's centre (``--prior centred``, where a forecast that
+learns little from the readings still lands on the truth).
 
 The advice: the target at 0.1 cm below the beam's centre (Omega >= 1, MCmatlab's
 Arrhenius E = 422.5 kJ/mol, A = 7.6e66 1/s), the protected point 0.2 cm below it with a
@@ -24,10 +29,16 @@ Targets: the true target time inside the advised 90% interval (5%-95% of the mem
 on >= 85% of the runs; the interval's width falling as the readings come (its median
 over the runs at each time); the probability that the protected point or the surface
 passes its limit under the plan calibrated (Brier score against always forecasting the
-base rate, and a reliability table), at the readings 0.5, 1, ..., 5 s.
+base rate, and a reliability table), at the readings 0.5, 1, ..., 5 s. Because each run
+scores one limit near its own truth, the same forecasts are also scored as temperatures:
+the hottest the protected point and the surface get under the plan, where the truth's
+falls among the members' (its share inside their 90% interval, and in which tenth of
+their distribution) and the probability of passing limits on either side of the case's.
 
     python validation/advice.py --seeds 20 [--cases constant time-varying]
     python validation/advice.py --seeds 10 12   # seeds per case, in --cases order
+    python validation/advice.py --prior centred --runs-file centred.json   # the contrast
+    python validation/advice.py --runs-file drawn.json --contrast centred.json
 """
 
 from __future__ import annotations
@@ -42,7 +53,13 @@ from pathlib import Path
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).parent))
-from independent_models import TIMES, independent_truth  # noqa: E402
+from independent_models import (  # noqa: E402
+    PRIORS,
+    TIMES,
+    independent_truth,
+    nominal_optics,
+    optics,
+)
 
 ROOT = Path(__file__).parents[1]
 REPORT = Path(__file__).parent / "reports" / "advice.md"
@@ -103,14 +120,8 @@ def advisor_for(setup, case: str):
 
 
 def nominal_for(case: str, seed: int, prior: str) -> tuple[float, float]:
-    """The filter's nominal (mua, mus) cm^-1 for a run: the truth's start (1, 100) with
-    ``prior = "centred"``; with ``"drawn"`` the truth's start divided by factors drawn
-    uniformly from the prior's range (0.5 to 2), so that the truth lies where the prior
-    puts it at random, not at its centre."""
-    if prior == "centred":
-        return 1.0, 100.0
-    r = np.random.default_rng([seed, list(CASES).index(case), 53, 1]).uniform(0.5, 2.0, 2)
-    return float(1.0 / r[0]), float(100.0 / r[1])
+    """The filter's nominal (mua, mus) cm^-1 for a run (``independent_models.nominal_optics``)."""
+    return nominal_optics(case, prior, [seed, list(CASES).index(case), 53, 1])
 
 
 def run_one(case: str, seed: int, check_rows: bool = False, prior: str = "drawn") -> dict:
@@ -131,8 +142,12 @@ def run_one(case: str, seed: int, check_rows: bool = False, prior: str = "drawn"
     adv = advisor_for(setup, case)
     kept = []
 
+    online = {}  # (filter, step): its members' mean optics as the reading left them
+
     def callback(rep):
         adv(rep)
+        if not rep.replayed and np.isclose(EVAL, rep.time).any():
+            online[rep.component, rep.step] = rep.param_ensemble[:, :2].mean(axis=0)
         if check_rows and not rep.replayed and rep.step in (1, 20, 40, 60):
             kept.append((rep.state_ensemble.copy(), rep.param_ensemble.copy()))
 
@@ -166,6 +181,22 @@ def run_one(case: str, seed: int, check_rows: bool = False, prior: str = "drawn"
                     "peak_protected": [r.peak_T["protected"] for r in rows],
                     "peak_surface": [r.peak_T["surface"] for r in rows],
                     "ms": [1e3 * r.wall_s for r in rows]}}
+    # the filters' mean optics at the scored readings, mixed by their weights then
+    out["optics"] = {}
+    for t in EVAL:
+        step = int(np.argmin(np.abs(TIMES[1:] - t)))
+        comps, forks = est.components or {}, est.component_forks or {}
+        parts = []
+        for k, w in (est.component_weights or {None: [1.0]}).items():
+            # a filter that shares another's run at this reading (before its own restart)
+            src = forks[k][0] if k in forks and step + 1 <= forks[k][1] else next(
+                (j for j in comps if (j, step + 1) in online and comps[j] is comps.get(k)), k)
+            if (src, step + 1) in online:
+                parts.append((float(w[min(step + 1, len(w) - 1)]), online[src, step + 1]))
+        if parts:
+            tot = sum(p[0] for p in parts)
+            out["optics"][f"{t:g}"] = [float(sum(p[0] * p[1][i] for p in parts) / tot)
+                                       for i in range(2)]
     # at the scored readings: where each truth's peak falls in the members' forecast (the
     # weighted share of members below it, the PIT) and the forecast probabilities of
     # passing limits spread around the case's own
@@ -398,7 +429,42 @@ def findings(runs: list) -> list:
     return L
 
 
-def report(runs: list, command: str, latency: dict | None) -> list:
+def summary_row(rs: list) -> str:
+    """One table row of a set of runs: the target time's coverage, the protected point's
+    Brier skill at its own limit and at the limits around it, its peak's share inside the
+    90% interval and where the truths fell in tenths."""
+    tab = coverage_table(rs)
+    own = risk_scores(rs, "p_protected", "true_protected")
+    ls = limits_scores(rs, "protected")
+    inside = peak_table(rs, "protected")[-1]
+    skill = 1 - own["brier"] / own["base"] if own["base"] > 0 else np.nan
+    lskill = 1 - ls["brier"] / ls["base"] if ls and ls["base"] > 0 else np.nan
+    return (f"{tab[-1][2] / tab[-1][1]:.2f} | {skill:.2f} | {lskill:.2f} | "
+            f"{inside[3] / inside[1]:.2f} ({inside[2]} below, {inside[4]} above) | "
+            f"{', '.join(str(int(v)) for v in pit_counts(rs, 'protected'))} |")
+
+
+def contrast(runs: list, other: list) -> list:
+    """The report's section: the same seeds with the truth at a drawn place in the prior
+    and at its centre."""
+    L = ["## Where the truth lies in the prior", "",
+         "The same seeds, powers and noise with the truth at a place of the filter's prior "
+         "drawn per seed (the tables above) and at its centre: the true target time inside "
+         "the 90% interval at every reading before it; the Brier skill of P(0.2 cm passes its "
+         "limit) at the case's own limit and over the limits around it; the truth's peak at "
+         "0.2 cm inside the members' 90% interval; and in which tenth of the members' peaks "
+         "it fell (a calibrated forecast fills each alike).", "",
+         "| case | prior | target time inside | skill, own limit | skill, limits around | "
+         "peak inside 90% | tenths |", "|---|---|---|---|---|---|---|"]
+    for case in CASES:
+        for rs in ([r for r in runs if r["case"] == case],
+                   [r for r in other if r["case"] == case]):
+            if rs and all("scores" in r for r in rs):
+                L.append(f"| {case} | {rs[0].get('prior', 'centred')} | {summary_row(rs)}")
+    return L + [""]
+
+
+def report(runs: list, command: str, latency: dict | None, other: list | None = None) -> list:
     L = ["# How long to keep the laser on: the advice against independent truths", "",
          f"Command: `{command}`", "",
          __doc__.split("\n\n")[1].replace("\n", " "), "",
@@ -469,9 +535,18 @@ def report(runs: list, command: str, latency: dict | None) -> list:
                       "|---|---|---|---|"]
                 L += [f"| {a} | {n} | {m:.3f} | {f:.3f} |" for a, n, m, f in ls["table"]]
                 L.append("")
+        ratios = {t: np.array([np.array(r["optics"][f"{t:g}"]) / optics(case, t) for r in rs
+                               if f"{t:g}" in r.get("optics", {})]) for t in (1.0, 3.0, 5.0)}
+        if all(len(v) for v in ratios.values()):
+            L += ["The filters' mean optics as each reading left them (mixed by weight), over "
+                  "the truth's (median over the runs, mua / mus): " + ", ".join(
+                      f"{np.median(v[:, 0]):.2f} / {np.median(v[:, 1]):.2f} at {t:g} s"
+                      for t, v in ratios.items()) + ".", ""]
         ms = np.concatenate([r["rows"]["ms"] for r in rs])
         L += [f"The advice's forecasts at each reading (the bank's filters together): median "
               f"{np.median(ms):.0f} ms, 95th percentile {np.percentile(ms, 95):.0f} ms.", ""]
+    if other:
+        L += contrast(runs, other)
     L += findings(runs)
     checks = [r["rows_check"] for r in runs if "rows_check" in r]
     if checks:
@@ -500,9 +575,12 @@ def main(argv=None):
     ap.add_argument("--seeds", type=int, nargs="+", default=[20],
                     help="seeds 0..N-1: one N for every case, or one per case of --cases")
     ap.add_argument("--cases", nargs="+", default=list(CASES), choices=list(CASES))
-    ap.add_argument("--prior", default="drawn", choices=("drawn", "centred"),
+    ap.add_argument("--prior", default="drawn", choices=PRIORS,
                     help="where the truth lies in the filter's prior: at a place drawn per "
                          "seed (default), or at its centre")
+    ap.add_argument("--contrast", type=Path, default=None, metavar="RUNS_FILE",
+                    help="a --runs-file of the same seeds with the other --prior: a section "
+                         "setting the two side by side")
     ap.add_argument("--out", type=Path, default=REPORT)
     ap.add_argument("--runs-file", type=Path, default=None,
                     help="keep the runs' numbers here (JSON, outside the repository), or, if "
@@ -511,7 +589,7 @@ def main(argv=None):
     argv = list(argv if argv is not None else sys.argv[1:])
     shown, skip = [], False
     for a in argv:  # the report's command: without the files it was written to or read from
-        if skip or a in ("--out", "--runs-file"):
+        if skip or a in ("--out", "--runs-file", "--contrast"):
             skip = not skip
             continue
         shown.append(a)
@@ -533,7 +611,12 @@ def main(argv=None):
         if args.runs_file is not None:
             args.runs_file.write_text(json.dumps({"runs": runs, "latency": latency,
                                                   "command": command}, default=float))
-    lines = report(runs, command.strip(), latency)
+    other = None
+    if args.contrast is not None:
+        saved = json.loads(args.contrast.read_text())
+        other = saved["runs"]
+        command += f"; {saved['command']}"
+    lines = report(runs, command.strip(), latency, other)
     args.out.parent.mkdir(parents=True, exist_ok=True)
     args.out.write_text("\n".join(lines) + "\n")
     print(f"-> {args.out}")

@@ -13,7 +13,10 @@ constant and with drifting optics. Each row of the report names the drift bank's
 ran with: the drifting filters' restart forms (``restart_knots``), their restarts' delay after
 each pulse (``restart_delay``, s) and their walk (``walk_std``, log units per heated step, mua
 and mus); rows with settings other than the shipped default's are alternatives measured on the
-same seeds and data.
+same seeds and data. The prior: ``centred``, the medium's nominal optics (the centre of the
+filter's prior, 0.5 to 2 times them) the truth's start, mua 1 and mus 100 cm^-1; ``drawn``
+(``--prior drawn``), the truth's start divided by factors drawn per seed from 0.5 to 2, as
+when a user's guess of the tissue is off (``independent_models.nominal_optics``).
 
 Targets per run: constant optics, mua within 5% and mus within 25 cm^-1 at 15 s; drifting
 optics, mua's RMSE over the run <= 0.3 cm^-1 and mus within 10% at 15 s; each
@@ -37,17 +40,27 @@ from pathlib import Path
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).parent))
-from independent_models import ALL_MODELS, CASES, TIMES, independent_truth, optics, pulses  # noqa: E402
+from independent_models import (  # noqa: E402
+    ALL_MODELS,
+    CASES,
+    PRIORS,
+    TIMES,
+    independent_truth,
+    nominal_optics,
+    optics,
+    pulses,
+)
 from reporting import write_report  # noqa: E402
 
 ROOT = Path(__file__).parents[1]
 CONSTANT = ("constant", "pulse-train")
 
 
-def config_for(case: str, mode: str = "auto", forms=None, delay=None, walk=None):
+def config_for(case: str, mode: str = "auto", forms=None, delay=None, walk=None,
+               nominal=None):
     """examples/own_data.toml with the laser of ``case`` (and ``[filter.drift] mode``,
-    ``restart_knots = forms``, ``restart_delay = delay`` and ``walk_std = walk`` unless
-    None)."""
+    ``restart_knots = forms``, ``restart_delay = delay``, ``walk_std = walk`` and the
+    medium's ``(mua, mus) = nominal`` unless None)."""
     from enkf.app.config import identify_config_from_dict
     from mcmatlab_py.config import read_toml
 
@@ -63,6 +76,8 @@ def config_for(case: str, mode: str = "auto", forms=None, delay=None, walk=None)
         raw["filter"]["drift"]["restart_delay"] = float(delay)
     if walk is not None:
         raw["filter"]["drift"]["walk_std"] = [float(v) for v in walk]
+    if nominal is not None:
+        raw["G"]["media"][0].update(mua=float(nominal[0]), mus=float(nominal[1]))
     raw.pop("data", None)
     return identify_config_from_dict(raw)
 
@@ -73,12 +88,15 @@ _CFG: dict = {}
 def run_one(args) -> dict:
     from enkf.tissue import identify
 
-    model, case, seed, mode, forms, delay, walk = args
+    model, case, seed, mode, forms, delay, walk, prior = args
     key = (case, mode, forms, delay, walk)
-    if key not in _CFG:
+    if key not in _CFG:  # the emulator does not depend on the nominal optics: one a key
         cfg = config_for(case, mode, forms, delay, walk)
         _CFG[key] = (cfg, cfg.emulator(progress=False))
     cfg, emulator = _CFG[key]
+    nominal = nominal_optics(case, prior, [seed, 18, 1])
+    if prior != "centred":
+        cfg = config_for(case, mode, forms, delay, walk, nominal)
     truth = independent_truth(model, case)
     rng = np.random.default_rng([seed, 18])
     data = truth[1:, :1] + 0.1 * rng.standard_normal((len(TIMES) - 1, 1))
@@ -100,6 +118,7 @@ def run_one(args) -> dict:
         setup.parameters.drift.restart_delay,
         "walk_std": None if setup.parameters.drift is None else
         list(setup.parameters.drift.walk_std),
+        "prior": prior, "nominal": list(nominal),
         "final": est.param_mean[-1].tolist(), "final_sd": est.param_std[-1].tolist(),
         "final_truth": true_p[-1].tolist(),
         "band_final": [[float(lo[-1]), float(hi[-1])] for lo, hi in band],
@@ -138,20 +157,22 @@ def forms_of(r: dict) -> str:
     return ", ".join(str(v) for v in forms) if len(forms) else "none (no bank)"
 
 
-def setting_of(r: dict) -> tuple[str, str, str]:
-    """(restart forms, restart delay, walk) of a run, as the report writes them."""
+def setting_of(r: dict) -> tuple[str, str, str, str]:
+    """(restart forms, restart delay, walk, prior) of a run, as the report writes them
+    (runs that predate the record of the prior had it centred on the truth)."""
     from enkf.tissue.drift import DriftBank
 
     delay = r.get("restart_delay", OLD_DELAY)
     walk = r.get("walk_std", DriftBank().walk_std)
     return (forms_of(r), "" if delay is None else f"{delay:g}",
-            "" if walk is None else ", ".join(f"{v:g}" for v in walk))
+            "" if walk is None else ", ".join(f"{v:g}" for v in walk),
+            r.get("prior", "centred"))
 
 
 def report(rows: list, path: Path, command: str) -> None:
     from enkf.tissue.drift import DriftBank
 
-    default = setting_of({"restart_delay": DriftBank().restart_delay})
+    default = setting_of({"restart_delay": DriftBank().restart_delay})[:3]
     lines = ["# One default config for still, drifting and pulsed optics", "",
              f"Command: `{command}`", "", __doc__.split("\n\n")[1].replace("\n", " "), "",
              __doc__.split("\n\n")[2].replace("\n", " "), "",
@@ -167,10 +188,11 @@ def report(rows: list, path: Path, command: str) -> None:
              "cores.", "",
              "| truth | case | seeds | estimates | parameter bands | T bands >= 0.9 | "
              "T coverage z = 0, 0.1, 0.2 | mua, mus at 15 s (median) | truth | P(drift) | "
-             "restarts (runs) | restart forms | restart delay s | walk | wall s (median) |",
-             "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
+             "restarts (runs) | restart forms | restart delay s | walk | prior | "
+             "wall s (median) |",
+             "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
     keys = sorted({(r["model"], r["case"], *setting_of(r)) for r in rows},
-                  key=lambda k: (k[0], CASES.index(k[1]), k[2:] != default, k[2:]))
+                  key=lambda k: (k[0], CASES.index(k[1]), k[2:5] != default, k[5], k[2:]))
     for key in keys:
         rs = [r for r in rows if (r["model"], r["case"], *setting_of(r)) == key]
         n = len(rs)
@@ -185,7 +207,7 @@ def report(rows: list, path: Path, command: str) -> None:
             f"{sum(o['bands'] for o in ok)} | {sum(o['T bands'] for o in ok)} | {cov} | "
             f"{fin[0]:.3g}, {fin[1]:.4g} | {rs[0]['final_truth'][0]:.3g}, "
             f"{rs[0]['final_truth'][1]:.4g} | {np.median(w) if w else float('nan'):.3g} | "
-            f"{sum(r['restarts'] > 0 for r in rs)} | {key[2]} | {key[3]} | {key[4]} | "
+            f"{sum(r['restarts'] > 0 for r in rs)} | {key[2]} | {key[3]} | {key[4]} | {key[5]} | "
             f"{np.median([r['wall_s'] for r in rs]):.1f} |")
     write_report(path, lines, rows)
 
@@ -215,6 +237,10 @@ def main(argv=None):
     ap.add_argument("--walk-std", type=float, nargs=2, default=None, metavar=("MUA", "MUS"),
                     help="[filter.drift] walk_std (log units per heated step) instead of the "
                          "config's")
+    ap.add_argument("--prior", default="centred", choices=PRIORS,
+                    help="where the truth lies in the filter's prior: at its centre (the "
+                         "nominal optics the truth's start), or at a place drawn per seed "
+                         "(independent_models.nominal_optics)")
     ap.add_argument("--out", default=str(ROOT / "validation" / "reports" / "drift_bank.md"))
     ap.add_argument("--from-json", nargs="+", default=None, metavar="FILE",
                     help="write the report from the per-run numbers of earlier runs (their "
@@ -233,7 +259,7 @@ def main(argv=None):
     forms = None if args.restart_knots is None else tuple(
         v if v == "logistic" else int(v) for v in args.restart_knots)
     walk = None if args.walk_std is None else tuple(args.walk_std)
-    tasks = [(m, c, s, args.mode, forms, args.restart_delay, walk) for c in args.case
+    tasks = [(m, c, s, args.mode, forms, args.restart_delay, walk, args.prior) for c in args.case
              for m in args.model for s in range(args.first_seed, args.first_seed + args.seeds)]
     rows = []
     t0 = time.perf_counter()

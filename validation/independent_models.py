@@ -123,6 +123,25 @@ def optics(case: str, t: float) -> tuple[float, float]:
 # ------------------------------------------------------------------------- Monte Carlo
 
 
+#: where the truth lies in the filter's prior (0.5 to 2 times the nominal optics)
+PRIORS = ("centred", "drawn")
+
+
+def nominal_optics(case: str, prior: str, key) -> tuple[float, float]:
+    """The filter's nominal (mua, mus) cm^-1, its prior's centre, for a run of ``case``:
+    the truth's start with ``prior = "centred"``; with ``"drawn"``, the truth's start
+    divided by factors drawn uniformly from the prior's range 0.5 to 2 (the generator
+    seeded by ``key``), so that the truth lies where the prior puts it at random, as when
+    a user's guess of the tissue is off."""
+    start = optics(case, 0.0)
+    if prior == "centred":
+        return float(start[0]), float(start[1])
+    if prior != "drawn":
+        raise ValueError(f"prior must be one of {PRIORS}, got {prior!r}")
+    r = np.random.default_rng(key).uniform(0.5, 2.0, 2)
+    return float(start[0] / r[0]), float(start[1] / r[1])
+
+
 def _hg_scatter(ux, uy, uz, g, rng):
     """New directions after Henyey-Greenstein scattering (Wang & Jacques 1995, MCML)."""
     n = ux.size
