@@ -320,10 +320,12 @@ def hot_files(tmp_path):
     return cfg, data
 
 
-def test_identify_writes_the_advice(tmp_path, cache, hot_files):
+def test_identify_writes_the_advice(tmp_path, cache, hot_files, capsys):
     cfg, data = hot_files
     out = tmp_path / "id"
     assert run("identify", cfg, "--data", data, "--out", out, "--quiet", "--cache-dir", cache) == 0
+    said = [line for line in capsys.readouterr().out.splitlines() if ": advice at 2 s: " in line]
+    assert len(said) == 1 and "target coagulated at" in said[0] and "hottest" in said[0]
     lines = (out / "advice.csv").read_text().splitlines()
     head = lines[0].split(",")
     assert head[:5] == ["time_s", "target_time_median_s", "target_time_q5_s",
@@ -338,7 +340,7 @@ def test_identify_writes_the_advice(tmp_path, cache, hot_files):
     assert (out / "figures" / "estimates.png").exists()
 
 
-def test_follow_writes_the_advice_with_each_line(tmp_path, cache, hot_files):
+def test_follow_writes_the_advice_with_each_line(tmp_path, cache, hot_files, capsys):
     cfg, data = hot_files
     live = tmp_path / "live.csv"
     lines = data.read_text().splitlines()
@@ -365,6 +367,7 @@ def test_follow_writes_the_advice_with_each_line(tmp_path, cache, hot_files):
     for a, e in zip(adv[1:], est[1:], strict=True):  # the same median, to the CSV's digits
         assert float(a.split(",")[1]) == pytest.approx(float(e.split(",")[-1]), rel=1e-5)
     assert json.loads((out / "run.json").read_text())["advice"]["final"]["time_s"] == pytest.approx(0.9)
+    assert "advice at 0.9 s: " in capsys.readouterr().out
 
 
 @pytest.mark.parametrize("new, message", [
@@ -393,3 +396,21 @@ def test_advice_needs_the_damage_law(tmp_path, capsys):
     cfg.write_text((EX / "tiny.toml").read_text() + ADVICE)
     assert run("identify", cfg, "--data", EX / "tiny_data.csv", "--out", tmp_path / "o") == 2
     assert "G.media[0].E" in capsys.readouterr().err
+
+
+def test_the_advice_in_one_line():
+    from enkf.tissue.advice import advice_line
+
+    final = {"time_s": 2.5, "target_time_median_s": 3.1, "target_time_q5_s": 2.8,
+             "target_time_q95_s": None, "p_target": 0.9, "stop_time_median_s": 2.6,
+             "stop_time_q5_s": 2.2, "stop_time_q95_s": 2.9, "p_protected_plan": 0.25,
+             "protected_peak_T_median_C": 48.04, "protected_peak_T_q5_C": 45.0,
+             "protected_peak_T_q95_C": 52.3}
+    line = advice_line({"final": final, "limits": {"protected_T": 50.0}})
+    assert line == ("advice at 2.5 s: target coagulated at 3.10 s (2.80 to beyond the "
+                    "horizon), stop at 2.60 s (2.20 to 2.90); P(protected over 50 deg C) "
+                    "0.25, hottest 48.0 deg C (45.0 to 52.3)")
+    final.update(target_time_median_s=None, p_target=0.0)
+    assert "target not coagulated within the horizon (P = 0.00)" in advice_line(
+        {"final": final, "limits": {}})
+    assert advice_line({}) == "advice: no reading"

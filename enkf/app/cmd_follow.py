@@ -236,9 +236,10 @@ def follow(args, cfg, absorption, seed, t_emu) -> int:
         drift = {"drift": {"behaviour": "drifting" if w >= 0.5 else "still", "weight_final": w}}
         print(f"optics {drift['drift']['behaviour']} while heated (P(drift) = {w:.2g})")
     if advice_rows:
-        from ..tissue.advice import advice_summary
+        from ..tissue.advice import advice_line, advice_summary
 
         drift["advice"] = advice_summary(advisor, advice_rows)
+        print(advice_line(drift["advice"]))
     lat = np.array([h.latency_s for h in ident.history])
     step_s = {"step_s": {"mean": float(lat.mean()), "p95": float(np.percentile(lat, 95)),
                          "max": float(lat.max())}} if lat.size else {}

@@ -222,6 +222,10 @@ def cmd_identify(args) -> int:
             par += (f"; optics {drift['behaviour']} while heated (P(drift) = "
                     f"{drift['weight_final']:.2g})")
         print(f"{r['data']}: {par}{stop}")
+        if r.get("advice"):
+            from ..tissue.advice import advice_line
+
+            print(f"{r['data']}: {advice_line(r['advice'])}")
     print(f"-> {args.out}")
     return 0
 

@@ -67,7 +67,7 @@ with the bank's weights), or after each :meth:`OnlineIdentifier.update` with
 
 from .advisor import Advisor, online_ensembles
 from .plan import DRIFT_FORECASTS, RISKS, AdviceRow, MemberAdvice, Plan
-from .report import advice_summary, plot_advice
+from .report import advice_line, advice_summary, plot_advice
 
 __all__ = ["DRIFT_FORECASTS", "RISKS", "AdviceRow", "Advisor", "MemberAdvice", "Plan",
-           "advice_summary", "online_ensembles", "plot_advice"]
+           "advice_line", "advice_summary", "online_ensembles", "plot_advice"]

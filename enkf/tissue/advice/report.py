@@ -6,7 +6,7 @@ import numpy as np
 
 from .advisor import Advisor
 
-__all__ = ["advice_summary", "plot_advice"]
+__all__ = ["advice_line", "advice_summary", "plot_advice"]
 
 
 def advice_summary(advisor: Advisor, rows: list) -> dict:
@@ -29,6 +29,46 @@ def advice_summary(advisor: Advisor, rows: list) -> dict:
                              "last": width[-1] if rows else None},
         "wall_ms": {"median": float(np.median(ms)) if ms else None,
                     "max": float(np.max(ms)) if ms else None}}
+
+
+def advice_line(summary: dict) -> str:
+    """The last reading's advice in one line, from :func:`advice_summary`'s dict: when the
+    target coagulates and when to stop (medians and intervals), the risks under the plan,
+    and the hottest the protected tissue and the surface get."""
+    f, lim = summary.get("final") or {}, summary.get("limits") or {}
+    if not f:
+        return "advice: no reading"
+    q = [k[len("target_time_q"):-2] for k in f if k.startswith("target_time_q")]
+
+    def finite(v):  # summary.json writes inf (beyond the horizon) as null
+        return v is not None and np.isfinite(v)
+
+    def when(what):
+        med, lo, hi = (f.get(f"{what}_median_s"), *(f.get(f"{what}_q{v}_s") for v in q))
+        hi_s = f"{hi:.2f}" if finite(hi) else "beyond the horizon"
+        return f"{med:.2f} s ({lo:.2f} to {hi_s})"
+
+    if finite(f.get("target_time_median_s")):
+        head = (f"target coagulated at {when('target_time')}, stop at "
+                f"{when('stop_time') if finite(f.get('stop_time_median_s')) else 'the horizon'}")
+    else:
+        head = (f"target not coagulated within the horizon (P = "
+                f"{f.get('p_target', 0.0):.2f})")
+    parts = [f"advice at {f['time_s']:g} s: {head}"]
+    for region, limit in (("protected", lim.get("protected_T")), ("surface", lim.get("surface_T"))):
+        peak = f.get(f"{region}_peak_T_median_C")
+        p = f.get(f"p_{region}_plan")
+        if p is None and peak is None:
+            continue
+        bits = []
+        if p is not None:
+            over = f" over {limit:g} deg C" if limit is not None else " over its limit"
+            bits.append(f"P({region}{over}) {p:.2f}")
+        if peak is not None:
+            lo, hi = (f.get(f"{region}_peak_T_q{v}_C") for v in q)
+            bits.append(f"hottest {peak:.1f} deg C ({lo:.1f} to {hi:.1f})")
+        parts.append(", ".join(bits))
+    return "; ".join(parts)
 
 
 def plot_advice(ax, rows: list) -> None:
