@@ -185,14 +185,8 @@ def run_one(case: str, seed: int, check_rows: bool = False, prior: str = "drawn"
     out["optics"] = {}
     for t in EVAL:
         step = int(np.argmin(np.abs(TIMES[1:] - t)))
-        comps, forks = est.components or {}, est.component_forks or {}
-        parts = []
-        for k, w in (est.component_weights or {None: [1.0]}).items():
-            # a filter that shares another's run at this reading (before its own restart)
-            src = forks[k][0] if k in forks and step + 1 <= forks[k][1] else next(
-                (j for j in comps if (j, step + 1) in online and comps[j] is comps.get(k)), k)
-            if (src, step + 1) in online:
-                parts.append((float(w[min(step + 1, len(w) - 1)]), online[src, step + 1]))
+        parts = [(w, online[src, step + 1]) for src, w in adv.filters_at(est, step + 1)
+                 if (src, step + 1) in online]
         if parts:
             tot = sum(p[0] for p in parts)
             out["optics"][f"{t:g}"] = [float(sum(p[0] * p[1][i] for p in parts) / tot)

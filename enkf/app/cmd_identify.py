@@ -208,6 +208,8 @@ def cmd_identify(args) -> int:
               file=sys.stderr)
         return EXIT_BATCH_FAILED
     # the result, even with --quiet (it hides the progress bars only)
+    from ..tissue.advice import advice_line
+
     for r in rows:
         if "error" in r:
             print(f"{r['data']}: failed: {r['error']}", file=sys.stderr)
@@ -223,8 +225,6 @@ def cmd_identify(args) -> int:
                     f"{drift['weight_final']:.2g})")
         print(f"{r['data']}: {par}{stop}")
         if r.get("advice"):
-            from ..tissue.advice import advice_line
-
             print(f"{r['data']}: {advice_line(r['advice'])}")
     print(f"-> {args.out}")
     return 0

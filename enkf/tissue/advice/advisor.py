@@ -343,26 +343,34 @@ class Advisor:
             tr.advice[rep.step] = self.member_advice(tr, rep.state_ensemble, rep.param_ensemble,
                                                      rep.component)
 
-    def table(self, est=None) -> list[AdviceRow]:
-        """The advice at each step followed: the members of the bank's filters weighed by
-        ``est.component_weights`` after each reading (one filter: its own members)."""
+    def filters_at(self, est, s: int) -> list[tuple]:
+        """``[(track key, weight), ...]`` of each filter of ``est.component_weights`` after
+        step ``s``, named by the track that followed its run there (one filter: its own,
+        weight 1)."""
         keys = list(self.tracks)
         weights = getattr(est, "component_weights", None) or {k: None for k in keys}
         comps = getattr(est, "components", None) or {}
-        # a bank runs the drifting filters once when none restarts: the others share it
-        same = {n: next((k for k in keys if k in comps and comps[k] is comps[n]), n)
-                for n in weights}
         # one that resumed another's run at its first restart: that one's steps before it
         forks = getattr(est, "component_forks", None) or {}
-        steps = sorted({s for k in keys for s in self.tracks[k].advice})
+        out = []
+        for n, w in weights.items():
+            if n in forks and s <= forks[n][1]:
+                src = forks[n][0]
+            else:  # a bank runs the drifting filters once when none restarts: they share it
+                src = next((k for k in keys if k in comps and comps[k] is comps[n]), n)
+            out.append((src, 1.0 if w is None else float(w[min(s, len(w) - 1)])))
+        return out
+
+    def table(self, est=None) -> list[AdviceRow]:
+        """The advice at each step followed: the members of the bank's filters weighed by
+        ``est.component_weights`` after each reading (one filter: its own members)."""
+        steps = sorted({s for tr in self.tracks.values() for s in tr.advice})
         rows = []
         for s in steps:
             parts = {}
-            for n, w in weights.items():
-                src = forks[n][0] if n in forks and s <= forks[n][1] else same[n]
+            for src, wk in self.filters_at(est, s):
                 tr = self.tracks.get(src)
                 adv = None if tr is None else tr.advice.get(s)
-                wk = 1.0 if w is None else float(w[min(s, len(w) - 1)])
                 if adv is not None and wk > 0:
                     parts[src] = (parts.get(src, (0.0,))[0] + wk, adv)
             if parts:
