@@ -115,8 +115,10 @@ def npz_headers(path: str | Path, what: str, error: type[Exception] = ValueError
                                     "damaged or forged")
                     out[info.filename[:-4]] = (tuple(int(s) for s in shape), dtype,
                                                info.file_size)
-        except (zipfile.BadZipFile, zipfile.LargeZipFile, EOFError, OSError,
-                ValueError) as err:
+        # zipfile raises NotImplementedError for features it cannot read (compression
+        # methods, patched data) and RuntimeError for an encrypted member
+        except (zipfile.BadZipFile, zipfile.LargeZipFile, EOFError, OSError, ValueError,
+                NotImplementedError, RuntimeError) as err:
             if isinstance(err, error):
                 raise
             raise error(f"{what} {name!r} is not a readable NPZ file ({err})") from None

@@ -13,7 +13,7 @@ import io
 import zipfile
 
 import numpy as np
-from hypothesis import HealthCheck, given, settings
+from hypothesis import HealthCheck, example, given, settings
 from hypothesis import strategies as st
 
 from enkf.app.readers import follow_csv, load_frames
@@ -37,6 +37,9 @@ SETTINGS = settings(max_examples=60, deadline=None,
 @SETTINGS
 @given(st.lists(st.tuples(st.integers(0, len(VALID) - 1), st.integers(0, 255)), max_size=8),
        st.integers(0, len(VALID)))
+# a member's flags in the central directory: compressed patched data (bit 5), encrypted
+@example(flips=[(654, 32)], cut=724)
+@example(flips=[(654, 1)], cut=724)
 def test_a_damaged_npz_loads_or_is_refused(tmp_path_factory, flips, cut):
     raw = bytearray(VALID[:max(cut, 30)])
     for pos, byte in flips:
