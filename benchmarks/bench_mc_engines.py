@@ -230,7 +230,7 @@ def breakdown(names: list[str], n: int, rounds: int) -> None:
 
     real = mc.kernel_safety
 
-    def walk(args, spec=None):
+    def walk(args, spec=None, groups=None):
         return np.zeros(args[0].size, dtype=np.float32)
 
     def no_track(build):

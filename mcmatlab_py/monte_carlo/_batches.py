@@ -6,7 +6,7 @@ batches from a shared atomic counter and run them with the one-medium kernel
 Numba keys the on-disk cache of :func:`run_batches` on this file's text alone, yet the
 cached code holds the kernels compiled in: a change to them (or to the helpers they
 inline) must change this file too, or a cache compiled before it goes on running.
-Kernels of 2026-11: the direction's reciprocals where they are used (issue 47).
+Kernels of 2026-12: delta tracking within groups of similar media (issue 47).
 """
 
 import numba
@@ -23,14 +23,16 @@ def run_batches(
     boundary_type, n_out, matched, roulette, weight_threshold, chance,
     si, sf, stab, svox, phase_idx, phase_tab, normals, use_normals,
     seed, batch_size, n_total, batch_start, batch_stop, acc, tally,
-    oi, of, consider, ext, paths, path_n, track, flu, safe,
+    oi, of, consider, ext, paths, path_n, track, flu, safe, majorant,
 ):  # fmt: skip
     """Run batches ``[batch_start, batch_stop)`` on ``acc.shape[0]`` workers in parallel.
 
     ``track`` (n_media,) bool or None and ``flu`` (n_workers, nvox or 1): the track-length
     tally (:func:`transport_batch`; the Python layer sets ``uniform_medium = -1`` with it).
     ``safe`` (nvox,) float32: the safety distances of the general kernel
-    (:func:`mcmatlab_py.monte_carlo.safety.safety_distances`).
+    (:func:`mcmatlab_py.monte_carlo.safety.navigation_safety`; negative: a ball of delta
+    tracking) and ``majorant`` (n_media,) float64 cm^-1, the largest attenuation of each
+    medium's group (:func:`mcmatlab_py.monte_carlo.safety.delta_groups`).
 
     ``acc`` is (n_workers, nvox), ``tally`` (n_workers, N_TALLY or more) and ``ext``
     (n_workers, n_ext), one row per worker; the workers (one per thread) claim batches one at a time from a
@@ -57,7 +59,7 @@ def run_batches(
                 )  # fmt: skip
                 continue
             transport_batch(
-                b, M, safe, mua, mus, g, nref, nx, ny, nz, dx, dy, dz,
+                b, M, safe, majorant, mua, mus, g, nref, nx, ny, nz, dx, dy, dz,
                 boundary_type, n_out, matched, roulette, weight_threshold, chance,
                 si, sf, stab, svox, phase_idx, phase_tab, normals, use_normals,
                 seed, batch_size, n_total, acc[k], tally[k],

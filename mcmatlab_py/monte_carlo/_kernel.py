@@ -61,9 +61,9 @@ from ._tally import (
 from ._track import track_walk
 
 
-@numba.njit(cache=True, fastmath=_FASTMATH)
+@numba.njit(cache=True, fastmath=_FASTMATH, error_model="numpy")
 def transport_batch(
-    b, M, safe, mua, mus, g, nref, nx, ny, nz, dx, dy, dz,
+    b, M, safe, majorant, mua, mus, g, nref, nx, ny, nz, dx, dy, dz,
     boundary_type, n_out, matched, roulette, weight_threshold, chance,
     si, sf, stab, svox, phase_idx, phase_tab, normals, use_normals,
     seed, batch_size, n_total, acc, tally, oi, of, consider, ext, paths, path_n,
@@ -76,6 +76,10 @@ def transport_batch(
     M : (nx*ny*nz,) int32, medium index per voxel, C order of (nx, ny, nz).
     safe : (nx*ny*nz,) float32 cm, how far a packet in each voxel may move without meeting
         a voxel of another kind of medium (:func:`mcmatlab_py.monte_carlo.safety.safety_distances`).
+        Negative: the packet crosses that ball by delta tracking
+        (:func:`mcmatlab_py.monte_carlo.safety.navigation_safety`).
+    majorant : (n_media,) float64 cm^-1, the largest ``mua + mus`` of each medium's group of
+        delta tracking (:func:`mcmatlab_py.monte_carlo.safety.delta_groups`).
     mua, mus, g, nref : (n_media,) float64 optical properties (cm^-1, -, -).
     boundary_type : 0 none escape, 1 all escape, 2 top escapes, 3 top and bottom
         escape with cyclic sides (MCmatlab).
@@ -167,6 +171,7 @@ def transport_batch(
         inside = True
         alive = True
         rs = 0.0  # the packet's safety: how far it may move freely, 0 if unknown
+        delta = False  # whether that ball is crossed by delta tracking
         rux = ruy = ruz = 0.0  # 1 / (ux, uy, uz), computed where needed once u changes
         pj = 0  # the deposit not yet added, and its voxel
         pdep = np.int64(0)
@@ -188,11 +193,15 @@ def transport_batch(
                     izc = _clamp(iz, nz)
                     j = (ixc * ny + iyc) * nz + izc
                     m = M[j]
-                    mut = mua[m] + mus[m]
                     if inside and (matched or npk == nref[m]):
-                        rs = max(rs, np.float64(safe[j]))
+                        sv = np.float64(safe[j])
+                        if abs(sv) > rs:  # the voxel's ball reaches beyond what is left
+                            rs = abs(sv)
+                            delta = sv < 0.0
                     else:
                         rs = 0.0
+                    # a ball of delta tracking draws its paths at the group's majorant
+                    mut = majorant[m] if rs > 0.0 and delta else mua[m] + mus[m]
                 if rs > 0.0:
                     # a free move: no voxel of another kind of medium lies within rs of the
                     # packet (mcmatlab_py.monte_carlo.safety); only the cuboid's faces can stop it. An
@@ -226,6 +235,15 @@ def transport_batch(
                     if hit:
                         rs -= s
                         j = (ix * ny + iy) * nz + iz
+                        if delta:
+                            # a tentative interaction: real with probability (mua + mus) /
+                            # majorant of the medium here, else null (the packet goes on)
+                            mh = M[j]
+                            s0, s1, s2, s3, r1 = next_double(s0, s1, s2, s3)
+                            if r1 * mut >= mua[mh] + mus[mh]:
+                                s0, s1, s2, s3, tau = next_exponential(s0, s1, s2, s3)
+                                continue
+                            m = mh
                         break
                     rs = 0.0
                     tau = max(tau - mut * s, 0.0)

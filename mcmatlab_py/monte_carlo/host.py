@@ -13,7 +13,7 @@ from . import _outputs as KO
 from ._batches import run_batches
 from ._tally import W_ONE, fluence_scale
 from .outputs import OutputSpec
-from .safety import medium_kinds, safety_distances
+from .safety import delta_groups, medium_kinds, navigation_safety
 
 __all__ = [
     "FLUSH_PHOTONS",
@@ -22,6 +22,7 @@ __all__ = [
     "MCResult",
     "WideSums",
     "kernel_args",
+    "kernel_groups",
     "kernel_safety",
     "optical_arrays",
     "parent_media",
@@ -121,16 +122,37 @@ def track_length(sums: WideSums, track, d: tuple, shape: tuple) -> np.ndarray | 
     return sums.value("flu").reshape(shape) / (fluence_scale(*d) * W_ONE)
 
 
-def kernel_safety(args: tuple, spec: OutputSpec | None = None) -> np.ndarray:
-    """(nvox,) float32 cm: the safety distances (:mod:`mcmatlab_py.monte_carlo.safety`) of the grid of
-    the kernel arguments ``args``; where deposition criteria count the transitions between
-    media, each medium is its own kind. A grid of one medium needs none: ``inf``."""
+def kernel_groups(args: tuple, spec: OutputSpec | None = None, track=None
+                  ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """``(group, majorant, merged)`` (n_media,) of the kernel arguments ``args``: the
+    groups of media crossed by delta tracking (:func:`mcmatlab_py.monte_carlo.safety.delta_groups`),
+    with ``track`` (:func:`track_media`) the media kept out of them, and with matched
+    interfaces (``MC.matched_interfaces``) regardless of the refractive indices; where
+    deposition criteria count the transitions between media, each medium is a group of its
+    own."""
+    M, mua, mus, nref = args[0], args[1], args[2], args[4]
+    by_medium = spec is not None and spec.active and spec.oi[KO.OI_DC] == 1
+    kinds = medium_kinds(*args[1:5], args[22], by_medium=by_medium)
+    present = np.bincount(np.asarray(M).ravel(), minlength=len(mua)) > 0
+    if by_medium or args[5] >= 0:  # counted transitions, or one medium: no groups
+        return kinds, np.asarray(mua, float) + np.asarray(mus, float), np.zeros(len(mua), bool)
+    if args[14]:  # matched interfaces: the refractive indices do not act
+        nref = np.ones(len(mua))
+    return delta_groups(kinds, mua, mus, nref, present, track)
+
+
+def kernel_safety(args: tuple, spec: OutputSpec | None = None, track=None) -> np.ndarray:
+    """(nvox,) float32 cm: the signed safety distances of the general kernel
+    (:func:`mcmatlab_py.monte_carlo.safety.navigation_safety`) of the grid of the kernel
+    arguments ``args``, its groups of delta tracking those of :func:`kernel_groups`. A grid
+    of one medium needs none: ``inf``."""
     M = args[0]
     if args[5] >= 0:
         return np.full(M.size, np.inf, dtype=np.float32)
+    group, _, merged = kernel_groups(args, spec, track)
     by_medium = spec is not None and spec.active and spec.oi[KO.OI_DC] == 1
     kinds = medium_kinds(*args[1:5], args[22], by_medium=by_medium)
-    return safety_distances(M.reshape(args[6:9]), kinds, args[9:12])
+    return navigation_safety(M.reshape(args[6:9]), kinds, group, merged, args[9:12])
 
 
 class HostRun:
@@ -150,14 +172,15 @@ class HostRun:
             self.args = args = (*args[:5], -1, *args[6:])
         self.flu = np.zeros((n_slots, args[0].size if self.track is not None else 1),
                             dtype=np.int64)
-        self.safe = kernel_safety(args, spec)
+        _, self.majorant, _ = kernel_groups(args, spec, self.track)
+        self.safe = kernel_safety(args, spec, self.track)
         self.sums = WideSums()
         self.pending = 0  #: packets in the int64 accumulators since they were last moved
         self._run(0, 0)  # compile or load first
 
     def _run(self, a: int, b: int) -> None:
         run_batches(*self.args, a, b, self.acc, self.tally, *self.out, self.track, self.flu,
-                      self.safe)
+                    self.safe, self.majorant)
 
     def run(self, start: int, stop: int) -> None:
         """Batches ``[start, stop)``, in chunks of at most FLUSH_PHOTONS packets."""
@@ -216,7 +239,8 @@ def kernel_args(G, MC, M, mua, mus, g, nref, seed, n_total):
                                   getattr(MC, "wavelength", None))
     if np.all(phase[0] < 0):
         phase = (None, phase[1])  # Henyey-Greenstein only: the kernel is compiled without tables
-    Mf = np.ascontiguousarray(M, dtype=np.int32).ravel()
+    # one byte a voxel where it holds the media (the look-ups stay in the cache)
+    Mf = np.ascontiguousarray(M, dtype=np.uint8 if len(mua) <= 256 else np.int32).ravel()
     uniform = int(Mf[0]) if np.all(Mf == Mf[0]) else -1
     normals = np.zeros(3, dtype=np.float32)
     smoothing = getattr(MC, "smoothing_length_scale", None)
