@@ -22,7 +22,8 @@ Run::
 
 ``--breakdown`` instead times the general kernel against itself with a part switched off:
 walking every packet face by face (a safety map of zeros, the kernel before its free
-moves) and without the track-length tally of thin media.
+moves), without delta tracking next to similar media, and without the track-length tally
+of thin media.
 
 A rate is marginal: each engine runs N/5 and N photons and the rate is 4N/5 over the
 difference of the CPU times (ours: this process's CPU time around ``run_monte_carlo``,
@@ -224,13 +225,15 @@ def mcmatlab(name: str, build, n: int, mcm_root: Path) -> tuple[float, float]:
 def breakdown(names: list[str], n: int, rounds: int) -> None:
     """Where the general kernel's time goes, by switching its parts off in turn (one
     thread, this process): the free moves (a safety map of zeros walks every packet face by
-    face, as the kernel did before them) and the track-length tally of thin media
-    (``MC.calc_normalized_fluence_rate = False``)."""
+    face, as the kernel did before them), delta tracking next to similar media
+    (``safety.DELTA_RATIO`` above 1: no groups, those voxels walked face by face) and the
+    track-length tally of thin media (``MC.calc_normalized_fluence_rate = False``)."""
     from mcmatlab_py.monte_carlo import host as mc
+    from mcmatlab_py.monte_carlo import safety
 
-    real = mc.kernel_safety
+    real, ratio = mc.kernel_safety, safety.DELTA_RATIO
 
-    def walk(args, spec=None, groups=None):
+    def walk(args, spec=None, track=None):
         return np.zeros(args[0].size, dtype=np.float32)
 
     def no_track(build):
@@ -240,13 +243,14 @@ def breakdown(names: list[str], n: int, rounds: int) -> None:
             return model
         return without
 
-    print("| problem | as run | walking face by face | without the track-length tally |")
-    print("|---|---|---|---|")
+    print("| problem | as run | walking face by face | without delta tracking "
+          "| without the track-length tally |")
+    print("|---|---|---|---|---|")
     for name in names:
         build = PROBLEMS[name]
         for b in (build, no_track(build)):  # compile or load the kernels outside the timing
             b(2000).run_monte_carlo()
-        best = {"as run": 0.0, "walk": 0.0, "no track": 0.0}
+        best = {"as run": 0.0, "walk": 0.0, "no delta": 0.0, "no track": 0.0}
         for _ in range(rounds):
             best["as run"] = max(best["as run"], ours(build, n)[0])
             mc.kernel_safety = walk
@@ -254,12 +258,18 @@ def breakdown(names: list[str], n: int, rounds: int) -> None:
                 best["walk"] = max(best["walk"], ours(build, n)[0])
             finally:
                 mc.kernel_safety = real
+            safety.DELTA_RATIO = 2.0
+            try:
+                best["no delta"] = max(best["no delta"], ours(build, n)[0])
+            finally:
+                safety.DELTA_RATIO = ratio
             best["no track"] = max(best["no track"], ours(no_track(build), n)[0])
         r = best["as run"]
         tally = (f"{best['no track']:.3g} (the tally: {1 - r / best['no track']:.0%} of the time)"
                  if _has_thin_media(build(1000)) else "no thin medium: nothing to switch off")
         print(f"| {name} | {r:.3g} | {best['walk']:.3g} ({r / best['walk']:.2f}x slower) | "
-              f"{tally} |", flush=True)
+              f"{best['no delta']:.3g} ({r / best['no delta']:.2f}x slower) | {tally} |",
+              flush=True)
 
 
 def _has_thin_media(model) -> bool:

@@ -195,7 +195,11 @@ def transport_batch(
                     m = M[j]
                     if inside and (matched or npk == nref[m]):
                         sv = np.float64(safe[j])
-                        if abs(sv) > rs:  # the voxel's ball reaches beyond what is left
+                        # a larger ball of the same rate at once; one of another rate
+                        # (delta tracking or not) only once this one is used up: the look-up
+                        # came because tau exceeds mut * rs, and the rest of tau would be
+                        # biased at another rate (a dermis layer absorbed 0.9% too little)
+                        if abs(sv) > rs and (rs == 0.0 or (sv < 0.0) == delta):
                             rs = abs(sv)
                             delta = sv < 0.0
                     else:
