@@ -89,27 +89,9 @@ def _safety(model) -> np.ndarray:
                                                                               G.nz)
 
 
-def skin(n_photons: int, *, matched: bool = True, boundary_type: int = 1, seed: int = 3) -> Model:
-    """Air (thin: its fluence is tallied along the path) over a layer, a dermis and a vessel
-    of other optics, a top-hat beam: every kind of move of the kernel."""
-    model = Model()
-    G = model.G
-    G.nx, G.ny, G.nz = 24, 24, 20
-    G.Lx = G.Ly = 0.24
-    G.Lz = 0.2
-    G.media = [Medium("air", mua=1e-8, mus=1e-8, g=1.0, n=1.0),
-               Medium("epidermis", mua=15.0, mus=300.0, g=0.8, n=1.45),
-               Medium("dermis", mua=1.0, mus=150.0, g=0.9, n=1.38),
-               Medium("blood", mua=50.0, mus=90.0, g=0.95, n=1.36)]
-
-    def geometry(X, Y, Z):
-        M = np.zeros(X.shape, dtype=int)
-        M[Z > 0.03] = 1
-        M[Z > 0.05] = 2
-        M[X**2 + (Z - 0.1) ** 2 < 0.03**2] = 3
-        return M
-
-    G.geom_func = geometry
+def _tophat_run(model: Model, n_photons: int, seed: int, *, matched: bool = True,
+                boundary_type: int = 1, radius: float = 0.05) -> Model:
+    """``model`` set to run ``n_photons`` of a top-hat beam of ``radius`` cm."""
     MC = model.MC
     MC.n_photons_requested = n_photons
     MC.seed = seed
@@ -117,8 +99,51 @@ def skin(n_photons: int, *, matched: bool = True, boundary_type: int = 1, seed: 
     MC.matched_interfaces = matched
     MC.boundary_type = boundary_type
     MC.light_source.source_type = "tophat"
-    MC.light_source.radius = 0.05
+    MC.light_source.radius = radius
     return model
+
+
+def _general_args(model: Model) -> tuple:
+    """The general kernel's arguments of ``model`` (as a run with a thin medium has them)."""
+    args = mc.kernel_args(model.G, model.MC, model.G.medium_map(),
+                          *mc.optical_arrays(model.G.media, model.MC.wavelength), 1,
+                          model.MC.n_photons_requested)
+    return (*args[:5], -1, *args[6:])
+
+
+def _vessel_model(shape: tuple, size: tuple, media: list, tops: tuple, vessel: tuple
+                  ) -> Model:
+    """Four media on a grid ``shape`` of ``size`` (Lx = Ly, Lz) cm: the first above the
+    depth ``tops[0]``, the second down to ``tops[1]``, the third below, and the fourth in
+    a vessel along y at depth ``vessel[0]`` of radius ``vessel[1]``."""
+    model = Model()
+    G = model.G
+    G.nx, G.ny, G.nz = shape
+    G.Lx = G.Ly = size[0]
+    G.Lz = size[1]
+    G.media = media
+
+    def geometry(X, Y, Z):
+        M = np.zeros(X.shape, dtype=int)
+        M[Z > tops[0]] = 1
+        M[Z > tops[1]] = 2
+        M[X**2 + (Z - vessel[0]) ** 2 < vessel[1] ** 2] = 3
+        return M
+
+    G.geom_func = geometry
+    return model
+
+
+def skin(n_photons: int, *, matched: bool = True, boundary_type: int = 1, seed: int = 3) -> Model:
+    """Air (thin: its fluence is tallied along the path) over a layer, a dermis and a vessel
+    of other optics, a top-hat beam: every kind of move of the kernel."""
+    model = _vessel_model((24, 24, 20), (0.24, 0.2),
+                          [Medium("air", mua=1e-8, mus=1e-8, g=1.0, n=1.0),
+                           Medium("epidermis", mua=15.0, mus=300.0, g=0.8, n=1.45),
+                           Medium("dermis", mua=1.0, mus=150.0, g=0.9, n=1.38),
+                           Medium("blood", mua=50.0, mus=90.0, g=0.95, n=1.36)],
+                          (0.03, 0.05), (0.1, 0.03))
+    return _tophat_run(model, n_photons, seed, matched=matched, boundary_type=boundary_type)
 
 
 def run(model, *, walk: bool = False, monkeypatch=None, threads: int | None = None):
@@ -250,15 +275,7 @@ def laminate(n_photons: int, seed: int = 7) -> Model:
         return M
 
     G.geom_func = geometry
-    MC = model.MC
-    MC.n_photons_requested = n_photons
-    MC.seed = seed
-    MC.progress = False
-    MC.matched_interfaces = True
-    MC.boundary_type = 1
-    MC.light_source.source_type = "tophat"
-    MC.light_source.radius = 0.05
-    return model
+    return _tophat_run(model, n_photons, seed)
 
 
 def test_delta_tracking_agrees_with_the_walk_face_by_face(monkeypatch):
@@ -270,9 +287,7 @@ def test_delta_tracking_agrees_with_the_walk_face_by_face(monkeypatch):
     ball's last look-up the absorbing layers' share by 43."""
     N = 100_000
     model = laminate(N)
-    args = mc.kernel_args(model.G, model.MC, model.G.medium_map(),
-                          *mc.optical_arrays(model.G.media, model.MC.wavelength), 1, N)
-    args = (*args[:5], -1, *args[6:])
+    args = _general_args(model)
     safe = mc.kernel_safety(args, None, mc.track_media(args))
     tissue = model.G.medium_map().ravel() > 0
     assert np.all(safe[tissue] <= 0) and (safe[tissue] < 0).mean() > 0.9  # 0: next to air
@@ -294,32 +309,13 @@ def gel_over_skin(n_photons: int, seed: int) -> Model:
     one voxel thick, a dermis and a vessel, matched. The voxels next to the epidermis and
     the vessel cross by delta tracking, the rest of the dermis by free moves: packets pass
     from one to the other."""
-    model = Model()
-    G = model.G
-    G.nx = G.ny = G.nz = 20
-    G.Lx = G.Ly = G.Lz = 0.1
-    G.media = [Medium("gel", mua=3.6e-4, mus=10.0, g=1.0, n=1.0),
-               Medium("epidermis", mua=16.57, mus=375.9, g=0.9, n=1.0),
-               Medium("dermis", mua=0.4585, mus=356.5, g=0.9, n=1.0),
-               Medium("blood", mua=230.5, mus=94.0, g=0.9, n=1.0)]
-
-    def geometry(X, Y, Z):
-        M = np.zeros(X.shape, dtype=int)
-        M[Z > 0.01] = 1
-        M[Z > 0.016] = 2
-        M[X**2 + (Z - 0.05) ** 2 < 0.01**2] = 3
-        return M
-
-    G.geom_func = geometry
-    MC = model.MC
-    MC.n_photons_requested = n_photons
-    MC.seed = seed
-    MC.progress = False
-    MC.matched_interfaces = True
-    MC.boundary_type = 1
-    MC.light_source.source_type = "tophat"
-    MC.light_source.radius = 0.03
-    return model
+    model = _vessel_model((20, 20, 20), (0.1, 0.1),
+                          [Medium("gel", mua=3.6e-4, mus=10.0, g=1.0, n=1.0),
+                           Medium("epidermis", mua=16.57, mus=375.9, g=0.9, n=1.0),
+                           Medium("dermis", mua=0.4585, mus=356.5, g=0.9, n=1.0),
+                           Medium("blood", mua=230.5, mus=94.0, g=0.9, n=1.0)],
+                          (0.01, 0.016), (0.05, 0.01))
+    return _tophat_run(model, n_photons, seed, radius=0.03)
 
 
 def test_delta_tracking_and_free_moves_together_agree_with_the_walk(monkeypatch):
@@ -339,9 +335,7 @@ def test_delta_tracking_and_free_moves_together_agree_with_the_walk(monkeypatch)
                      [MC.escaped[f] for f in ("top", "bottom", "sides")]]
 
     model = gel_over_skin(N, 0)
-    args = mc.kernel_args(model.G, model.MC, model.G.medium_map(),
-                          *mc.optical_arrays(model.G.media, model.MC.wavelength), 1, N)
-    args = (*args[:5], -1, *args[6:])
+    args = _general_args(model)
     safe = mc.kernel_safety(args, None, mc.track_media(args))
     assert (safe < 0).mean() > 0.05 and (safe > 0).mean() > 0.5  # both kinds of ball
     free = np.array([tallies(run(gel_over_skin(N, 100 + k))) for k in range(K)])
@@ -357,9 +351,7 @@ def test_the_skin_model_crosses_its_dermis_and_vessel_by_delta_tracking():
     """With matched interfaces the dermis (151 cm^-1) and the vessel (140) form one group:
     the voxels where they meet get balls of delta tracking."""
     model = skin(100)
-    args = mc.kernel_args(model.G, model.MC, model.G.medium_map(),
-                          *mc.optical_arrays(model.G.media, model.MC.wavelength), 1, 100)
-    args = (*args[:5], -1, *args[6:])
+    args = _general_args(model)
     _, maj, merged = mc.kernel_groups(args, None, mc.track_media(args))
     assert list(merged) == [False, False, True, True] and maj[3] == 151.0
     safe = mc.kernel_safety(args, None, mc.track_media(args)).reshape(model.G.medium_map().shape)
