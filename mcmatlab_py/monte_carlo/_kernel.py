@@ -198,7 +198,7 @@ def transport_batch(
                         # a larger ball of the same rate at once; one of another rate
                         # (delta tracking or not) only once this one is used up: the look-up
                         # came because tau exceeds mut * rs, and the rest of tau would be
-                        # biased at another rate (a dermis layer absorbed 0.9% too little)
+                        # biased at another rate (a dermis layer would absorb 0.9% too little)
                         if abs(sv) > rs and (rs == 0.0 or (sv < 0.0) == delta):
                             rs = abs(sv)
                             delta = sv < 0.0
