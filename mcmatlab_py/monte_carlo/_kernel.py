@@ -73,7 +73,8 @@ def transport_batch(
 
     Parameters
     ----------
-    M : (nx*ny*nz,) int32, medium index per voxel, C order of (nx, ny, nz).
+    M : (nx*ny*nz,) uint8 (int32 beyond 256 media), medium index per voxel, C order of
+        (nx, ny, nz).
     safe : (nx*ny*nz,) float32 cm, how far a packet in each voxel may move without meeting
         a voxel of another kind of medium (:func:`mcmatlab_py.monte_carlo.safety.safety_distances`).
         Negative: the packet crosses that ball by delta tracking
