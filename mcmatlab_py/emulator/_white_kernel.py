@@ -108,7 +108,7 @@ def white_batch(
     rate : (K,) the smallest ``mua_tab[m, k]`` over the media in the grid (cm^-1).
     kid : (K,) uint64 what keys the roulette numbers of ``k`` (the bits of its ``mua``), so
         that a weight's numbers do not depend on the other weights of the run.
-    Mf : (nx*ny*nz,) int32 medium index of each voxel (C order).
+    Mf : (nx*ny*nz,) uint8 or int32 medium index of each voxel (C order; kernel_args).
     mus, g : (n_media,) scattering coefficient (cm^-1) and anisotropy of each medium.
     nref : the refractive index of every medium (one value).
     boundary_type, n_out, matched, roulette, weight_threshold, chance : as
