@@ -6,7 +6,8 @@ batches from a shared atomic counter and run them with the one-medium kernel
 Numba keys the on-disk cache of :func:`run_batches` on this file's text alone, yet the
 cached code holds the kernels compiled in: a change to them (or to the helpers they
 inline) must change this file too, or a cache compiled before it goes on running.
-Kernels of 2026-12: delta tracking within groups of similar media (issue 47).
+Kernels of 2026-12: delta tracking within groups of similar media, a packet changing
+between its balls only once one is used up (issue 47).
 """
 
 import numba
