@@ -233,7 +233,7 @@ def breakdown(names: list[str], n: int, rounds: int) -> None:
 
     real, ratio = mc.kernel_safety, safety.DELTA_RATIO
 
-    def walk(args, spec=None, track=None):
+    def walk(args, *_):
         return np.zeros(args[0].size, dtype=np.float32)
 
     def no_track(build):

@@ -150,7 +150,7 @@ def run(model, *, walk: bool = False, monkeypatch=None, threads: int | None = No
     """``model``'s Monte Carlo; ``walk``: with a safety map of zeros (face by face)."""
     if walk:
         monkeypatch.setattr(mc, "kernel_safety",
-                            lambda args, spec=None, track=None: np.zeros(args[0].size, np.float32))
+                            lambda args, *_: np.zeros(args[0].size, np.float32))
     model.MC.n_threads = threads
     model.run_monte_carlo()
     if walk:
@@ -340,7 +340,7 @@ def test_delta_tracking_and_free_moves_together_agree_with_the_walk(monkeypatch)
     assert (safe < 0).mean() > 0.05 and (safe > 0).mean() > 0.5  # both kinds of ball
     free = np.array([tallies(run(gel_over_skin(N, 100 + k))) for k in range(K)])
     monkeypatch.setattr(mc, "kernel_safety",
-                        lambda args, spec=None, track=None: np.zeros(args[0].size, np.float32))
+                        lambda args, *_: np.zeros(args[0].size, np.float32))
     walk = np.array([tallies(run(gel_over_skin(N, 200 + k))) for k in range(K)])
     se = np.sqrt(free.var(axis=0, ddof=1) / K + walk.var(axis=0, ddof=1) / K)
     z = (free.mean(axis=0) - walk.mean(axis=0)) / np.where(se > 0, se, 1.0)
@@ -352,7 +352,7 @@ def test_the_skin_model_crosses_its_dermis_and_vessel_by_delta_tracking():
     the voxels where they meet get balls of delta tracking."""
     model = skin(100)
     args = _general_args(model)
-    _, maj, merged = mc.kernel_groups(args, None, mc.track_media(args))
+    _, _, maj, merged = mc.kernel_groups(args, None, mc.track_media(args))
     assert list(merged) == [False, False, True, True] and maj[3] == 151.0
     safe = mc.kernel_safety(args, None, mc.track_media(args)).reshape(model.G.medium_map().shape)
     M = model.G.medium_map()

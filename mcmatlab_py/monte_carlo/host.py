@@ -123,35 +123,36 @@ def track_length(sums: WideSums, track, d: tuple, shape: tuple) -> np.ndarray | 
 
 
 def kernel_groups(args: tuple, spec: OutputSpec | None = None, track=None
-                  ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """``(group, majorant, merged)`` (n_media,) of the kernel arguments ``args``: the
-    groups of media crossed by delta tracking (:func:`mcmatlab_py.monte_carlo.safety.delta_groups`),
-    with ``track`` (:func:`track_media`) the media kept out of them, and with matched
-    interfaces (``MC.matched_interfaces``) regardless of the refractive indices; where
-    deposition criteria count the transitions between media, each medium is a group of its
+                  ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """``(kinds, group, majorant, merged)`` (n_media,) of the kernel arguments ``args``: the
+    kinds of medium (:func:`mcmatlab_py.monte_carlo.safety.medium_kinds`) and their groups
+    crossed by delta tracking (:func:`mcmatlab_py.monte_carlo.safety.delta_groups`), with
+    ``track`` (:func:`track_media`) the media kept out of them, and with matched interfaces
+    (``MC.matched_interfaces``) regardless of the refractive indices; where deposition
+    criteria count the transitions between media, each medium is a kind and a group of its
     own."""
     M, mua, mus, nref = args[0], args[1], args[2], args[4]
     by_medium = spec is not None and spec.active and spec.oi[KO.OI_DC] == 1
     kinds = medium_kinds(*args[1:5], args[22], by_medium=by_medium)
-    present = np.bincount(np.asarray(M).ravel(), minlength=len(mua)) > 0
     if by_medium or args[5] >= 0:  # counted transitions, or one medium: no groups
-        return kinds, np.asarray(mua, float) + np.asarray(mus, float), np.zeros(len(mua), bool)
+        return (kinds, kinds, np.asarray(mua, float) + np.asarray(mus, float),
+                np.zeros(len(mua), bool))
     if args[14]:  # matched interfaces: the refractive indices do not act
         nref = np.ones(len(mua))
-    return delta_groups(kinds, mua, mus, nref, present, track)
+    present = np.bincount(np.asarray(M).ravel(), minlength=len(mua)) > 0
+    return (kinds, *delta_groups(kinds, mua, mus, nref, present, track))
 
 
-def kernel_safety(args: tuple, spec: OutputSpec | None = None, track=None) -> np.ndarray:
+def kernel_safety(args: tuple, spec: OutputSpec | None = None, track=None,
+                  groups: tuple | None = None) -> np.ndarray:
     """(nvox,) float32 cm: the signed safety distances of the general kernel
     (:func:`mcmatlab_py.monte_carlo.safety.navigation_safety`) of the grid of the kernel
-    arguments ``args``, its groups of delta tracking those of :func:`kernel_groups`. A grid
-    of one medium needs none: ``inf``."""
+    arguments ``args``, with the kinds and groups ``groups`` of :func:`kernel_groups`
+    (computed if None). A grid of one medium needs none: ``inf``."""
     M = args[0]
     if args[5] >= 0:
         return np.full(M.size, np.inf, dtype=np.float32)
-    group, _, merged = kernel_groups(args, spec, track)
-    by_medium = spec is not None and spec.active and spec.oi[KO.OI_DC] == 1
-    kinds = medium_kinds(*args[1:5], args[22], by_medium=by_medium)
+    kinds, group, _, merged = groups if groups is not None else kernel_groups(args, spec, track)
     return navigation_safety(M.reshape(args[6:9]), kinds, group, merged, args[9:12])
 
 
@@ -172,8 +173,9 @@ class HostRun:
             self.args = args = (*args[:5], -1, *args[6:])
         self.flu = np.zeros((n_slots, args[0].size if self.track is not None else 1),
                             dtype=np.int64)
-        _, self.majorant, _ = kernel_groups(args, spec, self.track)
-        self.safe = kernel_safety(args, spec, self.track)
+        groups = kernel_groups(args, spec, self.track)
+        self.majorant = groups[2]
+        self.safe = kernel_safety(args, spec, self.track, groups)
         self.sums = WideSums()
         self.pending = 0  #: packets in the int64 accumulators since they were last moved
         self._run(0, 0)  # compile or load first

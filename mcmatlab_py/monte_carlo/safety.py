@@ -102,13 +102,14 @@ def delta_groups(kinds, mua, mus, nref, present=None, track=None, ratio: float |
     return group, majorant, merged
 
 
-def safety_distances(M: np.ndarray, kinds: np.ndarray, d: tuple[float, float, float]
-                     ) -> np.ndarray:
+def safety_distances(M: np.ndarray, kinds: np.ndarray, d: tuple[float, float, float],
+                     only=None) -> np.ndarray:
     """(nx*ny*nz,) float32 cm, C order: for each voxel of the grid ``M`` (nx, ny, nz) of
     medium indices, the distance from any point of it to the nearest voxel of another kind
     (``kinds``, :func:`medium_kinds`, or another group of :func:`delta_groups`); ``inf``
     where none exists. Outside the grid counts as the same kind (the kernel cuts a move at
-    the cuboid's faces itself). ``d``: the voxel sides (dx, dy, dz) in cm.
+    the cuboid's faces itself). ``d``: the voxel sides (dx, dy, dz) in cm. ``only``: the
+    kinds whose voxels need their distance (default all; the others' stay ``inf``).
 
     The distance between the boxes of voxels ``v`` and ``w`` is
     :math:`\\sqrt{\\sum_a ((|v_a - w_a| - 1)^+ d_a)^2}`, the distance between the centres of
@@ -117,7 +118,7 @@ def safety_distances(M: np.ndarray, kinds: np.ndarray, d: tuple[float, float, fl
     """
     K = np.asarray(kinds)[np.asarray(M)]
     safe = np.full(K.shape, np.inf, dtype=np.float32)
-    for k in np.unique(K):
+    for k in np.unique(K) if only is None else np.intersect1d(np.unique(K), only):
         mine = K == k
         if mine.all():
             break
@@ -149,6 +150,7 @@ def navigation_safety(M: np.ndarray, kinds: np.ndarray, group: np.ndarray, merge
     exact = safety_distances(M, kinds, d)
     if not np.any(np.asarray(merged)):
         return exact
-    far = safety_distances(M, group, d)
+    # the other groups' distances only for the merged media's voxels, where they are used
+    far = safety_distances(M, group, d, only=np.unique(np.asarray(group)[np.asarray(merged)]))
     delta = np.asarray(merged)[np.asarray(M).ravel()] & (exact == 0.0) & (far > 0.0)
     return np.where(delta, -far, exact).astype(np.float32)
