@@ -7,7 +7,8 @@ Numba keys the on-disk cache of :func:`run_batches` on this file's text alone, y
 cached code holds the kernels compiled in: a change to them (or to the helpers they
 inline) must change this file too, or a cache compiled before it goes on running.
 Kernels of 2026-12: delta tracking within groups of similar media, a packet changing
-between its balls only once one is used up (issue 47).
+between its balls only once one is used up (issue 47); deposits of fewer than
+``_tally.RANDOM_ROUNDING_BELOW`` units rounded at random, not carried (issue 46).
 """
 
 import numba

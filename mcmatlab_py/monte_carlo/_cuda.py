@@ -41,6 +41,7 @@ from ._tally import (
     FLU_ONE,
     KILLRANGE,
     N_TALLY,
+    RANDOM_ROUNDING_BELOW,
     T_BOTTOM,
     T_KILLED,
     T_LAUNCHED,
@@ -336,7 +337,13 @@ def transport_streams(
             mut = mua[m] + mus[m]
             wd = w * (mua[m] / mut) + due
             dep = np.int64(wd)
-            due = wd - dep
+            if wd < RANDOM_ROUNDING_BELOW:  # unbiased in this voxel, nothing carried
+                s0, s1, s2, s3, r1 = next_double(s0, s1, s2, s3)
+                if r1 < wd - dep:
+                    dep = min(dep + 1, w)
+                due = 0.0
+            else:
+                due = wd - dep
             w -= dep
             if inside:
                 cuda.atomic.add(acc, j, dep)

@@ -45,6 +45,7 @@ from ._steps import (
 )
 from ._tally import (
     KILLRANGE,
+    RANDOM_ROUNDING_BELOW,
     T_ABSORBED_EXCLUDED,
     T_BOTTOM,
     T_KILLED,
@@ -450,7 +451,13 @@ def transport_batch(
             # (in voxel j, of medium m or of one of its kind)
             wd = w * absorb[m] + due
             dep = np.int64(wd)
-            due = wd - dep
+            if wd < RANDOM_ROUNDING_BELOW:  # unbiased in this voxel, nothing carried
+                s0, s1, s2, s3, r1 = next_double(s0, s1, s2, s3)
+                if r1 < wd - dep:
+                    dep = min(dep + 1, w)
+                due = 0.0
+            else:
+                due = wd - dep
             w -= dep
             if inside:
                 if oi is None:

@@ -25,7 +25,17 @@ import numpy as np
 from .._rng import next_azimuth, next_double, next_exponential, seed_stream
 from ..light._sources import SI_SURFACE, launch_from
 from ._steps import _cut_at_face, _enter_top, _fresnel, _hg_cos, _mirror, _spin_cs
-from ._tally import T_BOTTOM, T_LAUNCHED, T_MISSED, T_ROULETTE, T_SIDES, T_SPECULAR, T_TOP, W_ONE
+from ._tally import (
+    RANDOM_ROUNDING_BELOW,
+    T_BOTTOM,
+    T_LAUNCHED,
+    T_MISSED,
+    T_ROULETTE,
+    T_SIDES,
+    T_SPECULAR,
+    T_TOP,
+    W_ONE,
+)
 
 _INF = np.inf
 _FASTMATH = {"nsz", "arcp", "contract", "afn", "reassoc"}
@@ -129,7 +139,13 @@ def transport_uniform_batch(
             j = (ix * ny + iy) * nz + iz
             wd = w * frac + due
             dep = np.int64(wd)
-            due = wd - dep
+            if wd < RANDOM_ROUNDING_BELOW:  # unbiased in this voxel, nothing carried
+                s0, s1, s2, s3, r1 = next_double(s0, s1, s2, s3)
+                if r1 < wd - dep:
+                    dep = min(dep + 1, w)
+                due = 0.0
+            else:
+                due = wd - dep
             w -= dep
             acc[j] += dep
             s0, s1, s2, s3, r1 = next_double(s0, s1, s2, s3)
