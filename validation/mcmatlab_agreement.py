@@ -30,6 +30,7 @@ target for the heat solvers' own discretisation difference).
     python validation/mcmatlab_agreement.py compare [ex01 ex04 ...]
     # the light's unexplained differences re-tested on fresh seeds, twice the batches
     MCM_ROOT=/tmp/mcm/mcm python validation/mcmatlab_agreement.py confirm [ex02 ...]
+    # (--reuse-mcmatlab: MCmatlab's fresh numbers already stored are kept, ours re-run)
 
 A light number beyond 3 standard errors may be chance: with ~1,700 numbers some are. The
 ``confirm`` step re-runs both engines on fresh seeds with twice the batches (so the
@@ -1523,16 +1524,25 @@ def _write_json(path: Path, value: dict) -> None:
     os.replace(tmp, path)
 
 
-def confirm(names: list[str], mcm_root: Path) -> None:
+def confirm(names: list[str], mcm_root: Path | None, reuse: bool = False) -> None:
     """Both engines again on fresh seeds with twice the batches (MCmatlab's batches after its
     reference's, ours from :data:`OURS_CONFIRM_FIRST`); MCmatlab's numbers go to
-    :data:`CONFIRM`, ours to the results' "confirm", and the report is rewritten."""
-    adapt_build(mcm_root)
+    :data:`CONFIRM`, ours to the results' "confirm", and the report is rewritten. ``reuse``:
+    MCmatlab's fresh numbers already in :data:`CONFIRM` are kept (ours alone re-run)."""
+    if mcm_root is not None:
+        adapt_build(mcm_root)
     CONFIRM.mkdir(parents=True, exist_ok=True)
     for name in names:
         case = CASES[name]
-        ref = mcmatlab_reference(case, mcm_root, first=case.batches, batches=2 * case.batches)
-        _write_json(CONFIRM / f"{name}.json", ref)
+        if reuse and (CONFIRM / f"{name}.json").exists():
+            ref = json.loads((CONFIRM / f"{name}.json").read_text())
+        else:
+            if mcm_root is None:
+                raise SystemExit(f"confirm {name}: no MCmatlab numbers in {CONFIRM}: set "
+                                 "MCM_ROOT")
+            ref = mcmatlab_reference(case, mcm_root, first=case.batches,
+                                     batches=2 * case.batches)
+            _write_json(CONFIRM / f"{name}.json", ref)
         t0 = time.perf_counter()
         n_b = 2 * case.ours_batches
         stats = ours_statistics(case, n_b, OURS_CONFIRM_FIRST)
@@ -1558,6 +1568,8 @@ def main(argv=None) -> None:
     ap.add_argument("--batches", type=int, help="fewer batches, for a trial (not stored)")
     ap.add_argument("--ours-batches", type=int, help="batches of ours (default: the case's)")
     ap.add_argument("--photons", type=int, default=1_000_000, help="pencil: source photons")
+    ap.add_argument("--reuse-mcmatlab", action="store_true",
+                    help="confirm: keep MCmatlab's fresh numbers already stored, run ours alone")
     ap.add_argument("--mesh-refine", type=int, default=1,
                     help="heat-grids: ours also on a heat mesh this many times finer than the "
                          "voxels (the heat converged on the same voxel model)")
@@ -1593,13 +1605,13 @@ def main(argv=None) -> None:
         write_report()
         return
     if args.step == "confirm":
-        if mcm_root is None:
+        if mcm_root is None and not args.reuse_mcmatlab:
             ap.exit(2, "confirm: set MCM_ROOT to MCmatlab built for Octave (build.sh's mcm "
                        "folder)\n")
         unknown = [n for n in args.examples if n not in CASES]
         if unknown:
             ap.exit(2, f"confirm: unknown example(s) {', '.join(unknown)}\n")
-        confirm(args.examples or light_differences(), mcm_root)
+        confirm(args.examples or light_differences(), mcm_root, args.reuse_mcmatlab)
         return
     names = args.examples or list(CASES)
     trial = args.batches is not None  # a trial: nothing is stored

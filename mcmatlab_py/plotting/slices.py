@@ -87,8 +87,11 @@ def orthogonal_slices(fig, data: np.ndarray, G, positions, *, cmap="viridis", no
         images.append(ax.imshow(img, extent=ext, cmap=cmap, norm=norm, aspect="equal",
                                 interpolation="nearest", origin="lower" if k == 0 else "upper"))
         ax.set(xlabel=xl, ylabel=yl, title=t)
-        # a narrow panel (a deep block's xz and yz) would run its default ticks together
+        # a narrow panel (a deep block's xz and yz) would run its default ticks together:
+        # fewer of them, and upright where the panel is under half as wide as deep
         ax.xaxis.set_major_locator(MaxNLocator(nbins=4))
+        if abs(ext[1] - ext[0]) < 0.5 * abs(ext[3] - ext[2]):
+            ax.tick_params(axis="x", labelrotation=90)
         # where the other slices cut the panel (gid: found again by update_slices)
         ax.axhline(h, color="w", lw=0.6, ls="--", gid="cut")
         ax.axvline(v, color="w", lw=0.6, ls="--", gid="cut")
