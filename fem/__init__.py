@@ -73,7 +73,7 @@ from .mesh import (
     element_voxel_index,
     structured_grid,
 )
-from .probes import GroupMaxima, probe_matrix
+from .probes import GroupMaxima, probe_matrix, voxel_centre_values
 from .source import load_vector, voxel_load_matrix
 from .stepper import HeatStepper
 
@@ -123,6 +123,7 @@ __all__ = [
     "stiffness_matrix",
     "structured_grid",
     "update_damage",
+    "voxel_centre_values",
     "voxel_load_matrix",
     "write_vtu",
 ]

@@ -593,3 +593,92 @@ def banded_from_csr(indptr, indices, data, diag, off, strides):
     for k in range(m, 3):
         strides[k] = big
     return True
+
+
+@numba.njit(cache=True)
+def locate_structured(x, lower, spacing, shape, path_of_order, swapped, tol, elem, bary):
+    """:func:`fem.locate.locate` on ``box_mesh``: for each point (column of ``x``) its voxel
+    and Kuhn simplex from the coordinates, and the barycentrics in closed form (the
+    arithmetic of the vectorised version, so the same numbers to the last bit)."""
+    f = np.empty(3)
+    ijk = np.empty(3, np.int64)
+    for p in range(x.shape[1]):
+        inside = True
+        for a in range(3):
+            u = (x[a, p] - lower[a]) / spacing[a]
+            if not (u >= -tol and u <= shape[a] + tol):
+                inside = False
+            c = np.int64(np.floor(u)) if np.isfinite(u) else 0
+            c = min(max(c, 0), shape[a] - 1)
+            ijk[a] = c
+            f[a] = min(max(u - c, 0.0), 1.0)
+        if not inside:
+            elem[p] = -1
+            for r in range(4):
+                bary[r, p] = 0.0
+            continue
+        # the axes by decreasing f, ties in axis order (a stable sort of -f)
+        o0, o1, o2 = 0, 1, 2
+        if f[o1] > f[o0]:
+            o0, o1 = o1, o0
+        if f[o2] > f[o1]:
+            o1, o2 = o2, o1
+            if f[o1] > f[o0]:
+                o0, o1 = o1, o0
+        s = path_of_order[3 * o0 + o1]
+        v = (ijk[0] * shape[1] + ijk[1]) * shape[2] + ijk[2]
+        elem[p] = 6 * v + s
+        bary[0, p] = 1.0 - f[o0]
+        bary[1, p] = f[o0] - f[o1]
+        if swapped[s]:
+            bary[2, p] = f[o2]
+            bary[3, p] = f[o1] - f[o2]
+        else:
+            bary[2, p] = f[o1] - f[o2]
+            bary[3, p] = f[o2]
+
+
+@numba.njit(cache=True)
+def kuhn_centre_values(T, nx, ny, nz, out):
+    """out (nx ny nz,): a nodal field of ``box_mesh`` at the voxel centres, each on the
+    Kuhn diagonal shared by the voxel's six elements: the mean of its two ends."""
+    sy = nz + 1
+    sx = (ny + 1) * sy
+    d = sx + sy + 1
+    v = 0
+    for i in range(nx):
+        for j in range(ny):
+            base = i * sx + j * sy
+            for k in range(nz):
+                out[v] = 0.5 * T[base + k] + 0.5 * T[base + k + d]
+                v += 1
+
+
+@numba.njit(cache=True)
+def seven_point_csr(diag, w, strides, indptr, indices, data):
+    """The CSR arrays of the symmetric 7-point matrix with ``diag`` (n,) on the diagonal and
+    ``-w[a, i]`` at (i, i + strides[a]) and (i + strides[a], i); strides sorted ascending.
+    Columns in order, exact zeros left out (as DIA to CSR and ``eliminate_zeros``); returns
+    the number of entries."""
+    n = diag.size
+    q = 0
+    indptr[0] = 0
+    for i in range(n):
+        for a in range(2, -1, -1):
+            s = strides[a]
+            if i >= s and w[a, i - s] != 0.0:
+                indices[q] = i - s
+                data[q] = -w[a, i - s]
+                q += 1
+        if diag[i] != 0.0:
+            indices[q] = i
+            data[q] = diag[i]
+            q += 1
+        for a in range(3):
+            s = strides[a]
+            if i + s < n and w[a, i] != 0.0:
+                indices[q] = i + s
+                data[q] = -w[a, i]
+                q += 1
+        indptr[i + 1] = q
+    return q

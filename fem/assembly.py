@@ -124,7 +124,7 @@ def _kuhn_stiffness(grid, k: np.ndarray) -> sp.csr_matrix:
     # k of simplex s of every voxel, (6, nx, ny, nz): element 6 v + s is path KUHN_PATHS[s]
     k_s = np.ascontiguousarray(np.moveaxis(k.reshape(nx, ny, nz, 6), -1, 0))
     diag = np.zeros(n)
-    offs, bands = [], []
+    W = np.empty((3, n))  # the path edges' weights along z, y, x (strides ascending)
     for axis, h in enumerate(grid.spacing):
         # the path's edge along `axis` starts at the voxel corner offset by the axes the path
         # takes before it (kuhn_path_edges); summed on the node grid by slices: 0.2 s at
@@ -138,11 +138,15 @@ def _kuhn_stiffness(grid, k: np.ndarray) -> sp.csr_matrix:
         s = strides[axis]
         diag += w
         diag[s:] += w[:-s]
-        offs += [s, -s]
-        bands += [-w[:-s], -w[:-s]]
-    K = sp.diags_array([diag] + bands, offsets=[0] + offs, shape=(n, n), format="csr")
-    K.eliminate_zeros()
-    return K
+        W[2 - axis] = w
+    # the CSR arrays straight from the diagonals (no DIA matrix and conversion)
+    index = np.int32 if 7 * n < 2**31 else np.int64
+    indptr = np.empty(n + 1, dtype=index)
+    indices = np.empty(7 * n, dtype=index)
+    data = np.empty(7 * n)
+    nnz = _kernels.seven_point_csr(diag, W, np.array(strides[::-1], dtype=np.int64), indptr,
+                                   indices, data)
+    return sp.csr_matrix((data[:nnz], indices[:nnz], indptr), shape=(n, n))
 
 
 def _assemble(mesh, coef: np.ndarray, kind: int, prune_rtol: float) -> sp.csr_matrix:

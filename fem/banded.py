@@ -30,8 +30,8 @@ def banded_operator(A):
     A.sum_duplicates()
     n = A.shape[0]
     diag, off, strides = np.zeros(n), np.zeros((3, n)), np.zeros(3, np.int64)
-    if not _kernels.banded_from_csr(A.indptr.astype(np.int64), A.indices.astype(np.int64),
-                            A.data.astype(np.float64), diag, off, strides):
+    if not _kernels.banded_from_csr(A.indptr, A.indices, np.asarray(A.data, np.float64),
+                                    diag, off, strides):
         return None
     order = np.argsort(strides, kind="stable")
     return diag, np.ascontiguousarray(off[order]), strides[order]

@@ -22,7 +22,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from .locate import locate
-from .mesh import BoxGrid, element_volumes, structured_grid
+from .mesh import BoxGrid, _same_box, element_volumes, element_voxel_index, structured_grid
 
 __all__ = ["load_vector", "voxel_load_matrix"]
 
@@ -30,6 +30,12 @@ __all__ = ["load_vector", "voxel_load_matrix"]
 def _aligned_voxels(mesh, grid: BoxGrid) -> np.ndarray | None:
     """Voxel of each element if every element lies inside one voxel, else None (the
     box mesh of ``grid`` itself goes to :func:`_box_load_matrix` before this)."""
+    mesh_grid = structured_grid(mesh)
+    if mesh_grid is not None and _same_box(mesh_grid, grid):
+        # a box mesh over the same box: aligned where each axis splits every voxel alike
+        if all(m % n == 0 for m, n in zip(mesh_grid.shape, grid.shape, strict=True)):
+            return element_voxel_index(mesh, grid)
+        return None
     p, t = mesh.p, mesh.t
     c = p[:, t].mean(axis=1)
     ijk = grid.voxel_of_points(c)

@@ -160,3 +160,47 @@ def test_structured_stiffness_equals_generic_assembly():
     fast, generic = stiffness_matrix(m, k), _assemble(m, k, kind=0, prune_rtol=1e-13)
     assert fast.nnz == generic.nnz
     np.testing.assert_allclose((fast - generic).toarray(), 0, atol=1e-14 * abs(generic).max())
+
+
+@pytest.mark.parametrize("mesh_dims, voxel_dims", [
+    ((7, 9, 11), (5, 6, 4)),  # coarser voxels, not aligned
+    ((4, 6, 3), (6, 9, 5)),  # a mesh coarser than the voxels
+    ((10, 12, 8), (5, 6, 4)),  # a refinement (aligned)
+    ((67, 5, 3), (100, 7, 2)),
+])
+def test_box_element_voxel_index_equals_the_centroids(mesh_dims, voxel_dims):
+    """On another box mesh over the same box the voxels follow axis by axis from the node
+    axes: the same indices as the elements' centroids gathered from the mesh."""
+    L = (0.31, 0.2, 0.17)
+    m = BoxGrid(*mesh_dims, *L).mesh()
+    g = BoxGrid(*voxel_dims, *L)
+    vox = g.voxel_of_points(m.p[:, m.t].mean(axis=1))
+    expected = (vox[0] * g.ny + vox[1]) * g.nz + vox[2]
+    np.testing.assert_array_equal(element_voxel_index(m, g), expected)
+    # another box: the general path (a centroid outside the voxels is named)
+    with pytest.raises(ValueError, match="outside the voxel grid"):
+        element_voxel_index(m, BoxGrid(*voxel_dims, 0.2, 0.2, 0.17))
+
+
+def test_seven_point_csr_is_the_diagonal_matrix_without_zeros():
+    """The stiffness's CSR arrays built from its diagonals: the matrix that scipy's DIA
+    format gives, exact zeros dropped (insulating elements), columns sorted."""
+    import fem._kernels as kernels
+
+    rng = np.random.default_rng(4)
+    n, strides = 60, np.array([1, 4, 20])
+    W = rng.uniform(0.5, 2.0, (3, n))
+    W[rng.random((3, n)) < 0.3] = 0.0
+    diag = rng.uniform(1.0, 3.0, n)
+    diag[[3, 17]] = 0.0
+    indptr, indices, data = np.empty(n + 1, np.int32), np.empty(7 * n, np.int32), np.empty(7 * n)
+    nnz = kernels.seven_point_csr(diag, W, strides, indptr, indices, data)
+    A = sp.csr_matrix((data[:nnz], indices[:nnz], indptr), shape=(n, n))
+    bands = [diag] + [-W[a, :n - s] for a, s in enumerate(strides) for _ in (0, 1)]
+    offsets = [0] + [o for s in strides for o in (s, -s)]
+    B = sp.diags_array(bands, offsets=offsets, shape=(n, n), format="csr")
+    B.eliminate_zeros()
+    B.sort_indices()
+    np.testing.assert_array_equal(A.indptr, B.indptr)
+    np.testing.assert_array_equal(A.indices, B.indices)
+    np.testing.assert_array_equal(A.data, B.data)

@@ -153,3 +153,55 @@ def test_group_maxima_keep_each_groups_running_maximum():
     np.testing.assert_array_equal(out, [9.0, -np.inf, 4.0])
     with pytest.raises(ValueError, match="node 3"):
         gm.update(np.zeros(3), out)
+
+
+def test_voxel_centre_values_are_the_probes_at_the_centres():
+    """A box mesh's field at its voxel centres, the mean of each Kuhn diagonal's ends: the
+    probe matrix's interpolation to rounding, and exact for linear fields."""
+    import fem
+
+    g = fem.BoxGrid(5, 4, 3, 0.5, 0.4, 0.3)
+    m = g.mesh()
+    X, Y, Z = np.meshgrid(g.x, g.y, g.z, indexing="ij")
+    P = probe_matrix(m, np.vstack([X.ravel(), Y.ravel(), Z.ravel()]))
+    T = np.random.default_rng(1).normal(37.0, 5.0, m.p.shape[1])
+    got = fem.voxel_centre_values(g, T)
+    assert got.shape == g.shape
+    np.testing.assert_allclose(got.ravel(), P @ T, rtol=0, atol=1e-12)
+    lin = 2.0 + 3.0 * m.p[0] - m.p[1] + 0.5 * m.p[2]
+    np.testing.assert_allclose(fem.voxel_centre_values(g, lin), 2.0 + 3.0 * X - Y + 0.5 * Z,
+                               rtol=0, atol=1e-14)
+    with pytest.raises(ValueError, match="nodal must have shape"):
+        fem.voxel_centre_values(g, T[:-1])
+
+
+def test_box_mesh_load_and_locate_fast_paths_equal_the_general_ones():
+    """Box meshes over the voxel box: the aligned refinement's loads by the cells' voxels,
+    and the sub-sampled loads of a coarser mesh located from the coordinates, equal the
+    element by element sums and the bucket search."""
+    import sys
+
+    import fem.locate  # noqa: F401
+
+    Lmod = sys.modules["fem.locate"]
+    grid = BoxGrid(6, 4, 5, 0.6, 0.4, 0.5)
+    S = np.random.default_rng(3).uniform(0, 1, grid.shape)
+    fine = BoxGrid(12, 8, 10, 0.6, 0.4, 0.5).mesh()
+    f = voxel_load_matrix(fine, grid) @ S.ravel()
+    vol = np.abs(np.linalg.det(np.stack([fine.p[:, fine.t[a]] - fine.p[:, fine.t[0]]
+                                         for a in (1, 2, 3)], axis=1).transpose(2, 0, 1))) / 6
+    centroid = grid.voxel_of_points(fine.p[:, fine.t].mean(axis=1))
+    Se = S[centroid[0], centroid[1], centroid[2]]
+    expected = np.bincount(fine.t.ravel(), weights=np.tile(Se * vol / 4, 4),
+                           minlength=fine.p.shape[1])
+    np.testing.assert_allclose(f, expected, rtol=1e-12, atol=1e-15)
+    coarse = BoxGrid(4, 3, 3, 0.6, 0.4, 0.5).mesh()
+    pts = np.random.default_rng(5).uniform([-0.3, -0.2, 0.0], [0.3, 0.2, 0.5], (500, 3)).T
+    e1, b1 = Lmod.locate(coarse, pts)
+    b = Lmod._Buckets(coarse)
+    e2, b2 = np.empty(pts.shape[1], dtype=np.int64), np.zeros((4, pts.shape[1]))
+    Lmod._kernels.locate_points(np.ascontiguousarray(pts), b.p, b.t, b.lo, b.inv_h, b.nb,
+                                b.start, b.items, 1e-10, e2, b2)
+    fvals = np.cos(coarse.p[0]) + coarse.p[2] ** 2
+    np.testing.assert_allclose(np.einsum("kn,kn->n", b1, fvals[coarse.t[:, e1]]),
+                               np.einsum("kn,kn->n", b2, fvals[coarse.t[:, e2]]), atol=1e-12)

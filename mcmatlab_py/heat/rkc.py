@@ -112,7 +112,7 @@ def spectral_radius(A, mass: np.ndarray, free: np.ndarray | None = None) -> floa
     """
     A = sp.csr_array(A)
     rows = np.empty(A.shape[0])
-    _abs_row_sums(A.indptr.astype(np.int64), A.data.astype(np.float64), rows)
+    _abs_row_sums(A.indptr, np.asarray(A.data, np.float64), rows)
     rows /= mass
     return float(rows.max() if free is None else rows[free].max(initial=0.0))
 

@@ -99,13 +99,24 @@ def run_heat(model) -> None:  # noqa: C901  (one loop with its callbacks)
         return vhc, tc
 
     vhc0, tc0 = element_props(0.0)
+
+    def stability_props(t):
+        """VHC and TC for the automatic step: the sub-media on the voxels where no function
+        of time overrides them (the elements' values, without 6 per voxel)."""
+        if HS.VHC_t is None and HS.TC_t is None:
+            th = coupling.thermal
+            on = np.isin(th.parent, present_media)
+            return th.VHC[on], th.TC[on]
+        return element_props(t)
+
     dt_max = None
     # steps chosen by accuracy (mcmatlab_py.heat.steps); the *_t functions of time keep
     # the schedule's steps, so that their Monte Carlo re-runs stay at its times
     adaptive = (HS.dt is None and HS.step_control == "accuracy" and not varying_optics
                 and HS.VHC_t is None and HS.TC_t is None)
     if HS.dt is None:
-        dt_max = auto_dt(S.mesh_grid.spacing, vhc0, tc0, HS.theta, HS.large_time_steps)
+        dt_max = auto_dt(S.mesh_grid.spacing, *stability_props(0.0), HS.theta,
+                         HS.large_time_steps)
     sched = HS.schedule(math.inf if adaptive else dt_max)
     if adaptive:
         dt_max = None  # no sub-steps from the stability bound
@@ -241,7 +252,7 @@ def run_heat(model) -> None:  # noqa: C901  (one loop with its callbacks)
     if adaptive:
 
         # the first step is MCmatlab's (the stability bound); none shorter than 1/64 of it
-        dt_base = auto_dt(S.mesh_grid.spacing, vhc0, tc0, 1.0, False) / 64
+        dt_base = auto_dt(S.mesh_grid.spacing, *stability_props(0.0), 1.0, False) / 64
 
         def current():
             return stepper_for(dt_base, coupling.vhc_e, coupling.tc_e, theta=1.0)
@@ -260,7 +271,7 @@ def run_heat(model) -> None:  # noqa: C901  (one loop with its callbacks)
             return st.g, lambda X: st.M @ X, st._mass_rows, st.fixed
 
         st = current()
-        A = st.K + st.R if st._m_lumped is not None and HS.integrator != "implicit" else None
+        A = _k_plus_r(st) if st._m_lumped is not None and HS.integrator != "implicit" else None
         integrator, rho = _integrator(HS, st, A, T0, be_solve, laser_load)
         if integrator == "rkc":
             rkc_version = [coupling.version]
@@ -283,7 +294,7 @@ def run_heat(model) -> None:  # noqa: C901  (one loop with its callbacks)
                 marks.extend(k * HS.sensor_interval)
             if integrator == "rkc" and rkc_version[0] != coupling.version:  # re-binned media
                 st = current()
-                controller.set_operator(st.K + st.R, st._m_lumped, st.g)
+                controller.set_operator(_k_plus_r(st), st._m_lumped, st.g)
                 rkc_version[0] = coupling.version
             for a, b in zip(marks, [*marks[1:], t1], strict=True):
                 T = controller.advance(T, a, b)
@@ -341,15 +352,8 @@ def run_heat(model) -> None:  # noqa: C901  (one loop with its callbacks)
                 if coupling.update_fluorescence(T_vox, Om_vox, ran) or ran:
                     set_absorption(heat_source(model))
                 if coupling.update_thermal(T_vox, Om_vox) and dt_max is not None:
-                    if HS.VHC_t is None and HS.TC_t is None:
-                        # the sub-media on the voxels: the elements' values, not 6 per voxel
-                        th = coupling.thermal
-                        on = np.isin(th.parent, present_media)
-                        vhc, tc = th.VHC[on], th.TC[on]
-                    else:
-                        vhc, tc = element_props(t1)
-                    bound["dt"] = auto_dt(S.mesh_grid.spacing, vhc, tc, HS.theta,
-                                          HS.large_time_steps)
+                    bound["dt"] = auto_dt(S.mesh_grid.spacing, *stability_props(t1),
+                                          HS.theta, HS.large_time_steps)
         bar.update(k)
 
     T, sensor = fem.march(step, T0, times, probes, on_step)
@@ -383,6 +387,12 @@ _DIRECT_SOLVE_PRODUCTS = 8.0
 _LAYERED_PRECONDITIONER_PRODUCTS = 3.0
 
 
+def _k_plus_r(st):
+    """The stepper's ``K + R`` (W/K): ``K`` itself where no face is convective (the same
+    matrix, without adding an empty one to a copy of it)."""
+    return st.K if st.R.nnz == 0 else st.K + st.R
+
+
 def _integrator(HS, st, A, T0, be_solve, laser_load) -> tuple[str, float | None]:
     """``"rkc"`` or ``"implicit"`` for the error-controlled steps (``HS.integrator``), and
     the spectral radius of ``m^-1 A`` (``A = K + R`` of the stepper ``st``) where it was
@@ -403,6 +413,10 @@ def _integrator(HS, st, A, T0, be_solve, laser_load) -> tuple[str, float | None]
     rho = spectral_radius(A, st._m_lumped, st.free)
     h = phases[0] / 8
     if st.method == "pcg":
+        # RKC cheaper than an implicit step could be (each solve a single product): no
+        # trial solve needed to know the choice
+        if choose_integrator(rho, phases, 2.0 * 1.0 + 2.0) == "rkc":
+            return "rkc", rho
         be_solve(T0, h, laser_load(0.0, h))
         pcg = st._solver
         per = 1.0 if pcg.last_jacobi else 1.0 + _LAYERED_PRECONDITIONER_PRODUCTS
