@@ -52,6 +52,7 @@ from ._tally import (
     T_SPECULAR,
     T_TOP,
     W_ONE,
+    split_deposit,
 )
 
 if numba.config.ENABLE_CUDASIM:
@@ -336,14 +337,10 @@ def transport_streams(
             m = M[j]
             mut = mua[m] + mus[m]
             wd = w * (mua[m] / mut) + due
-            dep = np.int64(wd)
-            if wd < RANDOM_ROUNDING_BELOW:  # unbiased in this voxel, nothing carried
-                s0, s1, s2, s3, r1 = next_double(s0, s1, s2, s3)
-                if r1 < wd - dep:
-                    dep = min(dep + 1, w)
-                due = 0.0
-            else:
-                due = wd - dep
+            rr = 0.0  # small deposits are rounded at random: unbiased in this voxel
+            if wd < RANDOM_ROUNDING_BELOW:
+                s0, s1, s2, s3, rr = next_double(s0, s1, s2, s3)
+            dep, due = split_deposit(wd, w, rr)
             w -= dep
             if inside:
                 cuda.atomic.add(acc, j, dep)

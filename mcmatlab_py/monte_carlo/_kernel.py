@@ -58,6 +58,7 @@ from ._tally import (
     T_TOP,
     W_ONE,
     fluence_scale,
+    split_deposit,
 )
 from ._track import track_walk
 
@@ -450,14 +451,10 @@ def transport_batch(
             # ------------------------------------------------ interaction
             # (in voxel j, of medium m or of one of its kind)
             wd = w * absorb[m] + due
-            dep = np.int64(wd)
-            if wd < RANDOM_ROUNDING_BELOW:  # unbiased in this voxel, nothing carried
-                s0, s1, s2, s3, r1 = next_double(s0, s1, s2, s3)
-                if r1 < wd - dep:
-                    dep = min(dep + 1, w)
-                due = 0.0
-            else:
-                due = wd - dep
+            rr = 0.0  # small deposits are rounded at random: unbiased in this voxel
+            if wd < RANDOM_ROUNDING_BELOW:
+                s0, s1, s2, s3, rr = next_double(s0, s1, s2, s3)
+            dep, due = split_deposit(wd, w, rr)
             w -= dep
             if inside:
                 if oi is None:

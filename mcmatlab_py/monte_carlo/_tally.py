@@ -9,6 +9,7 @@ number of threads. The Python layer reads the slots here.
 import math
 
 import numba
+import numpy as np
 
 KILLRANGE = 5.0  # as MCmatlab: photons farther than 2.5 cuboid sizes from the centre die
 W_ONE = 2**36  # fixed-point weight of a launched packet (about 1.5e-11 resolution)
@@ -19,6 +20,23 @@ W_ONE = 2**36  # fixed-point weight of a launched packet (about 1.5e-11 resoluti
 #: (air that scatters: about 7 units an interaction). Above it the carry's bias is below
 #: 5e-7 of a voxel's deposit.
 RANDOM_ROUNDING_BELOW = 2**20
+
+
+@numba.njit(cache=True, inline="always")
+def split_deposit(wd: float, w, r: float):
+    """``(deposit, carried)``: a deposit of ``wd`` fixed-point units as whole units now and
+    the fraction carried to the next interaction. Below :data:`RANDOM_ROUNDING_BELOW` units
+    it is rounded up with probability its fraction (``r`` uniform in [0, 1), drawn by the
+    caller only there) and nothing is carried: its expectation is ``wd`` in this voxel.
+    Never more than the packet's weight ``w``."""
+    dep = np.int64(wd)
+    if wd >= RANDOM_ROUNDING_BELOW:
+        return dep, wd - dep
+    if r < wd - dep:
+        dep = min(dep + 1, w)
+    return dep, 0.0
+
+
 #: the track-length tally: a launched packet crossing a voxel's diagonal adds FLU_ONE
 FLU_ONE = 2**24
 

@@ -24,18 +24,9 @@ import numpy as np
 
 from .._rng import next_azimuth, next_double, next_exponential, seed_stream
 from ..light._sources import SI_SURFACE, launch_from
+from . import _tally
 from ._steps import _cut_at_face, _enter_top, _fresnel, _hg_cos, _mirror, _spin_cs
-from ._tally import (
-    RANDOM_ROUNDING_BELOW,
-    T_BOTTOM,
-    T_LAUNCHED,
-    T_MISSED,
-    T_ROULETTE,
-    T_SIDES,
-    T_SPECULAR,
-    T_TOP,
-    W_ONE,
-)
+from ._tally import T_BOTTOM, T_LAUNCHED, T_MISSED, T_ROULETTE, T_SIDES, T_SPECULAR, T_TOP, W_ONE
 
 _INF = np.inf
 _FASTMATH = {"nsz", "arcp", "contract", "afn", "reassoc"}
@@ -138,14 +129,10 @@ def transport_uniform_batch(
             iz = min(int(pz * inv_dz), nz - 1)
             j = (ix * ny + iy) * nz + iz
             wd = w * frac + due
-            dep = np.int64(wd)
-            if wd < RANDOM_ROUNDING_BELOW:  # unbiased in this voxel, nothing carried
-                s0, s1, s2, s3, r1 = next_double(s0, s1, s2, s3)
-                if r1 < wd - dep:
-                    dep = min(dep + 1, w)
-                due = 0.0
-            else:
-                due = wd - dep
+            rr = 0.0  # small deposits are rounded at random: unbiased in this voxel
+            if wd < _tally.RANDOM_ROUNDING_BELOW:
+                s0, s1, s2, s3, rr = next_double(s0, s1, s2, s3)
+            dep, due = _tally.split_deposit(wd, w, rr)
             w -= dep
             acc[j] += dep
             s0, s1, s2, s3, r1 = next_double(s0, s1, s2, s3)
