@@ -94,8 +94,8 @@ def voxel_centre_values(grid, nodal) -> np.ndarray:
     """(nx, ny, nz): a nodal field of ``box_mesh(grid)`` at its voxel centres.
 
     Each centre lies on the Kuhn diagonal that its voxel's six elements share, so the P1
-    field there is the mean of the diagonal's two ends: the probe matrix's numbers without
-    the matrix (half the memory traffic of its two weights a row)."""
+    field there is the mean of the diagonal's two ends: no probe matrix to build or keep
+    (whose weights, located numerically, differ from 1/2 by rounding)."""
     nodal = np.ascontiguousarray(nodal, dtype=np.float64)
     if nodal.shape != (grid.npoints,):
         raise ValueError(f"nodal must have shape ({grid.npoints},), got {nodal.shape}")
