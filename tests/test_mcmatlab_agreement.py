@@ -62,3 +62,28 @@ def test_a_difference_is_caught():
     rows = {name: (ours, r, tol) for name, ours, r, tol in ma.ci_check(case, ref=moved)}
     ours, r, tol = rows["stage 1: absorbed"]
     assert abs(ours - r) > tol
+
+
+def test_a_fresh_run_explains_chance_but_not_a_recurring_difference():
+    """``confirm``'s fresh run: a light number beyond 3 SE whose fresh run agrees is chance;
+    one that differs again, or a heat number, stays a difference; agreeing numbers stay so."""
+    case = ma.Case("t", "t", "T", (2, 2, 2), 10)
+
+    def stages(kind, **numbers):
+        return [{"kind": kind, "numbers": {k: {"mean": m, "se": 0.01} for k, m in
+                                           numbers.items()}}]
+
+    ref = stages("MC", a=1.0, b=1.0, c=1.0)
+    ours = stages("MC", a=1.1, b=1.1, c=1.0)  # a and b 7 SE off, c agrees
+    fresh = {"mcmatlab": stages("MC", a=1.0, b=1.0, c=1.0),
+             "ours": stages("MC", a=1.01, b=1.2, c=1.0)}  # a agrees now, b does not
+    rows = {r["name"]: r for r in ma.compare(ref, ours, case, fresh)}
+    assert rows["a"]["verdict"] == "explained (chance)"
+    assert abs(rows["a"]["z_fresh"] - 0.01 / (0.01 * 2 ** 0.5)) < 1e-9
+    assert rows["b"]["verdict"] == "DIFFER" and rows["b"]["z_fresh"] > 3
+    assert rows["c"]["verdict"] == "agree" and "z_fresh" not in rows["c"]
+    assert [r["verdict"] for r in ma.compare(ref, ours, case)] == ["DIFFER", "DIFFER", "agree"]
+    heat = ma.compare(stages("HS", **{"sensor 1 rise": 1.0}), stages("HS", **{"sensor 1 rise": 1.5}),
+                      case, {"mcmatlab": stages("HS", **{"sensor 1 rise": 1.0}),
+                             "ours": stages("HS", **{"sensor 1 rise": 1.0})})
+    assert heat[0]["verdict"] == "DIFFER"
