@@ -178,6 +178,17 @@ def ours_ex04(NA, refine: int = 1, **hs) -> dict:
             "integrator": HS.integrator_used}
 
 
+def _cells(parser, text: str) -> tuple[int, int, int]:
+    """``NX,NY,NZ`` as three positive integers (exit 2 naming the value otherwise)."""
+    try:
+        div = tuple(int(v) for v in text.split(","))
+    except ValueError:
+        div = ()
+    if len(div) != 3 or min(div) < 1:
+        parser.error(f"--ex04-mesh: NX,NY,NZ (three positive integers), got {text!r}")
+    return div
+
+
 def table(title: str, labels: tuple[str, str], rows: dict, ref: dict, ref_note: str) -> dict:
     """Print one problem's table; returns it for the JSON."""
     print(f"\n{title}\nreference: {ref_note}: {ref['wall_s']:.0f} s, rises at {labels[0]} "
@@ -226,8 +237,12 @@ def main(argv=None) -> int:
                    help="Example 4: our runs to time (1x: the reference's rtol on the 1x mesh, "
                         "how converged in time; mesh 1/2, 2/3: a heat mesh coarser than the "
                         "voxels, by that factor per axis, the lumped or the averaged mass)")
+    p.add_argument("--ex04-mesh", nargs="+", default=[], metavar="NX,NY,NZ",
+                   help="Example 4: also ours on a heat mesh of these cells per axis (e.g. "
+                        "50,20,100: coarse along the vessel, the voxels' depth resolution)")
     p.add_argument("--json", help="write the tables here")
     a = p.parse_args(argv)
+    meshes = [_cells(p, cells) for cells in a.ex04_mesh]
     need = {"run_heat": a.mat, "ex04": a.ex04_npz}
     if a.mcm_root is None and any(need[k] is None for k in a.problems):
         p.error("give --mcm-root (run MCmatlab's engine) or an earlier run of each problem "
@@ -270,6 +285,9 @@ def main(argv=None) -> int:
             if name.split(",")[0] in a.ex04_rows:
                 rows[f"ours, {name}" if name[0] != "1" else f"ours {name}"] = ours_ex04(
                     mcm["NA"], **settings[name])
+        for div in meshes:
+            rows[f"ours, mesh {'x'.join(map(str, div))}"] = ours_ex04(mcm["NA"],
+                                                                     mesh_divisions=div)
         ref = ours_ex04(mcm["NA"], refine=a.refine, rtol=a.ref_rtol)
         if a.ex04_check_refine:
             rows[f"ours {a.ex04_check_refine}x, rtol 1e-4"] = ours_ex04(

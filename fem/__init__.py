@@ -74,7 +74,7 @@ from .mesh import (
     structured_grid,
 )
 from .probes import GroupMaxima, probe_matrix, voxel_centre_values
-from .source import load_vector, voxel_load_matrix
+from .source import corner_load_matrix, load_vector, voxel_load_matrix
 from .stepper import HeatStepper
 
 
@@ -104,6 +104,7 @@ __all__ = [
     "arrhenius_increment",
     "box_mesh",
     "check_mesh",
+    "corner_load_matrix",
     "element_coefficient",
     "element_to_node",
     "element_volumes",

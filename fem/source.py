@@ -24,7 +24,7 @@ import scipy.sparse as sp
 from .locate import locate
 from .mesh import BoxGrid, _same_box, element_volumes, element_voxel_index, structured_grid
 
-__all__ = ["load_vector", "voxel_load_matrix"]
+__all__ = ["corner_load_matrix", "load_vector", "voxel_load_matrix"]
 
 
 def _aligned_voxels(mesh, grid: BoxGrid) -> np.ndarray | None:
@@ -151,6 +151,40 @@ def voxel_load_matrix(mesh, grid: BoxGrid, n_sub=None) -> sp.csr_matrix:
         B.sum_duplicates()
         blocks.append(B)
     return sp.hstack(blocks, format="csc").tocsr()
+
+
+def corner_load_matrix(mesh_grid: BoxGrid, grid: BoxGrid) -> sp.csr_matrix | None:
+    r"""The load of the tensor-product (trilinear, vertex-centred) operator: each cell's power
+    an eighth to each of its corners, ``(npoints, nvoxels)`` cm^3, ``f = L @ S.ravel()``.
+
+    With a voxel power density constant on each cell this is :math:`\int S N_i` of the
+    trilinear shape functions, and the integral over each node's dual cell (the vertex-
+    centred finite volumes): the partner of :func:`fem.layered.tensor_product_operators`'
+    masses, as :func:`voxel_load_matrix` (``V_e / 4`` per tetrahedron's vertex) is of the P1
+    operator's. The two agree inside the box for a uniform density and differ on its edges
+    (a P1 corner on its voxel's Kuhn diagonal takes ``V / 4``, the others ``V / 12``; here
+    every corner ``V / 8``). ``mesh_grid``: the box mesh's grid, the voxels' own or a
+    refinement of them over the same box (cells inside one voxel each); None otherwise.
+    """
+    if not _same_box(mesh_grid, grid) or any(
+            m % n for m, n in zip(mesh_grid.shape, grid.shape, strict=True)):
+        return None
+    ratio = [m // n for m, n in zip(mesh_grid.shape, grid.shape, strict=True)]
+    idx = np.int32 if 8 * mesh_grid.nvoxels < 2**31 else np.int64
+    i, j, k = np.unravel_index(np.arange(mesh_grid.nvoxels, dtype=idx), mesh_grid.shape)
+    voxel = ((i // ratio[0]) * grid.ny + j // ratio[1]) * grid.nz + k // ratio[2]
+    base = mesh_grid.node_index(i, j, k).astype(idx)
+    del i, j, k
+    sy, sx = mesh_grid.nz + 1, (mesh_grid.ny + 1) * (mesh_grid.nz + 1)
+    corners = np.array([a * sx + b * sy + c for a in (0, 1) for b in (0, 1) for c in (0, 1)],
+                       dtype=idx)
+    rows = (base[:, None] + corners[None, :]).ravel()
+    cols = np.repeat(voxel, 8)
+    vol = mesh_grid.dx * mesh_grid.dy * mesh_grid.dz / 8.0
+    L = sp.csr_matrix((np.full(rows.size, vol), (rows, cols)),
+                      shape=(mesh_grid.npoints, grid.nvoxels))
+    L.sum_duplicates()
+    return L
 
 
 def load_vector(mesh, grid: BoxGrid, S) -> np.ndarray:

@@ -115,8 +115,6 @@ class Setup:
         """(nx, ny, nz): a nodal field evaluated at the voxel centres (P1 interpolation)."""
         import fem
 
-        if self.mesh_grid is self.grid:  # the voxels' corners: the mean of each diagonal's ends
-            return fem.voxel_centre_values(self.grid, nodal)
         if self._to_voxels is None:
             X, Y, Z = np.meshgrid(self.grid.x, self.grid.y, self.grid.z, indexing="ij")
             P = fem.probe_matrix(self.mesh, np.vstack([X.ravel(), Y.ravel(), Z.ravel()]))

@@ -142,6 +142,21 @@ def run_heat(model) -> None:  # noqa: C901  (one loop with its callbacks)
     options = {"operator": "auto", "mass": HS.mass, "method": "gpu" if HS.use_gpu else "auto",
                "gpu_device": HS.gpu_device}
 
+    # the voxels' power on the nodes: a P1 operator's (L, V_e / 4 to a tetrahedron's vertex),
+    # or the tensor-product operator's (each cell's an eighth to each corner), whose lumped
+    # mass is the vertex-centred finite volumes' (they differ on the box's edges, where the
+    # P1 load with that mass heated a uniformly heated block unevenly)
+    loads = {"corner": None, "use_corner": False}
+
+    def corner_load():
+        """The tensor-product operator's load matrix, built once when first needed; False
+        where the heat mesh is not the voxels' or a refinement of them (the P1 load then)."""
+        if loads["corner"] is None:
+            loads["corner"] = fem.corner_load_matrix(S.mesh_grid, S.grid)
+            if loads["corner"] is None:
+                loads["corner"] = False
+        return loads["corner"]
+
     def stepper_for(dt, vhc, tc, theta=HS.theta):
         key = (round(dt, 15), coupling.version, theta)
         if key not in steppers or not single_thermal and (HS.VHC_t or HS.TC_t):
@@ -152,7 +167,13 @@ def run_heat(model) -> None:  # noqa: C901  (one loop with its callbacks)
                 del steppers[old]
             steppers[key] = fem.HeatStepper(mesh, vhc, tc, dt, theta=theta,
                                             boundary=boundary, **options)
-        return steppers[key]
+        st = steppers[key]
+        corner = st.operator == "kronecker" and corner_load() is not False
+        if corner != loads["use_corner"]:  # the load that goes with the operator's mass
+            loads["use_corner"] = corner
+            if src["NA"] is not None:
+                set_absorption(src["NA"])
+        return st
 
     probes = fem.probe_matrix(mesh, np.asarray(HS.temp_sensor_positions, float)
                               .reshape(-1, 3).T) if len(HS.temp_sensor_positions) else None
@@ -167,7 +188,8 @@ def run_heat(model) -> None:  # noqa: C901  (one loop with its callbacks)
     src = {"NA": MC.NA, "f": None}  # the voxel map and its nodal load per W
 
     def set_absorption(NA):
-        src["NA"], src["f"] = NA, L @ np.asarray(NA, float).ravel()
+        load = loads["corner"] if loads["use_corner"] else L
+        src["NA"], src["f"] = NA, load @ np.asarray(NA, float).ravel()
 
     if MC.NA is not None:
         set_absorption(heat_source(model))
