@@ -253,9 +253,10 @@ CASES: dict[str, Case] = {c.name: c for c in [
               "the reference: 16 and 32 quadrature points differ by 0.7% (0.40135 and 0.39867) "
               "and from 64 on it breaks down (overflow in its Legendre weights). The first voxel "
               "of air under the beam (air scatters here, mus = 100 cm^-1, and absorbs 1e-10 of "
-              "the weight per interaction) read 0.8% below MCmatlab's until ours rounded such "
-              "small deposits at random (34 SE at 12 and 120 batches; now 1774.8 +- 0.3 "
-              "against 1774.77 +- 0.18 W/cm^2/W). Left open: the fluence rate of the top "
+              "the weight per interaction) reads 1774.8 +- 0.3 W/cm^2/W against MCmatlab's "
+              "1774.77 +- 0.18, ours rounding such small deposits at random; carried to the "
+              "next interaction instead, they leave it 0.8% low (34 SE at 12 and 120 "
+              "batches). Left open: the fluence rate of the top "
               "quarter under the beam, pooled over the five matched runs, lies above MCmatlab's "
               "in the study and in the fresh run alike (+0.18%, z = 3.0; +0.09%, z = 2.2); "
               "without delta tracking it moves by 1.1 SE (8 runs of 2e5 photons)."),
@@ -1410,10 +1411,10 @@ HEAT_GRID_FINDINGS: dict[str, list[str]] = {
         "heat_mesh_divisions`, up to 2^21 nodes)."],
     "ex14": [
         "Thermochromic medium whose absorption falls with temperature, the Monte Carlo re-run "
-        "as it heats: the same cause as Example 15. On the voxel-corner mesh ours had read "
+        "as it heats: the same cause as Example 15. On the voxel-corner mesh ours reads "
         "sensor 4 (0.078 cm deep, under the clearing absorber) at 6.74 deg C at the end, on a "
-        "mesh twice as fine 15.7, MCmatlab 16.0: the coarse heat mesh fed the temperature-"
-        "dependent optics too low a temperature. The default heat mesh is now twice as fine "
+        "mesh twice as fine 15.7, MCmatlab 16.0: the coarse heat mesh feeds the temperature-"
+        "dependent optics too low a temperature, hence the default heat mesh twice as fine "
         "where optics follow T or FD. The table holds ours on that default mesh, MCmatlab's, "
         "and ours on a mesh 4 times as fine as the voxels (`heat-grids ex14 23 --mesh-refine "
         "4`). Against the finest: ours is the nearer on 15 of the 18 numbers. Sensor 3 (far "
