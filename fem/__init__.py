@@ -73,7 +73,7 @@ from .mesh import (
     element_voxel_index,
     structured_grid,
 )
-from .probes import GroupMaxima, probe_matrix, voxel_centre_values
+from .probes import GroupMaxima, probe_matrix
 from .source import corner_load_matrix, load_vector, voxel_load_matrix
 from .stepper import HeatStepper
 
@@ -124,7 +124,6 @@ __all__ = [
     "stiffness_matrix",
     "structured_grid",
     "update_damage",
-    "voxel_centre_values",
     "voxel_load_matrix",
     "write_vtu",
 ]

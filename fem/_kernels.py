@@ -639,22 +639,6 @@ def locate_structured(x, lower, spacing, shape, path_of_order, swapped, tol, ele
 
 
 @numba.njit(cache=True)
-def kuhn_centre_values(T, nx, ny, nz, out):
-    """out (nx ny nz,): a nodal field of ``box_mesh`` at the voxel centres, each on the
-    Kuhn diagonal shared by the voxel's six elements: the mean of its two ends."""
-    sy = nz + 1
-    sx = (ny + 1) * sy
-    d = sx + sy + 1
-    v = 0
-    for i in range(nx):
-        for j in range(ny):
-            base = i * sx + j * sy
-            for k in range(nz):
-                out[v] = 0.5 * T[base + k] + 0.5 * T[base + k + d]
-                v += 1
-
-
-@numba.njit(cache=True)
 def seven_point_csr(diag, w, strides, indptr, indices, data):
     """The CSR arrays of the symmetric 7-point matrix with ``diag`` (n,) on the diagonal and
     ``-w[a, i]`` at (i, i + strides[a]) and (i + strides[a], i); strides sorted ascending.

@@ -5,10 +5,9 @@ from __future__ import annotations
 import numpy as np
 import scipy.sparse as sp
 
-from . import _kernels
 from .locate import locate
 
-__all__ = ["GroupMaxima", "probe_matrix", "voxel_centre_values"]
+__all__ = ["GroupMaxima", "probe_matrix"]
 
 
 def probe_matrix(mesh, points) -> sp.csr_matrix:
@@ -88,17 +87,3 @@ class GroupMaxima:
                              f"{out.dtype} {out.shape}")
         self._kernel(values, self.nodes, self.starts, out)
         return out
-
-
-def voxel_centre_values(grid, nodal) -> np.ndarray:
-    """(nx, ny, nz): a nodal field of ``box_mesh(grid)`` at its voxel centres.
-
-    Each centre lies on the Kuhn diagonal that its voxel's six elements share, so the P1
-    field there is the mean of the diagonal's two ends: no probe matrix to build or keep
-    (whose weights, located numerically, differ from 1/2 by rounding)."""
-    nodal = np.ascontiguousarray(nodal, dtype=np.float64)
-    if nodal.shape != (grid.npoints,):
-        raise ValueError(f"nodal must have shape ({grid.npoints},), got {nodal.shape}")
-    out = np.empty(grid.nvoxels)
-    _kernels.kuhn_centre_values(nodal, grid.nx, grid.ny, grid.nz, out)
-    return out.reshape(grid.shape)

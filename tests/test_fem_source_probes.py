@@ -155,26 +155,6 @@ def test_group_maxima_keep_each_groups_running_maximum():
         gm.update(np.zeros(3), out)
 
 
-def test_voxel_centre_values_are_the_probes_at_the_centres():
-    """A box mesh's field at its voxel centres, the mean of each Kuhn diagonal's ends: the
-    probe matrix's interpolation to rounding, and exact for linear fields."""
-    import fem
-
-    g = fem.BoxGrid(5, 4, 3, 0.5, 0.4, 0.3)
-    m = g.mesh()
-    X, Y, Z = np.meshgrid(g.x, g.y, g.z, indexing="ij")
-    P = probe_matrix(m, np.vstack([X.ravel(), Y.ravel(), Z.ravel()]))
-    T = np.random.default_rng(1).normal(37.0, 5.0, m.p.shape[1])
-    got = fem.voxel_centre_values(g, T)
-    assert got.shape == g.shape
-    np.testing.assert_allclose(got.ravel(), P @ T, rtol=0, atol=1e-12)
-    lin = 2.0 + 3.0 * m.p[0] - m.p[1] + 0.5 * m.p[2]
-    np.testing.assert_allclose(fem.voxel_centre_values(g, lin), 2.0 + 3.0 * X - Y + 0.5 * Z,
-                               rtol=0, atol=1e-14)
-    with pytest.raises(ValueError, match="nodal must have shape"):
-        fem.voxel_centre_values(g, T[:-1])
-
-
 def test_box_mesh_load_and_locate_fast_paths_equal_the_general_ones():
     """Box meshes over the voxel box: the aligned refinement's loads by the cells' voxels,
     and the sub-sampled loads of a coarser mesh located from the coordinates, equal the
