@@ -33,9 +33,7 @@ def _aligned_voxels(mesh, grid: BoxGrid) -> np.ndarray | None:
     mesh_grid = structured_grid(mesh)
     if mesh_grid is not None and _same_box(mesh_grid, grid):
         # a box mesh over the same box: aligned where each axis splits every voxel alike
-        if all(m % n == 0 for m, n in zip(mesh_grid.shape, grid.shape, strict=True)):
-            return element_voxel_index(mesh, grid)
-        return None
+        return None if _refinement(mesh_grid, grid) is None else element_voxel_index(mesh, grid)
     p, t = mesh.p, mesh.t
     c = p[:, t].mean(axis=1)
     ijk = grid.voxel_of_points(c)
@@ -48,6 +46,14 @@ def _aligned_voxels(mesh, grid: BoxGrid) -> np.ndarray | None:
         if np.any(xa < lo_v - tol) or np.any(xa > lo_v + h + tol):
             return None
     return (ijk[0] * grid.ny + ijk[1]) * grid.nz + ijk[2]
+
+
+def _refinement(mesh_grid: BoxGrid, grid: BoxGrid) -> tuple[int, int, int] | None:
+    """Cells of ``mesh_grid`` per voxel of ``grid`` along each axis, or None where an axis
+    does not split every voxel alike."""
+    if any(m % n for m, n in zip(mesh_grid.shape, grid.shape, strict=True)):
+        return None
+    return tuple(m // n for m, n in zip(mesh_grid.shape, grid.shape, strict=True))
 
 
 def _box_load_matrix(mesh, grid: BoxGrid) -> sp.csr_matrix:
@@ -166,10 +172,9 @@ def corner_load_matrix(mesh_grid: BoxGrid, grid: BoxGrid) -> sp.csr_matrix | Non
     every corner ``V / 8``). ``mesh_grid``: the box mesh's grid, the voxels' own or a
     refinement of them over the same box (cells inside one voxel each); None otherwise.
     """
-    if not _same_box(mesh_grid, grid) or any(
-            m % n for m, n in zip(mesh_grid.shape, grid.shape, strict=True)):
+    ratio = _refinement(mesh_grid, grid) if _same_box(mesh_grid, grid) else None
+    if ratio is None:
         return None
-    ratio = [m // n for m, n in zip(mesh_grid.shape, grid.shape, strict=True)]
     idx = np.int32 if 8 * mesh_grid.nvoxels < 2**31 else np.int64
     i, j, k = np.unravel_index(np.arange(mesh_grid.nvoxels, dtype=idx), mesh_grid.shape)
     voxel = ((i // ratio[0]) * grid.ny + j // ratio[1]) * grid.nz + k // ratio[2]

@@ -12,6 +12,7 @@ re-evaluated (:mod:`mcmatlab_py.frt`).
 
 from __future__ import annotations
 
+import functools
 import math
 import warnings
 
@@ -146,16 +147,9 @@ def run_heat(model) -> None:  # noqa: C901  (one loop with its callbacks)
     # or the tensor-product operator's (each cell's an eighth to each corner), whose lumped
     # mass is the vertex-centred finite volumes' (they differ on the box's edges, where the
     # P1 load with that mass heated a uniformly heated block unevenly)
-    loads = {"corner": None, "use_corner": False}
-
-    def corner_load():
-        """The tensor-product operator's load matrix, built once when first needed; False
-        where the heat mesh is not the voxels' or a refinement of them (the P1 load then)."""
-        if loads["corner"] is None:
-            loads["corner"] = fem.corner_load_matrix(S.mesh_grid, S.grid)
-            if loads["corner"] is None:
-                loads["corner"] = False
-        return loads["corner"]
+    # (None where the heat mesh is neither the voxels' nor a refinement of them: the P1 load)
+    corner_load = functools.cache(lambda: fem.corner_load_matrix(S.mesh_grid, S.grid))
+    load = {"matrix": L}  # the one that goes with the current operator's mass
 
     def stepper_for(dt, vhc, tc, theta=HS.theta):
         key = (round(dt, 15), coupling.version, theta)
@@ -165,15 +159,15 @@ def run_heat(model) -> None:  # noqa: C901  (one loop with its callbacks)
             # would hold one factorization each (24 GB at 100^3 voxels)
             for old in [k for k in steppers if k[1] != coupling.version]:
                 del steppers[old]
-            steppers[key] = fem.HeatStepper(mesh, vhc, tc, dt, theta=theta,
-                                            boundary=boundary, **options)
-        st = steppers[key]
-        corner = st.operator == "kronecker" and corner_load() is not False
-        if corner != loads["use_corner"]:  # the load that goes with the operator's mass
-            loads["use_corner"] = corner
-            if src["NA"] is not None:
-                set_absorption(src["NA"])
-        return st
+            st = steppers[key] = fem.HeatStepper(mesh, vhc, tc, dt, theta=theta,
+                                                 boundary=boundary, **options)
+            corner = corner_load() if st.operator == "kronecker" else None
+            matrix = L if corner is None else corner
+            if matrix is not load["matrix"]:  # the media changed the operator
+                load["matrix"] = matrix
+                if src["NA"] is not None:
+                    set_absorption(src["NA"])
+        return steppers[key]
 
     probes = fem.probe_matrix(mesh, np.asarray(HS.temp_sensor_positions, float)
                               .reshape(-1, 3).T) if len(HS.temp_sensor_positions) else None
@@ -188,8 +182,7 @@ def run_heat(model) -> None:  # noqa: C901  (one loop with its callbacks)
     src = {"NA": MC.NA, "f": None}  # the voxel map and its nodal load per W
 
     def set_absorption(NA):
-        load = loads["corner"] if loads["use_corner"] else L
-        src["NA"], src["f"] = NA, load @ np.asarray(NA, float).ravel()
+        src["NA"], src["f"] = NA, load["matrix"] @ np.asarray(NA, float).ravel()
 
     if MC.NA is not None:
         set_absorption(heat_source(model))
