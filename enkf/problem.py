@@ -25,6 +25,8 @@ __all__ = [
     "Forecast",
     "Prior",
     "StepReport",
+    "PRIOR_SAMPLINGS",
+    "stratified_uniform",
     "uniform_prior",
 ]
 
@@ -282,11 +284,26 @@ class FilterProblem:
         set_(self, "tracked", tracked.astype(np.intp))
 
 
+#: how :func:`uniform_prior` draws the parameters
+PRIOR_SAMPLINGS = ("random", "stratified")
+
+
+def stratified_uniform(rng: np.random.Generator, N: int, n: int) -> np.ndarray:
+    """(N, n) draws of the unit cube, a Latin hypercube: each column holds one draw in each
+    of the N equal strata of [0, 1), the columns' strata paired at random (McKay, Beckman
+    & Conover 1979). Each draw is uniform on [0, 1), as with ``rng.random``, but no part
+    of a parameter's range is left empty or crowded by chance."""
+    rank = np.argsort(rng.random((N, n)), axis=0)
+    return (rank + rng.random((N, n))) / N
+
+
 def uniform_prior(
     state_mean: np.ndarray,
     theta_low: np.ndarray,
     theta_high: np.ndarray,
     state_std: float | np.ndarray = 0.0,
+    *,
+    sampling: str = "random",
 ) -> Prior:
     """A prior sampler: Gaussian state, independent uniform parameters.
 
@@ -301,12 +318,19 @@ def uniform_prior(
         Bounds of the uniform prior, physical units.
     state_std : float or ndarray, shape (n_state,)
         Standard deviation of the Gaussian state prior (0: all members equal).
+    sampling : {"random", "stratified"}
+        ``"random"``: independent draws. ``"stratified"``: a Latin hypercube
+        (:func:`stratified_uniform`), the same prior drawn with less sampling error: with
+        50 members a corner of the prior's box holds about as many members as its volume
+        asks for, where random draws leave it nearly empty on some seeds.
 
     Returns
     -------
     callable
         ``prior(rng, N) -> (E_state (N, n_state), theta (N, n_par))``.
     """
+    if sampling not in PRIOR_SAMPLINGS:
+        raise ValueError(f"sampling must be one of {PRIOR_SAMPLINGS}, got {sampling!r}")
     mean = float_array(state_mean, "state_mean", 1)
     lo = float_array(theta_low, "theta_low", 1)
     hi = float_array(theta_high, "theta_high", 1)
@@ -316,7 +340,9 @@ def uniform_prior(
 
     def prior(rng: np.random.Generator, N: int) -> tuple[np.ndarray, np.ndarray]:
         X = mean + sd * rng.standard_normal((N, mean.shape[0]))
-        return X, lo + (hi - lo) * rng.random((N, lo.shape[0]))
+        u = (stratified_uniform(rng, N, lo.shape[0]) if sampling == "stratified"
+             else rng.random((N, lo.shape[0])))
+        return X, lo + (hi - lo) * u
 
     return prior
 

@@ -191,6 +191,19 @@ def test_prior_table_sets_each_parameters_own_range():
                                         with_("filter.bounds.mus", [100.0, 1000.0])))
 
 
+def test_prior_sampling_reaches_the_filter_and_is_checked():
+    """[filter] prior_sampling: random unless a config says "stratified" (a Latin
+    hypercube); anything else names the key and the value."""
+    setup = identify_config_from_dict(BASE).setup(absorption=lambda mua, mus: None)
+    assert setup.parameters.prior_sampling == "random"
+    setup = identify_config_from_dict(with_("filter.prior_sampling", "stratified")).setup(
+        absorption=lambda mua, mus: None)
+    assert setup.parameters.prior_sampling == "stratified"
+    with pytest.raises(ConfigError, match=r"filter.prior_sampling must be one of "
+                                          r"\['random', 'stratified'\], got 'sobol'"):
+        identify_config_from_dict(with_("filter.prior_sampling", "sobol"))
+
+
 def test_hs_theta_is_the_filters_time_scheme():
     """[HS] theta reaches the filter's heat steps; without it the filter's default
     (Crank-Nicolson)."""

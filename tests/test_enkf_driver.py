@@ -454,3 +454,24 @@ def test_bad_param_walk_bounds():
     with pytest.raises(ValueError, match="^param_walk_bounds"):
         run_filter(linear_problem(param_walk_bounds=np.array([[0.0, 1.0], [0.0, 1.0]])),
                    FilterConfig(n_members=5))
+
+
+def test_stratified_prior_puts_one_member_in_each_stratum():
+    """uniform_prior(sampling="stratified"): each parameter's N draws fall one in each
+    of the N equal parts of its range (a Latin hypercube), within the bounds; the pairing
+    of the parameters' strata is random (different seeds, different pairs)."""
+    lo, hi = np.array([0.5, 50.0]), np.array([2.0, 200.0])
+    prior = uniform_prior([0.0], lo, hi, sampling="stratified")
+    N = 50
+    _, th = prior(np.random.default_rng(3), N)
+    strata = np.floor((th - lo) / (hi - lo) * N).astype(int)
+    assert all(sorted(strata[:, j]) == list(range(N)) for j in range(2))
+    _, th2 = prior(np.random.default_rng(4), N)
+    pairs = {tuple(r) for r in strata}
+    pairs2 = {tuple(r) for r in np.floor((th2 - lo) / (hi - lo) * N).astype(int)}
+    assert pairs != pairs2
+    # random draws of 50 leave some of the 50 strata empty (at random: 1 - 1/e of them filled)
+    _, th3 = uniform_prior([0.0], lo, hi)(np.random.default_rng(3), N)
+    assert len(set(np.floor((th3[:, 0] - lo[0]) / (hi[0] - lo[0]) * N).astype(int))) < N
+    with pytest.raises(ValueError, match="sampling must be one of .*got 'lhs'"):
+        uniform_prior([0.0], lo, hi, sampling="lhs")

@@ -60,6 +60,7 @@ def test_divergence_is_reported_with_the_estimates_so_far(tissue):
     (dict(prior_range=(2.0, 0.5)), "prior_range"),
     (dict(model_noise_std=float("nan")), "ModelError.noise_std"),
     (dict(parameter_model="spline"), "ParameterModel.kind must be"),
+    (dict(prior_sampling="sobol"), r"ParameterModel.prior_sampling must be one of .*'sobol'"),
     (dict(theta=0.3), r"theta must be in \[0.5, 1\]"),
     (dict(theta=True), r"theta must be in \[0.5, 1\]"),
 ])

@@ -39,6 +39,8 @@ from pathlib import Path
 
 import numpy as np
 
+from enkf.problem import PRIOR_SAMPLINGS
+
 sys.path.insert(0, str(Path(__file__).parent))
 from independent_models import (  # noqa: E402
     ALL_MODELS,
@@ -57,10 +59,11 @@ CONSTANT = ("constant", "pulse-train")
 
 
 def config_for(case: str, mode: str = "auto", forms=None, delay=None, walk=None,
-               nominal=None):
+               nominal=None, sampling=None):
     """examples/own_data.toml with the laser of ``case`` (and ``[filter.drift] mode``,
-    ``restart_knots = forms``, ``restart_delay = delay``, ``walk_std = walk`` and the
-    medium's ``(mua, mus) = nominal`` unless None)."""
+    ``restart_knots = forms``, ``restart_delay = delay``, ``walk_std = walk``, the
+    medium's ``(mua, mus) = nominal`` and ``[filter] prior_sampling = sampling`` unless
+    None)."""
     from enkf.app.config import identify_config_from_dict
     from mcmatlab_py.config import read_toml
 
@@ -78,6 +81,8 @@ def config_for(case: str, mode: str = "auto", forms=None, delay=None, walk=None,
         raw["filter"]["drift"]["walk_std"] = [float(v) for v in walk]
     if nominal is not None:
         raw["G"]["media"][0].update(mua=float(nominal[0]), mus=float(nominal[1]))
+    if sampling is not None:
+        raw["filter"]["prior_sampling"] = sampling
     raw.pop("data", None)
     return identify_config_from_dict(raw)
 
@@ -88,15 +93,15 @@ _CFG: dict = {}
 def run_one(args) -> dict:
     from enkf.tissue import identify
 
-    model, case, seed, mode, forms, delay, walk, prior = args
-    key = (case, mode, forms, delay, walk)
+    model, case, seed, mode, forms, delay, walk, prior, sampling = args
+    key = (case, mode, forms, delay, walk, sampling)
     if key not in _CFG:  # the emulator does not depend on the nominal optics: one a key
-        cfg = config_for(case, mode, forms, delay, walk)
+        cfg = config_for(case, mode, forms, delay, walk, sampling=sampling)
         _CFG[key] = (cfg, cfg.emulator(progress=False))
     cfg, emulator = _CFG[key]
     nominal = nominal_optics(case, prior, [seed, 18, 1])
     if prior != "centred":
-        cfg = config_for(case, mode, forms, delay, walk, nominal)
+        cfg = config_for(case, mode, forms, delay, walk, nominal, sampling)
     truth = independent_truth(model, case)
     rng = np.random.default_rng([seed, 18])
     data = truth[1:, :1] + 0.1 * rng.standard_normal((len(TIMES) - 1, 1))
@@ -118,7 +123,8 @@ def run_one(args) -> dict:
         setup.parameters.drift.restart_delay,
         "walk_std": None if setup.parameters.drift is None else
         list(setup.parameters.drift.walk_std),
-        "prior": prior, "nominal": list(nominal),
+        "prior": prior, "prior_sampling": setup.parameters.prior_sampling,
+        "nominal": list(nominal),
         "final": est.param_mean[-1].tolist(), "final_sd": est.param_std[-1].tolist(),
         "final_truth": true_p[-1].tolist(),
         "band_final": [[float(lo[-1]), float(hi[-1])] for lo, hi in band],
@@ -157,22 +163,25 @@ def forms_of(r: dict) -> str:
     return ", ".join(str(v) for v in forms) if len(forms) else "none (no bank)"
 
 
-def setting_of(r: dict) -> tuple[str, str, str, str]:
-    """(restart forms, restart delay, walk, prior) of a run, as the report writes them
-    (runs that predate the record of the prior had it centred on the truth)."""
+def setting_of(r: dict) -> tuple[str, str, str, str, str]:
+    """(restart forms, restart delay, walk, prior, prior draws) of a run, as the report
+    writes them (runs that predate the record of the prior had it centred on the truth,
+    and drew it at random)."""
     from enkf.tissue.drift import DriftBank
 
     delay = r.get("restart_delay", OLD_DELAY)
     walk = r.get("walk_std", DriftBank().walk_std)
     return (forms_of(r), "" if delay is None else f"{delay:g}",
             "" if walk is None else ", ".join(f"{v:g}" for v in walk),
-            r.get("prior", "centred"))
+            r.get("prior", "centred"), r.get("prior_sampling", "random"))
 
 
 def report(rows: list, path: Path, command: str) -> None:
     from enkf.tissue.drift import DriftBank
+    from enkf.tissue.setup.parameter_model import ParameterModel
 
     default = setting_of({"restart_delay": DriftBank().restart_delay})[:3]
+    default_draws = ParameterModel.__dataclass_fields__["prior_sampling"].default
     lines = ["# One default config for still, drifting and pulsed optics", "",
              f"Command: `{command}`", "", __doc__.split("\n\n")[1].replace("\n", " "), "",
              __doc__.split("\n\n")[2].replace("\n", " "), "",
@@ -182,17 +191,20 @@ def report(rows: list, path: Path, command: str) -> None:
              "runs in which a drifting filter restarted from the smoother (where none did, "
              "the restart forms never ran and the row holds for any). The shipped default: "
              f"restart forms {default[0]}, restarts {default[1]} s after each pulse, walk "
-             f"{default[2]}; rows of other settings are alternatives measured on the same "
+             f"{default[2]}, the members' optics drawn from the prior at {default_draws} "
+             "(``stratified``: a Latin hypercube, ``[filter] prior_sampling``); rows of "
+             "other settings are alternatives measured on the same "
              "seeds and data (a row of n seeds holds seeds 0 to n - 1, the first n of the "
              "20). The wall times were measured with two or three runs sharing the two "
              "cores.", "",
              "| truth | case | seeds | estimates | parameter bands | T bands >= 0.9 | "
              "T coverage z = 0, 0.1, 0.2 | mua, mus at 15 s (median) | truth | P(drift) | "
              "restarts (runs) | restart forms | restart delay s | walk | prior | "
-             "wall s (median) |",
-             "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
+             "prior draws | wall s (median) |",
+             "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
     keys = sorted({(r["model"], r["case"], *setting_of(r)) for r in rows},
-                  key=lambda k: (k[0], CASES.index(k[1]), k[2:5] != default, k[5], k[2:]))
+                  key=lambda k: (k[0], CASES.index(k[1]), k[2:5] != default, k[5],
+                                 k[6] != default_draws, k[2:]))
     for key in keys:
         rs = [r for r in rows if (r["model"], r["case"], *setting_of(r)) == key]
         n = len(rs)
@@ -208,7 +220,7 @@ def report(rows: list, path: Path, command: str) -> None:
             f"{fin[0]:.3g}, {fin[1]:.4g} | {rs[0]['final_truth'][0]:.3g}, "
             f"{rs[0]['final_truth'][1]:.4g} | {np.median(w) if w else float('nan'):.3g} | "
             f"{sum(r['restarts'] > 0 for r in rs)} | {key[2]} | {key[3]} | {key[4]} | {key[5]} | "
-            f"{np.median([r['wall_s'] for r in rs]):.1f} |")
+            f"{key[6]} | {np.median([r['wall_s'] for r in rs]):.1f} |")
     write_report(path, lines, rows)
 
 
@@ -241,6 +253,8 @@ def main(argv=None):
                     help="where the truth lies in the filter's prior: at its centre (the "
                          "nominal optics the truth's start), or at a place drawn per seed "
                          "(independent_models.nominal_optics)")
+    ap.add_argument("--prior-sampling", default=None, choices=PRIOR_SAMPLINGS,
+                    help="[filter] prior_sampling instead of the config's (random)")
     ap.add_argument("--out", default=str(ROOT / "validation" / "reports" / "drift_bank.md"))
     ap.add_argument("--from-json", nargs="+", default=None, metavar="FILE",
                     help="write the report from the per-run numbers of earlier runs (their "
@@ -259,7 +273,8 @@ def main(argv=None):
     forms = None if args.restart_knots is None else tuple(
         v if v == "logistic" else int(v) for v in args.restart_knots)
     walk = None if args.walk_std is None else tuple(args.walk_std)
-    tasks = [(m, c, s, args.mode, forms, args.restart_delay, walk, args.prior) for c in args.case
+    tasks = [(m, c, s, args.mode, forms, args.restart_delay, walk, args.prior,
+              args.prior_sampling) for c in args.case
              for m in args.model for s in range(args.first_seed, args.first_seed + args.seeds)]
     rows = []
     t0 = time.perf_counter()

@@ -104,7 +104,8 @@ def assemble(setup: TissueFilterSetup, param_bounds=None, warm_dt: float | None 
     P_obs, noise_var, obs_xyz = observation_operator(setup, model.mesh)
     P_track = fem.probe_matrix(model.mesh, setup.sensors.tracked.T)
     nominal = setup.parameters.nominal_values()
-    prior = uniform_prior(np.full(npts, float(setup.T_initial)), *setup.parameters.prior_bounds())
+    prior = uniform_prior(np.full(npts, float(setup.T_initial)), *setup.parameters.prior_bounds(),
+                          sampling=setup.parameters.prior_sampling)
     n = len(names)
     rw = np.broadcast_to(np.asarray(setup.parameters.random_walk_std, float), (n,)) ** 2
 

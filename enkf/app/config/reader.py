@@ -25,6 +25,7 @@ Python API (``model.G``, ``model.MC``, ``model.HS`` as in MCmatlab, then
                                     # or two: ["dermis", "epidermis"] estimates mua2, mus2 too
     grid = [20, 20, 10]             # the filter's coarse voxels
     prior_range = [0.5, 2.0]        # uniform prior, times the estimated medium's values
+    prior_sampling = "random"       # or "stratified" (a Latin hypercube): the members' draws
     ...
     [filter.coagulation]            # with parameter_model = "coagulation" (optics follow
     E = 422.5e3                     # each member's damage): Arrhenius E J/mol, A 1/s,
@@ -54,7 +55,7 @@ from mcmatlab_py import NotBuiltError
 from mcmatlab_py.budget import check_filter, check_steps
 from mcmatlab_py.config import ConfigError, check_keys, model_from_config, read_toml
 
-from ...problem import DEFAULT_METHOD
+from ...problem import DEFAULT_METHOD, PRIOR_SAMPLINGS
 from ...tissue.parameters import (
     COAGULATION_NAMES,
     ESTIMATES,
@@ -95,7 +96,7 @@ _CAMERA_KEYS = CAMERA_KEYS
 #: keys of [filter]: each goes to its part of the setup by its flat name
 #: (:data:`enkf.tissue.setup.FLAT_NAMES`), the emulator's and the smoother's to theirs
 FILTER_KEYS = {
-    "n_members", "method", "estimate", "grid", "prior_range", "model_noise_std",
+    "n_members", "method", "estimate", "grid", "prior_range", "prior_sampling", "model_noise_std",
     "random_walk_std", "random_walk_when_off", "inflation", "rtps", "mda", "seed",
     "parameter_model",
     "localization_radius", "heat_mass", "transforms", "emulator", "bounds", "prior",
@@ -206,6 +207,11 @@ def identify_config_from_dict(cfg: dict) -> IdentifyConfig:
     grid = tuple(num(f"filter.grid[{i}]", v, integer=True, lo=1) for i, v in enumerate(grid))
     if "prior_range" in flt:
         setup_kw["prior_range"] = pair("filter.prior_range", flt["prior_range"], positive=True)
+    if "prior_sampling" in flt:
+        if flt["prior_sampling"] not in PRIOR_SAMPLINGS:
+            raise ConfigError(f"filter.prior_sampling must be one of {list(PRIOR_SAMPLINGS)}, "
+                              f"got {shorten(repr(flt['prior_sampling']))}")
+        setup_kw["prior_sampling"] = flt["prior_sampling"]
     if "parameter_model" in flt:  # before the priors: "coagulation" adds parameters
         allowed = ("random_walk", "trend", "coagulation")
         if flt["parameter_model"] not in allowed:

@@ -28,7 +28,7 @@ RESTART_PROBES = 64
 #: (and of a config's ``[filter]`` and ``[sensors]`` keys): ``name: (part, field)``
 FLAT_NAMES = {
     **{k: ("parameters", k) for k in (
-        "nominal", "estimate", "prior_range", "prior", "random_walk_std",
+        "nominal", "estimate", "prior_range", "prior", "prior_sampling", "random_walk_std",
         "random_walk_when_off", "trend_prior_std", "trend_noise_std", "coagulation", "drift")},
     "parameter_model": ("parameters", "kind"),
     "sensor_positions": ("sensors", "positions"),
