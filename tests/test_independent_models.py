@@ -70,3 +70,12 @@ def _heated(box):
     for _ in range(40):
         T = box.step(T, q, box.dt)
     return T
+
+
+def test_model_d_is_model_a_with_ten_times_the_photons():
+    """D runs A's analog Monte Carlo with 10 times the photons on its own seeds, cached
+    apart; C's maps are B's, and A, B, C keep their caches."""
+    assert im._photons("D", 200_000) == 2_000_000
+    assert [im._photons(m, 200_000) for m in "ABC"] == [200_000] * 3
+    paths = {m: im._truth_path(m, "constant", 200_000) for m in im.ALL_MODELS}
+    assert len(set(paths.values())) == len(im.ALL_MODELS)

@@ -1,10 +1,10 @@
-"""Two forward models of the paper's block that share no code with the filter's model.
+"""Forward models of the paper's block that share no code with the filter's model.
 
 The filter's model is MCmatlab's Monte Carlo (numba kernel, implicit capture: the packet
 loses ``w mua / mut`` at every interaction, scored on 100 x 100 x 50 voxels), tabulated
 by the emulator and integrated onto the P1 basis of a 20 x 20 x 10 tetrahedral mesh,
 stepped by the FEM heat solver (``fem``). To see how honest its uncertainty is when the
-truth comes from *another* model, this module writes two truths of its own, in plain
+truth comes from *another* model, this module writes truths of its own, in plain
 numpy and scipy, importing nothing from ``mcmatlab_py``, ``fem`` or ``enkf``:
 
 ``"A"``
@@ -22,6 +22,17 @@ numpy and scipy, importing nothing from ``mcmatlab_py``, ``fem`` or ``enkf``:
     and an **axisymmetric finite-volume** heat solver on a cylinder of the box's
     cross-section area (radius 0.282 cm, 40 x 40 cells, Crank-Nicolson, 0.1 s). The
     cylinder for the box is itself a model error, as a real tissue's shape would be.
+
+``"D"``
+    **Model A with 10 times the photons** (2 x 10^6 a map, its own seeds) and A's
+    finite differences. A's 2 x 10^5 analog photons leave the absorbed power under the
+    beam's centre noisy: through C's spectral heat solution, the surface after 5 s of the
+    constant case reads 19.83 deg C on A's map and 19.33 on one of another seed; with 2 x
+    10^6 photons two seeds read 19.44 and 19.50 (B's 2 x 10^5 attenuation photons, two
+    seeds: 19.58 and 19.50; the filter's model at the truth's optics 19.58). A's truth
+    thus lies about 1.8% above its own converged model at the sensor, which the filter,
+    fitting the surface, reads as mus about 10% high (constant optics: 110 against 100).
+    D is that model converged in its photons.
 
 ``"C"``
     **Model B's Monte Carlo** (the same absorbed-power maps) with a **spectral heat
@@ -65,10 +76,12 @@ KNOTS = np.round(0.5 * np.arange(11), 10)  # s, Monte Carlo instants of the drif
 CACHE = Path.home() / ".cache" / "tissue-enkf" / "independent"
 MODELS = ("A", "B")  #: the two truths the studies run by default
 #: every model here: C is B's Monte Carlo with a spectral solution on the box
-ALL_MODELS = ("A", "B", "C")
+ALL_MODELS = ("A", "B", "C", "D")
 DT_A = 0.00625  #: s, model A's backward-Euler step (16 per reading)
 #: the cache keys' versions (A's "v1", truths stepped at 0.05 s, is not read)
-VERSIONS = {"A": "v2", "B": "v1", "C": "v1"}
+VERSIONS = {"A": "v2", "B": "v1", "C": "v1", "D": "v1"}
+#: photons per Monte Carlo map, times ``n_photons`` of :func:`independent_truth`
+PHOTON_FACTOR = {"A": 1, "B": 1, "D": 10}
 
 
 #: the laser of each case: (on, off) windows of 0.5 W (s); the paper's single 5 s pulse
@@ -239,7 +252,9 @@ def absorbed_maps(model: str, case: str, n_photons: int) -> tuple[np.ndarray, li
     (r edges, z edges)); cached."""
     model = "B" if model == "C" else model  # C's light is B's: the same maps
     estimator, dr, dz, seed = {"A": ("analog", 0.0125, 0.00625, 11),
-                               "B": ("attenuation", 0.01, 0.005, 22)}[model]
+                               "B": ("attenuation", 0.01, 0.005, 22),
+                               "D": ("analog", 0.0125, 0.00625, 33)}[model]
+    n_photons = _photons(model, n_photons)
     knots = np.array([0.0]) if case in ("constant", "pulse-train") else \
         np.round(np.linspace(0.0, heated_total(case), int(round(heated_total(case) / 0.5)) + 1), 10)
     tag = hashlib.sha256(f"{model}-{case}-{n_photons}-v1".encode()).hexdigest()[:16]
@@ -505,7 +520,8 @@ def independent_surface(model: str, case: str, xy: np.ndarray, n_photons: int = 
     from 0 to 15 s (cached): what a camera of the model's truth sees."""
     xy = np.ascontiguousarray(xy, dtype=float)
     key = hashlib.sha256(xy.tobytes()).hexdigest()[:12]
-    tag = hashlib.sha256(f"surface-{model}-{case}-{n_photons}-{key}-{VERSIONS[model]}"
+    tag = hashlib.sha256(f"surface-{model}-{case}-{_photons(model, n_photons)}-{key}-"
+                         f"{VERSIONS[model]}"
                          .encode()).hexdigest()[:16]
     path = CACHE / f"surface-{tag}.npy"
     if path.exists():
@@ -515,8 +531,13 @@ def independent_surface(model: str, case: str, xy: np.ndarray, n_photons: int = 
     return surf
 
 
+def _photons(model: str, n_photons: int) -> int:
+    """Photons per Monte Carlo map of ``model`` (C's maps are B's)."""
+    return n_photons * PHOTON_FACTOR["B" if model == "C" else model]
+
+
 def _truth_path(model: str, case: str, n_photons: int) -> Path:
-    tag = hashlib.sha256(f"truth-{model}-{case}-{n_photons}-{VERSIONS[model]}"
+    tag = hashlib.sha256(f"truth-{model}-{case}-{_photons(model, n_photons)}-{VERSIONS[model]}"
                          .encode()).hexdigest()[:16]
     return CACHE / f"truth-{tag}.npy"
 
@@ -525,7 +546,7 @@ def _run(model: str, case: str, n_photons: int, xy: np.ndarray | None = None):
     """The truth of ``model`` for ``case``: temperatures (151, 3) at the tracked depths
     (written to the cache), and (151, m) on the top face at ``xy`` (None without points)."""
     knots, maps, edges = absorbed_maps(model, case, n_photons)
-    solver = {"A": CartesianFD, "B": AxisymmetricFV, "C": SpectralBox}[model]()
+    solver = {"A": CartesianFD, "B": AxisymmetricFV, "C": SpectralBox, "D": CartesianFD}[model]()
     # the heat each map puts into the block: its integral over the annuli inside the box
     totals = [float((m * np.outer(annulus_area_in_box(edges[0]), np.diff(edges[1]))).sum())
               for m in maps]
