@@ -20,9 +20,9 @@ README = HERE / "README.md"
 
 #: modules of validation/ that studies import; they write no report of their own
 HELPERS = {
-    "independent_models.py": "the independent forward models A, B and C of the paper's "
-                             "block (plain numpy and scipy, no code shared with the filter's "
-                             "model), and their cached truths",
+    "independent_models.py": "the independent forward models A, B, C and D (A with 10 times "
+                             "the photons) of the paper's block (plain numpy and scipy, no "
+                             "code shared with the filter's model), and their cached truths",
     "independent_mc.py": "a minimal Monte Carlo of a half-space that shares no code with "
                          "`mcmatlab_py` (the reference of `mc_outputs` at n = 1)",
     "reporting.py": "a report's Markdown with its per-run numbers as JSON beside it",
