@@ -54,6 +54,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).parent))
 from independent_models import (  # noqa: E402
+    ALL_MODELS,
     PRIORS,
     TIMES,
     independent_truth,
@@ -124,14 +125,16 @@ def nominal_for(case: str, seed: int, prior: str) -> tuple[float, float]:
     return nominal_optics(case, prior, [seed, list(CASES).index(case), 53, 1])
 
 
-def run_one(case: str, seed: int, check_rows: bool = False, prior: str = "drawn") -> dict:
+def run_one(case: str, seed: int, check_rows: bool = False, prior: str = "drawn",
+            models: tuple = MODELS) -> dict:
     """One filter run with the advice at every reading; with ``check_rows``, the
     forecast's low-rank rows set against the full ones on the members of a few readings;
-    ``prior``: where the truth lies in the filter's prior (:func:`nominal_for`)."""
+    ``prior``: where the truth lies in the filter's prior (:func:`nominal_for`);
+    ``models``: the truths taken in turn by seed."""
     from enkf.tissue import identify
     from enkf.tissue.advice.forecast import PointForecast
 
-    model = MODELS[seed % len(MODELS)]
+    model = models[seed % len(models)]
     rng = np.random.default_rng([seed, list(CASES).index(case), 53])
     power = float(rng.uniform(*CASES[case]["power"]))
     nominal = nominal_for(case, seed, prior)
@@ -590,6 +593,8 @@ def main(argv=None):
     ap.add_argument("--contrast", type=Path, default=None, metavar="RUNS_FILE",
                     help="a --runs-file of the same seeds with the other --prior: a section "
                          "setting the two side by side")
+    ap.add_argument("--models", nargs="+", default=list(MODELS), choices=list(ALL_MODELS),
+                    help="the independent truths taken in turn by seed (default: A B C)")
     ap.add_argument("--out", type=Path, default=REPORT)
     ap.add_argument("--runs-file", type=Path, default=None,
                     help="keep the runs' numbers here (JSON, outside the repository), or, if "
@@ -604,7 +609,7 @@ def main(argv=None):
         shown.append(a)
     command = " ".join(["python validation/advice.py", *shown])
     for case in args.cases:
-        for m in MODELS:
+        for m in args.models:
             independent_truth(m, case)  # the truths' cache before the filters
     if args.runs_file is not None and args.runs_file.exists():
         saved = json.loads(args.runs_file.read_text())
@@ -614,7 +619,8 @@ def main(argv=None):
             ap.error("--seeds takes one number or one per case")
         n_seeds = dict(zip(args.cases, args.seeds * len(args.cases) if len(args.seeds) == 1
                            else args.seeds, strict=False))
-        runs = [run_one(case, seed, seed == 0, args.prior) for case in args.cases
+        runs = [run_one(case, seed, seed == 0, args.prior, tuple(args.models))
+                for case in args.cases
                 for seed in range(n_seeds[case])]
         latency = online_latency()
         if args.runs_file is not None:
