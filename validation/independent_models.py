@@ -80,6 +80,8 @@ ALL_MODELS = ("A", "B", "C", "D")
 DT_A = 0.00625  #: s, model A's backward-Euler step (16 per reading)
 #: the cache keys' versions (A's "v1", truths stepped at 0.05 s, is not read)
 VERSIONS = {"A": "v2", "B": "v1", "C": "v1", "D": "v1"}
+#: whose Monte Carlo maps each model's light is (C's are B's)
+LIGHT = {"A": "A", "B": "B", "C": "B", "D": "D"}
 #: photons per Monte Carlo map, times ``n_photons`` of :func:`independent_truth`
 PHOTON_FACTOR = {"A": 1, "B": 1, "D": 10}
 
@@ -250,7 +252,7 @@ def annulus_area_in_box(r_edges: np.ndarray, n: int = 2000) -> np.ndarray:
 def absorbed_maps(model: str, case: str, n_photons: int) -> tuple[np.ndarray, list, tuple]:
     """The Monte Carlo maps of ``model`` for ``case``: (times of the maps, [density (nr, nz)],
     (r edges, z edges)); cached."""
-    model = "B" if model == "C" else model  # C's light is B's: the same maps
+    model = LIGHT[model]
     estimator, dr, dz, seed = {"A": ("analog", 0.0125, 0.00625, 11),
                                "B": ("attenuation", 0.01, 0.005, 22),
                                "D": ("analog", 0.0125, 0.00625, 33)}[model]
@@ -532,8 +534,8 @@ def independent_surface(model: str, case: str, xy: np.ndarray, n_photons: int = 
 
 
 def _photons(model: str, n_photons: int) -> int:
-    """Photons per Monte Carlo map of ``model`` (C's maps are B's)."""
-    return n_photons * PHOTON_FACTOR["B" if model == "C" else model]
+    """Photons per Monte Carlo map of ``model`` (:data:`LIGHT`)."""
+    return n_photons * PHOTON_FACTOR[LIGHT[model]]
 
 
 def _truth_path(model: str, case: str, n_photons: int) -> Path:
