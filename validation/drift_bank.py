@@ -48,6 +48,7 @@ from independent_models import (  # noqa: E402
     CASES,
     PRIORS,
     TIMES,
+    heated,
     independent_truth,
     nominal_optics,
     optics,
@@ -132,9 +133,26 @@ def run_one(args) -> dict:
         "mua_rmse": float(np.sqrt(np.mean((est.param_mean[1:, 0] - true_p[1:, 0]) ** 2))),
         "cov_T": cov.mean(0).tolist(),
         "drift_weight_final": None if est.drift_weight is None else float(est.drift_weight[-1]),
+        "evidence_heated": heated_evidence(est, case),
         "restarts": len(est.restarts), "wall_s": wall,
         "step_max_s": float(np.max(est.step_latency_s)),
     }
+
+
+def heated_evidence(est, case: str) -> float | None:
+    """The first drifting filter's log evidence over the readings after a heated step
+    (the sum of their innovation log-densities, ``enkf.adaptive.innovation_loglik``): how
+    well a walk predicts the next reading where the walks differ. None without a drifting
+    filter."""
+    from enkf.tissue.drift import STILL
+
+    parts = [e for name, e in (est.components or {}).items() if name != STILL]
+    if not parts or parts[0].innovation_loglik is None:
+        return None
+    ll = np.asarray(parts[0].innovation_loglik, float)
+    on = np.array([heated(case, float(b)) > heated(case, float(a))
+                   for a, b in zip(TIMES[:ll.size], TIMES[1:1 + ll.size], strict=True)])
+    return float(np.nansum(ll[on]))
 
 
 def passes(r: dict) -> dict:
@@ -292,7 +310,9 @@ def main(argv=None):
                   + " ".join(f"{k}={'ok' if v else 'FAIL'}" for k, v in o.items())
                   + f" final {np.round(r['final'], 3)} truth {r['final_truth']} "
                   f"cov {np.round(r['cov_T'], 2)} P(drift) {r['drift_weight_final']} "
-                  f"{r['wall_s']:.1f} s", flush=True)
+                  + ("" if r["evidence_heated"] is None else
+                     f"evidence heated {r['evidence_heated']:.1f} ")
+                  + f"{r['wall_s']:.1f} s", flush=True)
     command = "python validation/drift_bank.py " + " ".join(sys.argv[1:] if argv is None else argv)
     report(rows, Path(args.out), command)
     partial.unlink()
