@@ -82,8 +82,11 @@ DT_A = 0.00625  #: s, model A's backward-Euler step (16 per reading)
 VERSIONS = {"A": "v2", "B": "v1", "C": "v1", "D": "v1"}
 #: whose Monte Carlo maps each model's light is (C's are B's)
 LIGHT = {"A": "A", "B": "B", "C": "B", "D": "D"}
-#: photons per Monte Carlo map, times ``n_photons`` of :func:`independent_truth`
-PHOTON_FACTOR = {"A": 1, "B": 1, "D": 10}
+#: each light's Monte Carlo: (estimator, dr cm, dz cm, seed, photons per map as a multiple
+#: of ``n_photons`` of :func:`independent_truth`); D is A's with 10 times the photons
+MONTE_CARLO = {"A": ("analog", 0.0125, 0.00625, 11, 1),
+               "B": ("attenuation", 0.01, 0.005, 22, 1),
+               "D": ("analog", 0.0125, 0.00625, 33, 10)}
 
 
 #: the laser of each case: (on, off) windows of 0.5 W (s); the paper's single 5 s pulse
@@ -253,9 +256,7 @@ def absorbed_maps(model: str, case: str, n_photons: int) -> tuple[np.ndarray, li
     """The Monte Carlo maps of ``model`` for ``case``: (times of the maps, [density (nr, nz)],
     (r edges, z edges)); cached."""
     model = LIGHT[model]
-    estimator, dr, dz, seed = {"A": ("analog", 0.0125, 0.00625, 11),
-                               "B": ("attenuation", 0.01, 0.005, 22),
-                               "D": ("analog", 0.0125, 0.00625, 33)}[model]
+    estimator, dr, dz, seed, _ = MONTE_CARLO[model]
     n_photons = _photons(model, n_photons)
     knots = np.array([0.0]) if case in ("constant", "pulse-train") else \
         np.round(np.linspace(0.0, heated_total(case), int(round(heated_total(case) / 0.5)) + 1), 10)
@@ -535,7 +536,7 @@ def independent_surface(model: str, case: str, xy: np.ndarray, n_photons: int = 
 
 def _photons(model: str, n_photons: int) -> int:
     """Photons per Monte Carlo map of ``model`` (:data:`LIGHT`)."""
-    return n_photons * PHOTON_FACTOR[LIGHT[model]]
+    return n_photons * MONTE_CARLO[LIGHT[model]][4]
 
 
 def _truth_path(model: str, case: str, n_photons: int) -> Path:
