@@ -155,6 +155,25 @@ class TissueForwardModel:
 
         Members whose optics lie outside the emulator's table are clamped to its edge;
         they are counted (:meth:`clamp_report`) instead of warned about one by one."""
+        vals = self.values(theta)
+        if self._nodal:  # np.take keeps C order (vals[:, idx] comes out in Fortran
+            # order), which the heat step's kernels read row by row
+            return power * np.take(vals, self.absorption.inverse, axis=1)
+        return (self.L @ (power * vals).T).T
+
+    @property
+    def value_operator(self) -> sp.csr_matrix:
+        """(n_nodes, n_unique): the nodal loads per W of the absorption model's values
+        (:meth:`values`), ``loads(theta, 1) == (value_operator @ values(theta).T).T``."""
+        if not self._nodal:
+            return self.L
+        inv = self.absorption.inverse
+        return sp.csr_matrix((np.ones(inv.size), (np.arange(inv.size), inv)),
+                             shape=(inv.size, int(inv.max()) + 1))
+
+    def values(self, theta: np.ndarray) -> np.ndarray:
+        """(N, n_unique): the absorption model's values of the members' optics ``theta``
+        (N, n_par) at its orbit representatives, clamps counted as in :meth:`loads`."""
         optics = {n: theta[:, self.col[n]] for n in ("mua", "mus") + self._extra}
         key = np.column_stack(list(optics.values()))
         last = self._last_optics
@@ -175,10 +194,7 @@ class TissueForwardModel:
                 if w not in clamps:
                     warnings.warn(str(w.message), w.category, stacklevel=3)
             self._last_optics = (key, vals, bool(clamps))
-        if self._nodal:  # np.take keeps C order (vals[:, idx] comes out in Fortran
-            # order), which the heat step's kernels read row by row
-            return power * np.take(vals, self.absorption.inverse, axis=1)
-        return (self.L @ (power * vals).T).T
+        return vals
 
     def step(self, E_state: np.ndarray, theta: np.ndarray, t0: float, t1: float,
              power: float) -> np.ndarray:

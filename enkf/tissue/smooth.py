@@ -47,6 +47,7 @@ from .paths import (
 )
 from .pieces import assemble
 from .posterior import MODE_SEARCH, MODE_STARTS, log_posterior, residuals_of, search_modes
+from .response import sensor_response
 from .setup import TissueFilterSetup
 
 __all__ = ["SmootherEstimates", "heated_time", "smooth_constant", "smooth_drifting"]
@@ -281,8 +282,14 @@ def _smooth(setup, times, data, n_iter, seed, n_knots, drift_log_std, discrepanc
         def path(U: np.ndarray) -> np.ndarray:
             return knots_of(U, drift, n_knots)
 
+    # the readings as a linear function of the sources where the heat model is linear
+    # (:mod:`enkf.tissue.response`: the same numbers at a small share of the cost)
+    response = sensor_response(model, P, times, X0[0])
+
     def simulate(U: np.ndarray) -> np.ndarray:
         theta = knot_values(path(U), tk, tau)
+        if response is not None:
+            return response.readings(theta).reshape(U.shape[0], -1)[:, keep]
         # every member starts from the known initial field (the importance sampler's
         # batches have their own sizes)
         T = np.tile(X0[0], (U.shape[0], 1))
