@@ -46,6 +46,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..random import standard_normal
+from ._kernels import sppt_step
 
 __all__ = ["StructuredModelError", "squared_exponential_root"]
 
@@ -113,8 +114,13 @@ class StructuredModelError:
     def field(self, rng: np.random.Generator, N: int) -> np.ndarray:
         """(N, n_nodes) unit-variance correlated Gaussian fields."""
         Lx, Ly, Lz = self.roots
+        nx, ny, nz = self.shape
         xi = standard_normal(rng, (N, *self.shape))
-        return np.einsum("ai,bj,ck,nijk->nabc", Lx, Ly, Lz, xi, optimize=True).reshape(N, -1)
+        # (L_x (x) L_y (x) L_z) xi one axis at a time, each a single matrix product
+        a = (xi.reshape(-1, nz) @ Lz.T).reshape(N, nx, ny, nz)
+        a = np.tensordot(Ly, a, axes=(1, 2))  # (y, N, x, z)
+        a = np.tensordot(Lx, a, axes=(1, 2))  # (x, y, N, z)
+        return np.ascontiguousarray(a.transpose(2, 0, 1, 3)).reshape(N, -1)
 
     def __call__(self, rng: np.random.Generator, X0: np.ndarray, X1: np.ndarray, theta,
                  t0: float, t1: float) -> np.ndarray:
@@ -122,23 +128,26 @@ class StructuredModelError:
         ``t1`` (s) (the ``model_noise`` callable of :class:`enkf.FilterProblem`)."""
         N = X0.shape[0]
         fresh = self._r is None or self._r.shape[0] != N or self._t is None or t0 < self._t - 1e-9
-        rel = self.rel_std
+        rel = np.full(N, float(self.rel_std))
         if self.extra_rel_std is not None:
             extra = np.asarray(self.extra_rel_std(theta, t0), float)
             if extra.shape != (N,) or not np.all(np.isfinite(extra) & (extra >= 0)):
                 raise ValueError(f"extra_rel_std must return {N} finite numbers >= 0, got "
                                  f"shape {extra.shape}")
-            rel = rel + extra[:, None]
+            rel = rel + extra
+        v = np.empty(X1.shape)
         if np.any(rel > 0):
+            field = self.field(rng, N)
             if fresh:
-                r = self.field(rng, N)
+                r, phi, scale = field, 0.0, 1.0
             else:
                 phi = np.exp(-(t1 - t0) / self.time_scale) if self.time_scale > 0 else 0.0
-                r = phi * self._r + np.sqrt(1 - phi * phi) * self.field(rng, N)
+                r, scale = self._r, np.sqrt(1 - phi * phi)
+            eta = standard_normal(rng, X1.shape) if self.floor_std > 0 else v
+            sppt_step(r, field, phi, scale, rel, X0, X1, float(self.floor_std), eta, v)
             self._r, self._t = r, t1
-            v = rel * r * (X1 - X0)
         else:
-            v = np.zeros_like(X1)
-        if self.floor_std > 0:
-            v += self.floor_std * standard_normal(rng, X1.shape)
+            v[:] = 0.0
+            if self.floor_std > 0:
+                v += self.floor_std * standard_normal(rng, X1.shape)
         return v
