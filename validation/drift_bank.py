@@ -12,7 +12,8 @@ the optics there: constant, the paper's ramps, a step at the onset of coagulatio
 saturating drift, mua alone drifting, and a train of two 2 s pulses with constant and with
 drifting optics. Each row of the report names the drift bank's settings it ran with: the
 drifting filters' restart forms (``restart_knots``), their restarts' delay after each pulse
-(``restart_delay``, s) and their walk (``walk_std``, log units per heated step, mua and
+(``restart_delay``, s; or ``at`` the fixed times of ``--restart-times``, s, while the laser
+still heats and after) and their walk (``walk_std``, log units per heated step, mua and
 mus); rows with settings other than the shipped default's are alternatives measured on the
 same seeds and data. The prior: ``centred``, the medium's nominal optics (the centre of the
 filter's prior, 0.5 to 2 times them) the truth's start, mua 1 and mus 100 cm^-1; ``drawn``
@@ -92,10 +93,29 @@ def config_for(case: str, mode: str = "auto", forms=None, delay=None, walk=None,
 _CFG: dict = {}
 
 
+def _timed_restarts():
+    """:class:`enkf.tissue.drift.DriftBank` whose drifting filters restart at fixed times
+    (``restart_times``, s) instead of after each pulse (``--restart-times``)."""
+    from dataclasses import dataclass
+
+    from enkf.tissue.drift import DriftBank
+
+    @dataclass
+    class Timed(DriftBank):
+        restart_times: tuple = ()
+
+        def components(self, setup) -> dict:
+            return {name: s.with_(smoother_restarts=self.restart_times,
+                                  smoother_restart_delay=0.0) if s.restarts.times else s
+                    for name, s in super().components(setup).items()}
+
+    return Timed
+
+
 def run_one(args) -> dict:
     from enkf.tissue import identify
 
-    model, case, seed, mode, forms, delay, walk, prior, sampling = args
+    model, case, seed, mode, forms, delay, walk, prior, sampling, times = args
     key = (case, mode, forms, delay, walk, sampling)
     if key not in _CFG:  # the emulator does not depend on the nominal optics: one a key
         cfg = config_for(case, mode, forms, delay, walk, sampling=sampling)
@@ -108,6 +128,9 @@ def run_one(args) -> dict:
     rng = np.random.default_rng([seed, 18])
     data = truth[1:, :1] + 0.1 * rng.standard_normal((len(TIMES) - 1, 1))
     setup = cfg.setup(emulator, seed=seed)
+    if times:
+        setup = setup.with_(drift=_timed_restarts()(**vars(setup.parameters.drift),
+                                                        restart_times=tuple(times)))
     tic = time.perf_counter()
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
@@ -125,6 +148,7 @@ def run_one(args) -> dict:
         setup.parameters.drift.restart_delay,
         "walk_std": None if setup.parameters.drift is None else
         list(setup.parameters.drift.walk_std),
+        "restart_times": list(times) if times else None,
         "prior": prior, "prior_sampling": setup.parameters.prior_sampling,
         "nominal": list(nominal),
         "final": est.param_mean[-1].tolist(), "final_sd": est.param_std[-1].tolist(),
@@ -190,7 +214,10 @@ def setting_of(r: dict) -> tuple[str, str, str, str, str]:
 
     delay = r.get("restart_delay", OLD_DELAY)
     walk = r.get("walk_std", DriftBank().walk_std)
-    return (forms_of(r), "" if delay is None else f"{delay:g}",
+    if r.get("restart_times"):
+        delay = "at " + ", ".join(f"{t:g}" for t in r["restart_times"]) + " s"
+    return (forms_of(r), "" if delay is None else f"{delay:g}" if not isinstance(delay, str)
+            else delay,
             "" if walk is None else ", ".join(f"{v:g}" for v in walk),
             r.get("prior", "centred"), r.get("prior_sampling", "random"))
 
@@ -265,6 +292,9 @@ def main(argv=None):
     ap.add_argument("--restart-delay", type=float, default=None, metavar="S",
                     help="[filter.drift] restart_delay (s after each pulse) instead of the "
                          "config's")
+    ap.add_argument("--restart-times", type=float, nargs="+", default=None, metavar="S",
+                    help="the drifting filters restart from the smoother at these times (s; "
+                         "the first reading at or after each) instead of after each pulse")
     ap.add_argument("--walk-std", type=float, nargs=2, default=None, metavar=("MUA", "MUS"),
                     help="[filter.drift] walk_std (log units per heated step) instead of the "
                          "config's")
@@ -293,7 +323,7 @@ def main(argv=None):
         v if v == "logistic" else int(v) for v in args.restart_knots)
     walk = None if args.walk_std is None else tuple(args.walk_std)
     tasks = [(m, c, s, args.mode, forms, args.restart_delay, walk, args.prior,
-              args.prior_sampling) for c in args.case
+              args.prior_sampling, args.restart_times) for c in args.case
              for m in args.model for s in range(args.first_seed, args.first_seed + args.seeds)]
     rows = []
     t0 = time.perf_counter()
