@@ -83,3 +83,16 @@ def test_the_smoother_gives_the_same_optics_with_and_without_the_response(tissue
             m.setattr(smooth, "sensor_response", lambda *a: None)
             slow = smooth_drifting(s, times, data, knots=form)
         np.testing.assert_allclose(fast.theta, slow.theta, rtol=1e-7)
+
+
+def test_a_window_without_the_laser_reads_the_free_cooling(tissue):
+    """No power over the window: every member reads the laser-off run, whatever its
+    optics (the absorption model is not called)."""
+    s = tissue.setup(power=HeatSimulation(P=0.0, duration_on=1.0).laser_power,
+                     T_initial=37.0)
+    model = TissueForwardModel(s)
+    P = fem.probe_matrix(model.mesh, np.zeros((3, 1)))
+    times = 0.1 * np.arange(1, 6)
+    response = sensor_response(model, P, times, np.full(model.mesh.p.shape[1], 37.0))
+    theta = _paths(np.random.default_rng(1), times.size, 3)
+    np.testing.assert_allclose(response.readings(theta), 37.0, atol=1e-9)

@@ -66,9 +66,9 @@ class SensorResponse:
         M, N = theta.shape[:2]
         r = self.rank
         c = np.zeros((M, N, r))
-        # every heated interval's members in one call of the absorption model
-        lit = np.ascontiguousarray(theta[self.heated]).reshape(-1, theta.shape[2])
-        c[self.heated] = (self.model.values(lit) @ self.basis).reshape(-1, N, r)
+        if self.heated.any():  # every heated interval's members in one call
+            lit = np.ascontiguousarray(theta[self.heated]).reshape(-1, theta.shape[2])
+            c[self.heated] = (self.model.values(lit) @ self.basis).reshape(-1, N, r)
         y = c.transpose(1, 0, 2).reshape(N, M * r) @ self.toeplitz
         return y.reshape(N, M, -1) + self.free
 
