@@ -9,6 +9,8 @@ from dataclasses import replace
 
 import numpy as np
 
+from fem.threads import blas_threads
+
 from ..problem import FilterResult
 from ..random import standard_normal
 from .pieces import FilterPieces
@@ -59,6 +61,11 @@ def restart_ensemble(setup: TissueFilterSetup, pieces: FilterPieces, times, data
     each step ``k`` at ``times[k - 1]`` with the members' optics of that step.
 
     Returns ``(X (N, n_nodes) deg C, theta (N, n_par), wall_s)``."""
+    with blas_threads(1):  # small products, as the filter's steps (identify, online)
+        return _restart_ensemble(setup, pieces, times, data, on_step)
+
+
+def _restart_ensemble(setup, pieces, times, data, on_step):
     tic = time.perf_counter()
     kw = dict(n_iter=setup.restarts.iterations,
               discrepancy=setup.restarts.discrepancy,

@@ -32,6 +32,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from fem.threads import blas_threads
+
 from ..checks import float_array
 from ..importance import amis, weighted_quantile
 from ..smoother import es_mda
@@ -217,9 +219,17 @@ def smooth_drifting(setup: TissueFilterSetup, times, data, *, knots: int | str =
                    importance_rounds, callback, mode_search)
 
 
-def _smooth(setup, times, data, n_iter, seed, n_knots, drift_log_std, discrepancy,
-            discrepancy_time, drifting, importance=0, importance_rounds=6, callback=None,
-            mode_search=None) -> SmootherEstimates:
+def _smooth(*args, **kw) -> SmootherEstimates:
+    """:func:`_smooth_window` on one BLAS thread: its products are small (members by
+    readings), and on 2 cores the threads' wake-ups cost more than they share (the drift
+    bank's three restarts on the paper's ramps 1.6 s against 2.3 s)."""
+    with blas_threads(1):
+        return _smooth_window(*args, **kw)
+
+
+def _smooth_window(setup, times, data, n_iter, seed, n_knots, drift_log_std, discrepancy,
+                   discrepancy_time, drifting, importance=0, importance_rounds=6,
+                   callback=None, mode_search=None) -> SmootherEstimates:
     if setup.parameters.kind != "random_walk":
         raise ValueError(f"the smoother needs parameter_model = 'random_walk' (constant or "
                          f"drifting optics), got {setup.parameters.kind!r}")
