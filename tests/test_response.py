@@ -96,3 +96,26 @@ def test_a_window_without_the_laser_reads_the_free_cooling(tissue):
     response = sensor_response(model, P, times, np.full(model.mesh.p.shape[1], 37.0))
     theta = _paths(np.random.default_rng(1), times.size, 3)
     np.testing.assert_allclose(response.readings(theta), 37.0, atol=1e-9)
+
+
+def test_constant_optics_read_the_absorption_once_and_the_same(tissue):
+    """Optics constant over the window (the constant smoother's members): the absorption
+    model is called once for all intervals, and the readings are the member runs'."""
+    calls = []
+
+    def counted(mua, mus):
+        calls.append(len(mua))
+        return tissue.absorption(mua, mus)
+
+    s = tissue.setup(absorption=counted, T_initial=37.0)
+    model = TissueForwardModel(s)
+    P = fem.probe_matrix(model.mesh, np.zeros((3, 1)))
+    times = 0.1 * np.arange(1, 16)
+    T0 = np.full(model.mesh.p.shape[1], 37.0)
+    response = sensor_response(model, P, times, T0)
+    start = _paths(np.random.default_rng(2), 1, 5)[0]
+    theta = np.broadcast_to(start, (times.size, *start.shape))
+    calls.clear()
+    y = response.readings(theta)
+    assert calls == [5]
+    np.testing.assert_allclose(y, _member_runs(model, P, T0, theta, times), rtol=0, atol=1e-9)

@@ -67,9 +67,12 @@ class SensorResponse:
         M, N = theta.shape[:2]
         r = self.rank
         c = np.zeros((M, N, r))
-        if self.heated.any():  # every heated interval's members in one call
-            lit = np.ascontiguousarray(theta[self.heated]).reshape(-1, theta.shape[2])
-            c[self.heated] = (self.model.values(lit) @ self.basis).reshape(-1, N, r)
+        lit = theta[self.heated]
+        if lit.size and (lit == lit[:1]).all():  # optics constant over the window
+            c[self.heated] = self.model.values(np.ascontiguousarray(lit[0])) @ self.basis
+        elif lit.size:  # every heated interval's members in one call
+            flat = np.ascontiguousarray(lit).reshape(-1, theta.shape[2])
+            c[self.heated] = (self.model.values(flat) @ self.basis).reshape(-1, N, r)
         y = c.transpose(1, 0, 2).reshape(N, M * r) @ self.toeplitz
         return y.reshape(N, M, -1) + self.free
 
