@@ -13,7 +13,8 @@ a drifting filter) and reports the two filters' steps and the drifting filter's 
 from the smoother apart (a restart runs once per pulse, after it). ``--bank --ab-rhs``
 times, in one process and interleaved, the heat steps' right-hand side in one
 axis-by-axis pass (``fem._kernels.tridiag3_theta_rhs``, the default) against the mass
-pass plus the stiffness's sparse product.
+pass plus the stiffness's sparse product. ``--smoother`` times the smoother through the
+sensors' responses (``enkf.tissue.response``) against running the members, interleaved.
 """
 
 from __future__ import annotations
@@ -106,6 +107,71 @@ def ab_rhs(setup, truth, data, rounds: int = 4) -> None:
     print(f"  final estimates' largest relative difference {d.max():.1e}")
 
 
+def smoother_ab(emu, rounds: int = 3) -> None:
+    """The smoother through the sensors' responses (``enkf.tissue.response``) against
+    running the members, in one process and interleaved: one window of 50 members over the
+    paper's 150 ramp readings, then each restart form over the first 60 readings."""
+    import time
+
+    import enkf.tissue.smooth as smooth
+    from enkf.tissue.pieces import assemble
+    from enkf.tissue.response import sensor_response
+    from fem.threads import blas_threads
+
+    truth = generate_truth(TruthConfig(scenario="time-varying"), progress=False)
+    data = noisy_sensor(truth, 0)[:, None]
+    setup = filter_setup("time-varying", emu)
+    times = truth.times[1:]
+    pieces = assemble(setup, warm_dt=float(times[0]))
+    model, P = pieces.model, pieces.P_obs
+    X0, th0 = pieces.prior(np.random.default_rng(0), setup.n_members)
+    drift = np.exp(np.linspace(0.0, 1.0, times.size))[:, None, None]
+    theta = th0[None] * drift  # every member's optics rising over the window
+    edges = np.r_[0.0, times]
+
+    def members():
+        T = np.tile(X0[0], (theta.shape[1], 1))
+        out = np.empty((theta.shape[1], times.size, P.shape[0]))
+        for k in range(times.size):
+            T = model(T, np.ascontiguousarray(theta[k]), edges[k], edges[k + 1])
+            out[:, k] = (P @ T.T).T
+        return out
+
+    tic = time.perf_counter()
+    response = sensor_response(model, P, times, X0[0])
+    built = time.perf_counter() - tic
+    ref = members()
+    best = {"response": np.inf, "members": np.inf}
+    for _ in range(rounds):
+        for name, fn in (("response", lambda: response.readings(theta)), ("members", members)):
+            with blas_threads(1):  # as the smoother runs them
+                tic = time.perf_counter()
+                fn()
+                best[name] = min(best[name], time.perf_counter() - tic)
+    diff = np.abs(response.readings(theta) - ref).max()
+    print(f"one window, 50 members x 150 readings: response {1e3 * best['response']:.1f} ms "
+          f"(built once in {1e3 * built:.0f} ms, rank {response.rank}), members "
+          f"{1e3 * best['members']:.0f} ms; largest difference {diff:.1e} K")
+    real = smooth.sensor_response
+    for form in (2, 9, "logistic"):
+        walls, means = {}, {}
+        for _ in range(rounds):
+            for use in (True, False):
+                smooth.sensor_response = real if use else (lambda *a: None)
+                try:
+                    tic = time.perf_counter()
+                    est = smooth.smooth_drifting(setup, times[:60], data[:60], knots=form,
+                                                 n_iter=8, discrepancy=0.01)
+                finally:
+                    smooth.sensor_response = real
+                walls.setdefault(use, []).append(time.perf_counter() - tic)
+                means[use] = est.mean
+        d = np.max(np.abs(means[True] - means[False]) / np.abs(means[False]))
+        print(f"restart form {form}, 60 readings: response {min(walls[True]):.2f} s, members "
+              f"{min(walls[False]):.2f} s (best of {rounds}); estimates' largest relative "
+              f"difference {d:.1e}")
+
+
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--scenario", choices=SCENARIOS, default=None)
@@ -114,12 +180,18 @@ def main(argv=None):
                     help="time the constant scenario for these ensemble sizes and stop")
     ap.add_argument("--bank", action="store_true",
                     help="the drift bank (identify's default) on each scenario")
+    ap.add_argument("--smoother", action="store_true",
+                    help="the smoother through the sensors' responses against running the "
+                         "members, interleaved in one process, and stop")
     ap.add_argument("--ab-rhs", action="store_true",
                     help="with --bank: the one-pass right-hand side against the sparse "
                          "stiffness product, interleaved in one process")
     args = ap.parse_args(argv)
     if args.members:
         members_scaling(emulator_for(progress=False), args.members)
+        return
+    if args.smoother:
+        smoother_ab(emulator_for(progress=False), args.repeat)
         return
     avg = dict(mass="averaged")
     print(f"heat step, 50 members, kronecker operator with the filter's averaged mass: "

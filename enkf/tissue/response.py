@@ -22,8 +22,9 @@ their leading right singular vectors ``V`` (n_unique, r) carry each member's val
 
 The smoother (:mod:`enkf.tissue.smooth`) re-runs every member over the whole window for
 every update; this gives the same readings (to 1e-13 K on the paper's model, to 1e-9 K in
-``tests/test_response.py``) at a hundredth of the cost (50 members over 150 readings in
-4 ms against 480 ms), the absorption model's values then taking most of it.
+``tests/test_response.py``) at a twentieth of the cost (50 members over 150 readings in
+22 ms against 510 ms, ``benchmarks/bench_filter.py --smoother``), the absorption model's
+values then taking most of it.
 """
 
 from __future__ import annotations
