@@ -37,11 +37,13 @@ import sys
 import time
 import warnings
 from concurrent.futures import ProcessPoolExecutor
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
 from enkf.problem import PRIOR_SAMPLINGS
+from enkf.tissue.drift import DriftBank
 
 sys.path.insert(0, str(Path(__file__).parent))
 from independent_models import (  # noqa: E402
@@ -93,23 +95,17 @@ def config_for(case: str, mode: str = "auto", forms=None, delay=None, walk=None,
 _CFG: dict = {}
 
 
-def _timed_restarts():
-    """:class:`enkf.tissue.drift.DriftBank` whose drifting filters restart at fixed times
-    (``restart_times``, s) instead of after each pulse (``--restart-times``)."""
-    from dataclasses import dataclass
+@dataclass
+class TimedRestarts(DriftBank):
+    """The drift bank whose drifting filters restart at fixed times (``restart_times``, s)
+    instead of after each pulse (``--restart-times``)."""
 
-    from enkf.tissue.drift import DriftBank
+    restart_times: tuple = ()
 
-    @dataclass
-    class Timed(DriftBank):
-        restart_times: tuple = ()
-
-        def components(self, setup) -> dict:
-            return {name: s.with_(smoother_restarts=self.restart_times,
-                                  smoother_restart_delay=0.0) if s.restarts.times else s
-                    for name, s in super().components(setup).items()}
-
-    return Timed
+    def components(self, setup) -> dict:
+        return {name: s.with_(smoother_restarts=self.restart_times,
+                              smoother_restart_delay=0.0) if s.restarts.times else s
+                for name, s in super().components(setup).items()}
 
 
 def run_one(args) -> dict:
@@ -129,8 +125,8 @@ def run_one(args) -> dict:
     data = truth[1:, :1] + 0.1 * rng.standard_normal((len(TIMES) - 1, 1))
     setup = cfg.setup(emulator, seed=seed)
     if times:
-        setup = setup.with_(drift=_timed_restarts()(**vars(setup.parameters.drift),
-                                                        restart_times=tuple(times)))
+        setup = setup.with_(drift=TimedRestarts(**vars(setup.parameters.drift),
+                                                restart_times=tuple(times)))
     tic = time.perf_counter()
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
@@ -200,7 +196,6 @@ OLD_DELAY = 2.5
 
 def forms_of(r: dict) -> str:
     """The drift bank's restart forms a run used (``DriftBank.restart_knots``)."""
-    from enkf.tissue.drift import DriftBank
 
     forms = r.get("restart_knots", DriftBank().restart_knots)
     return ", ".join(str(v) for v in forms) if len(forms) else "none (no bank)"
@@ -210,20 +205,19 @@ def setting_of(r: dict) -> tuple[str, str, str, str, str]:
     """(restart forms, restart delay, walk, prior, prior draws) of a run, as the report
     writes them (runs that predate the record of the prior had it centred on the truth,
     and drew it at random)."""
-    from enkf.tissue.drift import DriftBank
 
     delay = r.get("restart_delay", OLD_DELAY)
     walk = r.get("walk_std", DriftBank().walk_std)
     if r.get("restart_times"):
-        delay = "at " + ", ".join(f"{t:g}" for t in r["restart_times"]) + " s"
-    return (forms_of(r), "" if delay is None else f"{delay:g}" if not isinstance(delay, str)
-            else delay,
+        when = "at " + ", ".join(f"{t:g}" for t in r["restart_times"]) + " s"
+    else:
+        when = "" if delay is None else f"{delay:g}"
+    return (forms_of(r), when,
             "" if walk is None else ", ".join(f"{v:g}" for v in walk),
             r.get("prior", "centred"), r.get("prior_sampling", "random"))
 
 
 def report(rows: list, path: Path, command: str) -> None:
-    from enkf.tissue.drift import DriftBank
     from enkf.tissue.setup.parameter_model import ParameterModel
 
     default = setting_of({"restart_delay": DriftBank().restart_delay})[:3]

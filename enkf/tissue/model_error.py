@@ -135,19 +135,17 @@ class StructuredModelError:
                 raise ValueError(f"extra_rel_std must return {N} finite numbers >= 0, got "
                                  f"shape {extra.shape}")
             rel = rel + extra
-        v = np.empty(X1.shape)
-        if np.any(rel > 0):
-            field = self.field(rng, N)
-            if fresh:
-                r, phi, scale = field, 0.0, 1.0
-            else:
-                phi = np.exp(-(t1 - t0) / self.time_scale) if self.time_scale > 0 else 0.0
-                r, scale = self._r, np.sqrt(1 - phi * phi)
-            eta = standard_normal(rng, X1.shape) if self.floor_std > 0 else v
-            sppt_step(r, field, phi, scale, rel, X0, X1, float(self.floor_std), eta, v)
-            self._r, self._t = r, t1
+        if not np.any(rel > 0):
+            return (self.floor_std * standard_normal(rng, X1.shape) if self.floor_std > 0
+                    else np.zeros(X1.shape))
+        field = self.field(rng, N)
+        if fresh:
+            r, phi, scale = field, 0.0, 1.0
         else:
-            v[:] = 0.0
-            if self.floor_std > 0:
-                v += self.floor_std * standard_normal(rng, X1.shape)
+            phi = np.exp(-(t1 - t0) / self.time_scale) if self.time_scale > 0 else 0.0
+            r, scale = self._r, np.sqrt(1 - phi * phi)
+        v = np.empty(X1.shape)
+        eta = standard_normal(rng, X1.shape) if self.floor_std > 0 else v  # v: not read
+        sppt_step(r, field, phi, scale, rel, X0, X1, float(self.floor_std), eta, v)
+        self._r, self._t = r, t1
         return v
